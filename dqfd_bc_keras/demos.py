@@ -1,0 +1,274 @@
+"""Demonstration datasets: record them with a scripted expert, save them as plain `.npz`, and
+load them back with every check a learner relies on.
+
+File format (version 1), readable with `numpy.load(path, allow_pickle=False)`:
+
+    obs (N, d) float32   actions (N,) int64   rewards (N,) float32   next_obs (N, d) float32
+    terminated (N,) bool   truncated (N,) bool   episode_ids (N,) int64
+    meta  0-d str: JSON {format_version, task, env_id, timeout, obs_dim, n_actions, expert,
+                         epsilon, seed, episode_returns, plain_returns}
+
+Transitions are stored in time order, episode after episode, and every episode is complete
+(its last transition is terminated or truncated), so n-step returns can be read off directly.
+
+    python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
+    python -m dqfd_bc_keras.demos inspect demos.npz
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .cli import ArgumentParser, positive_int, run
+from .envs import TASKS, TIMEOUT_MODES, get_task, make_task
+from .errors import ConfigError, DemoFileError
+from .experts import EXPERT_NAMES, make_expert
+from .files import atomic_path
+
+FORMAT_VERSION = 1
+
+ARRAYS: dict[str, tuple[type, int]] = {
+    # name: (dtype, number of dimensions)
+    "obs": (np.float32, 2),
+    "actions": (np.int64, 1),
+    "rewards": (np.float32, 1),
+    "next_obs": (np.float32, 2),
+    "terminated": (np.bool_, 1),
+    "truncated": (np.bool_, 1),
+    "episode_ids": (np.int64, 1),
+}
+
+
+@dataclass(frozen=True)
+class DemoMeta:
+    """Where a dataset comes from; stored as the JSON string `meta`."""
+
+    task: str
+    env_id: str
+    timeout: str
+    obs_dim: int
+    n_actions: int
+    expert: str
+    epsilon: float
+    seed: int
+    episode_returns: list[float]
+    """Return of each episode under the task's rewards (what the learner sees)."""
+    plain_returns: list[float]
+    """Return of each episode under the plain env's rewards (what the field reports)."""
+    format_version: int = FORMAT_VERSION
+
+
+@dataclass(frozen=True)
+class DemoDataset:
+    """Demonstration transitions in time order, one complete episode after another."""
+
+    obs: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    next_obs: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    episode_ids: np.ndarray
+    meta: DemoMeta
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self.meta.episode_returns)
+
+    def summary(self) -> str:
+        """A few human-readable lines: provenance, size and returns."""
+        m = self.meta
+        returns = np.asarray(m.episode_returns)
+        plain = np.asarray(m.plain_returns)
+        return "\n".join([
+            f"task         {m.task} ({m.env_id}, timeout={m.timeout}, obs_dim={m.obs_dim}, "
+            f"n_actions={m.n_actions})",
+            f"expert       {m.expert} (epsilon={m.epsilon:g}, seed={m.seed})",
+            f"episodes     {self.n_episodes}",
+            f"transitions  {len(self)}",
+            f"returns      {' '.join(f'{r:g}' for r in returns)}",
+            f"mean ± std   {returns.mean():.1f} ± {returns.std():.1f}  "
+            f"(plain env: {plain.mean():.1f} ± {plain.std():.1f})",
+        ])
+
+
+def record(
+    task: str,
+    expert: str,
+    episodes: int,
+    seed: int = 0,
+    epsilon: float = 0.0,
+    timeout: str = "bootstrap",
+) -> DemoDataset:
+    """Run the scripted `expert` for `episodes` episodes of `task`; episode i resets with seed + i."""
+    if episodes < 1:
+        raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
+    spec = get_task(task)
+    env = make_task(task, timeout=timeout)
+    policy = make_expert(spec.family, expert, epsilon=epsilon, seed=seed)
+    columns: dict[str, list] = {name: [] for name in ARRAYS}
+    returns, plain_returns = [], []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done, ret, plain = False, 0.0, 0.0
+        while not done:
+            action = policy(obs)
+            next_obs, reward, terminated, truncated, info = env.step(action)
+            for name, value in zip(ARRAYS, (obs, action, reward, next_obs, terminated, truncated, episode)):
+                columns[name].append(value)
+            ret += float(reward)
+            plain += info["plain_reward"]
+            obs, done = next_obs, terminated or truncated
+        returns.append(ret)
+        plain_returns.append(plain)
+    meta = DemoMeta(
+        task=task, env_id=spec.env_id, timeout=timeout, obs_dim=int(env.observation_space.shape[0]),
+        n_actions=int(env.action_space.n), expert=expert, epsilon=float(epsilon), seed=int(seed),
+        episode_returns=returns, plain_returns=plain_returns,
+    )
+    env.close()
+    arrays = {name: np.asarray(columns[name], dtype=dtype) for name, (dtype, _) in ARRAYS.items()}
+    return DemoDataset(**arrays, meta=meta)
+
+
+def save(dataset: DemoDataset, path: str | Path, force: bool = False) -> None:
+    """Write `dataset` to `path` atomically; an existing file is kept unless `force`."""
+    arrays = {name: getattr(dataset, name) for name in ARRAYS}
+    meta = np.array(json.dumps(dataclasses.asdict(dataset.meta)))
+    with atomic_path(path, overwrite=force) as tmp:
+        np.savez_compressed(tmp, meta=meta, **arrays)
+
+
+def load(path: str | Path, task: str | None = None, timeout: str | None = None) -> DemoDataset:
+    """Read and validate a dataset; with `task`/`timeout`, also check it was recorded for them.
+
+    Raises `DemoFileError` naming the file and the problem for anything a learner could trip
+    on later: not an npz, pickled objects, missing keys, wrong shapes or dtypes, non-finite
+    values, actions out of range, incomplete episodes, another task, an empty dataset.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DemoFileError(path, "no such file")
+    if not zipfile.is_zipfile(path):
+        raise DemoFileError(path, "is not an .npz file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            contents = {key: data[key] for key in data.files}
+    except ValueError as error:  # numpy refuses object arrays without allow_pickle
+        raise DemoFileError(path, f"holds pickled objects, which are not accepted ({error})") from None
+    except (OSError, zipfile.BadZipFile, EOFError) as error:
+        raise DemoFileError(path, f"is not a readable .npz file ({error})") from None
+    missing = [key for key in (*ARRAYS, "meta") if key not in contents]
+    if missing:
+        raise DemoFileError(path, f"missing key(s) {missing}")
+    meta = _parse_meta(path, contents["meta"])
+    dataset = DemoDataset(**{name: contents[name] for name in ARRAYS}, meta=meta)
+    _validate(path, dataset)
+    if task is not None and meta.task != task:
+        raise DemoFileError(path, f"was recorded on task {meta.task!r}, not on the requested {task!r}")
+    if timeout is not None and meta.timeout != timeout:
+        raise DemoFileError(
+            path, f"was recorded with timeout={meta.timeout!r}, not the requested {timeout!r} "
+            "(the flags at the time limit differ; record it again with --timeout)")
+    return dataset
+
+
+def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
+    if raw.ndim != 0 or raw.dtype.kind != "U":
+        raise DemoFileError(path, f"meta must be a JSON string, got an array of dtype {raw.dtype}")
+    try:
+        fields = json.loads(str(raw))
+    except json.JSONDecodeError as error:
+        raise DemoFileError(path, f"meta is not valid JSON ({error})") from None
+    if not isinstance(fields, dict):
+        raise DemoFileError(path, "meta must be a JSON object")
+    if fields.get("format_version") != FORMAT_VERSION:
+        raise DemoFileError(path, f"format_version {fields.get('format_version')!r} is not {FORMAT_VERSION}")
+    names = {field.name for field in dataclasses.fields(DemoMeta)}
+    missing = sorted(names - fields.keys())
+    if missing:
+        raise DemoFileError(path, f"meta lacks {missing}")
+    meta = DemoMeta(**{key: fields[key] for key in names})
+    if meta.task not in TASKS:
+        raise DemoFileError(path, f"meta names unknown task {meta.task!r}")
+    if meta.timeout not in TIMEOUT_MODES:
+        raise DemoFileError(path, f"meta names unknown timeout mode {meta.timeout!r}")
+    return meta
+
+
+def _validate(path: Path, ds: DemoDataset) -> None:
+    """Every check that does not need the environment; raises DemoFileError on the first failure."""
+    for name, (dtype, ndim) in ARRAYS.items():
+        array = getattr(ds, name)
+        if array.dtype != dtype or array.ndim != ndim:
+            raise DemoFileError(path, f"{name} must be {np.dtype(dtype).name} with {ndim} dimension(s), "
+                                      f"got {array.dtype} with shape {array.shape}")
+    n, m = len(ds.actions), ds.meta
+    if n == 0 or m.episode_returns == []:
+        raise DemoFileError(path, "the dataset is empty")
+    for name in ARRAYS:
+        if len(getattr(ds, name)) != n:
+            raise DemoFileError(path, f"{name} has {len(getattr(ds, name))} rows, actions has {n}")
+    for name in ("obs", "next_obs"):
+        if getattr(ds, name).shape[1] != m.obs_dim:
+            raise DemoFileError(path, f"{name} has {getattr(ds, name).shape[1]} features, meta says obs_dim={m.obs_dim}")
+    for name in ("obs", "rewards", "next_obs"):
+        if not np.isfinite(getattr(ds, name)).all():
+            raise DemoFileError(path, f"{name} holds non-finite values (NaN or inf)")
+    if ds.actions.min() < 0 or ds.actions.max() >= m.n_actions:
+        raise DemoFileError(path, f"actions must lie in [0, {m.n_actions}), got values in "
+                                  f"[{ds.actions.min()}, {ds.actions.max()}]")
+    starts = np.flatnonzero(np.diff(ds.episode_ids)) + 1
+    if (np.diff(ds.episode_ids) < 0).any() or ds.episode_ids[0] != 0 or ds.episode_ids[-1] != len(starts):
+        raise DemoFileError(path, "episode_ids must count 0, 1, 2, … in time order")
+    if len(starts) + 1 != len(m.episode_returns):
+        raise DemoFileError(path, f"{len(starts) + 1} episodes in episode_ids, "
+                                  f"{len(m.episode_returns)} returns in meta")
+    ends = np.append(starts - 1, n - 1)
+    if not (ds.terminated[ends] | ds.truncated[ends]).all():
+        raise DemoFileError(path, "an episode does not end with terminated or truncated")
+    inner = np.setdiff1d(np.arange(n - 1), ends)
+    if not np.array_equal(ds.next_obs[inner], ds.obs[inner + 1]):
+        raise DemoFileError(path, "next_obs does not match the following obs inside an episode")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m dqfd_bc_keras.demos", description=__doc__.split("\n\n")[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    rec = commands.add_parser("record", help="record a dataset with a scripted expert")
+    rec.add_argument("--task", required=True, choices=sorted(TASKS))
+    rec.add_argument("--expert", required=True, choices=EXPERT_NAMES)
+    rec.add_argument("--episodes", type=positive_int, default=5)
+    rec.add_argument("--seed", type=int, default=0, help="episode i resets with seed + i")
+    rec.add_argument("--epsilon", type=float, default=0.0, help="probability of a random action")
+    rec.add_argument("--timeout", choices=TIMEOUT_MODES, default="bootstrap")
+    rec.add_argument("--out", required=True, help="the .npz file to write")
+    rec.add_argument("--force", action="store_true", help="overwrite an existing file")
+    ins = commands.add_parser("inspect", help="print a dataset's summary")
+    ins.add_argument("path")
+    args = parser.parse_args(argv)
+    if args.command == "record":
+        if not args.out.endswith(".npz"):
+            raise ConfigError(f"--out must end in .npz, got {args.out!r}")
+        dataset = record(args.task, args.expert, args.episodes, args.seed, args.epsilon, args.timeout)
+        save(dataset, args.out, force=args.force)
+        print(f"wrote {args.out}")
+    else:
+        dataset = load(args.path)
+    print(dataset.summary())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))

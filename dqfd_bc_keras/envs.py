@@ -1,0 +1,221 @@
+"""The paper's tasks (ALGORITHM.md §6) as Gymnasium wrappers, task presets and registered ids.
+
+A task env is built from the plain Gymnasium env with no time limit of its own, then
+
+    FallPenalty (CartPole) or GoalCount (MountainCar goal variant)   reward shaping
+    TimeLimitMode                                                    the step limit, in one of three modes
+
+so the shaping wrappers only ever see the physics' own terminations and a truncation can
+never be mistaken for a fall. Every step's `info["plain_reward"]` is the reward the plain
+env (CartPole-v1 / MountainCar-v0) would have paid, so training logs can report the plain
+return next to the shaped one; `evaluation` always scores on the plain env itself.
+
+>>> env = make_task("cartpole-200", timeout="naive")
+>>> obs, info = env.reset(seed=0)
+>>> obs.shape
+(4,)
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from .errors import ConfigError
+
+TIMEOUT_MODES = ("bootstrap", "naive", "time-aware")
+"""How the step limit reaches the learner: `bootstrap` truncates (Gymnasium semantics, the
+paper's fix: learners bootstrap from Q(s')); `naive` reports it as a termination (old Gym,
+the problem the paper starts from); `time-aware` appends the remaining-time fraction to the
+observation and then a termination is the truth (Pardo et al. 2018)."""
+
+ID_NAMESPACE = "dqfd_bc_keras"
+
+
+class FallPenalty(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """CartPole: the step on which the pole falls pays `penalty` (paper: −100) instead of +1.
+
+    Place it inside `TimeLimitMode`: it then sees only the physics' terminations, so a
+    truncation at the time limit never gets the penalty.
+    """
+
+    def __init__(self, env: gym.Env, penalty: float = -100.0) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, penalty=penalty)
+        gym.Wrapper.__init__(self, env)
+        self.penalty = float(penalty)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info.setdefault("plain_reward", float(reward))
+        if terminated:
+            reward = self.penalty
+        return obs, reward, terminated, truncated, info
+
+
+class GoalCount(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """MountainCar, the paper's Figs. 9–11 metric: count how often the car reaches the flag.
+
+    Reaching the flag pays `goal_reward` (+100) instead of −1, puts the car back at a fresh
+    start state (position uniform in [−0.6, −0.4], velocity 0, as `reset` would) and does
+    not end the episode, which runs on to its step limit. `info["goals"]` is the running
+    count; the plain reward stops at the first goal, where MountainCar-v0 would have ended.
+    """
+
+    def __init__(self, env: gym.Env, goal_reward: float = 100.0) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, goal_reward=goal_reward)
+        gym.Wrapper.__init__(self, env)
+        self.goal_reward = float(goal_reward)
+        self.goals = 0
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self.goals = 0
+        info["goals"] = 0
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info.setdefault("plain_reward", 0.0 if self.goals else float(reward))
+        if terminated:
+            self.goals += 1
+            reward = self.goal_reward
+            car = self.env.unwrapped
+            car.state = np.array([car.np_random.uniform(low=-0.6, high=-0.4), 0.0])
+            obs = np.array(car.state, dtype=np.float32)
+            terminated = False
+        info["goals"] = self.goals
+        return obs, reward, terminated, truncated, info
+
+
+class TimeLimitMode(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """End episodes after `max_steps` steps; `mode` (one of `TIMEOUT_MODES`) says how.
+
+    At the limit, unless the physics terminated on that same step:
+    `bootstrap` → truncated=True, terminated=False; `naive` → terminated=True;
+    `time-aware` → terminated=True, and every observation carries one more feature, the
+    remaining-time fraction 1 − t/max_steps (1 at reset, 0 at the limit).
+    `info["time_limit"]` is True on the step where the limit was hit.
+    """
+
+    def __init__(self, env: gym.Env, max_steps: int, mode: str = "bootstrap") -> None:
+        if mode not in TIMEOUT_MODES:
+            raise ConfigError(f"unknown timeout mode {mode!r}; expected one of {TIMEOUT_MODES}")
+        if int(max_steps) < 1:
+            raise ConfigError(f"max_steps must be ≥ 1, got {max_steps}")
+        gym.utils.RecordConstructorArgs.__init__(self, max_steps=max_steps, mode=mode)
+        gym.Wrapper.__init__(self, env)
+        self.max_steps = int(max_steps)
+        self.mode = mode
+        self._t = 0
+        if mode == "time-aware":
+            space = env.observation_space
+            self.observation_space = gym.spaces.Box(
+                low=np.append(space.low, 0.0).astype(np.float32),
+                high=np.append(space.high, 1.0).astype(np.float32),
+                dtype=np.float32,
+            )
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        if self.mode != "time-aware":
+            return obs
+        remaining = 1.0 - self._t / self.max_steps
+        return np.append(obs, remaining).astype(np.float32)
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._t = 0
+        return self._observe(obs), info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info.setdefault("plain_reward", float(reward))  # no shaping wrapper inside: unchanged
+        self._t += 1
+        if self._t >= self.max_steps and not terminated:
+            info["time_limit"] = True
+            if self.mode == "bootstrap":
+                truncated = True
+            else:
+                terminated = True
+        return self._observe(obs), reward, terminated, truncated, info
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """A task preset: which plain env, which shaping, which step limit (paper's settings)."""
+
+    name: str
+    env_id: str
+    """The plain Gymnasium env; evaluation scores on it, unmodified."""
+    family: str
+    """`cartpole` or `mountaincar`: which scripted experts apply."""
+    max_steps: int
+    fall_penalty: float | None = None
+    goal_reward: float | None = None
+    solved_return: float = 0.0
+    """The plain env's conventional "solved" threshold (CartPole-v1: 475, MountainCar-v0: −110)."""
+
+    @property
+    def gym_id(self) -> str:
+        """The id under which the preset is registered with Gymnasium."""
+        return f"{ID_NAMESPACE}/{self.name}-v0"
+
+    @property
+    def goal_count(self) -> bool:
+        return self.goal_reward is not None
+
+
+TASKS: dict[str, TaskSpec] = {
+    spec.name: spec
+    for spec in (
+        TaskSpec("cartpole", "CartPole-v1", "cartpole", 500, fall_penalty=-100.0, solved_return=475.0),
+        TaskSpec("cartpole-200", "CartPole-v1", "cartpole", 200, fall_penalty=-100.0, solved_return=475.0),
+        TaskSpec("mountaincar", "MountainCar-v0", "mountaincar", 200, solved_return=-110.0),
+        TaskSpec("mountaincar-goals", "MountainCar-v0", "mountaincar", 200, goal_reward=100.0,
+                 solved_return=-110.0),
+    )
+}
+
+
+def get_task(name: str) -> TaskSpec:
+    """The preset called `name`, or a `ConfigError` listing the known ones."""
+    try:
+        return TASKS[name]
+    except KeyError:
+        raise ConfigError(f"unknown task {name!r}; expected one of {sorted(TASKS)}") from None
+
+
+def make_task(
+    name: str,
+    timeout: str = "bootstrap",
+    max_steps: int | None = None,
+    render_mode: str | None = None,
+) -> gym.Env:
+    """Build the task env `name` with the paper's settings; `max_steps` overrides the limit."""
+    spec = get_task(name)
+    env = gym.make(spec.env_id, max_episode_steps=-1, render_mode=render_mode)
+    if spec.fall_penalty is not None:
+        env = FallPenalty(env, spec.fall_penalty)
+    if spec.goal_reward is not None:
+        env = GoalCount(env, spec.goal_reward)
+    return TimeLimitMode(env, spec.max_steps if max_steps is None else max_steps, timeout)
+
+
+def make_plain_env(name: str, render_mode: str | None = None) -> gym.Env:
+    """The unmodified Gymnasium env of task `name`, with its own time limit."""
+    return gym.make(get_task(name).env_id, render_mode=render_mode)
+
+
+def register_tasks() -> None:
+    """Register every preset as `dqfd_bc_keras/<task>-v0`; `gym.make(id, timeout=...)` works."""
+    for spec in TASKS.values():
+        if spec.gym_id not in gym.registry:
+            gym.register(
+                id=spec.gym_id,
+                entry_point=functools.partial(make_task, spec.name),
+                max_episode_steps=None,
+                disable_env_checker=True,
+            )

@@ -1,0 +1,32 @@
+"""Process-wide TensorFlow settings: quiet logs and a thread budget that fits a 2-core CPU.
+
+Imported first by the package, before TensorFlow itself, because the environment variables
+below are only read when TensorFlow loads. Every setting can be overridden from the shell.
+"""
+
+from __future__ import annotations
+
+import os
+
+# INFO/WARNING lines from the C++ runtime, and oneDNN's "custom operations are on" banner;
+# oneDNN brings nothing to 64-unit MLPs and makes results depend on the CPU's kernels.
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+os.environ.setdefault("TF_ENABLE_ONEDNN_OPTS", "0")
+os.environ.setdefault("KERAS_BACKEND", "tensorflow")
+
+THREADS_ENV = "DQFD_TF_THREADS"
+"""Intra-op threads per process (default 1: small graphs gain nothing from more, and the
+experiment runner puts one process on each core)."""
+
+
+def configure_tensorflow() -> None:
+    """Set TensorFlow's thread pools once per process; later calls are no-ops."""
+    import tensorflow as tf
+
+    tf.get_logger().setLevel("ERROR")
+    threads = int(os.environ.get(THREADS_ENV, "1"))
+    try:
+        tf.config.threading.set_intra_op_parallelism_threads(threads)
+        tf.config.threading.set_inter_op_parallelism_threads(1)
+    except RuntimeError:
+        pass  # the runtime is already initialised (someone ran an op first): keep its pools

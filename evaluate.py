@@ -1,0 +1,16 @@
+"""Evaluate a trained agent on the plain env. Not implemented yet: arrives with issue C."""
+
+import sys
+
+from dqfd_bc_keras.cli import ArgumentParser
+
+
+def main() -> int:
+    ArgumentParser(prog="evaluate.py", description=__doc__).parse_args()
+    print("evaluate.py: not yet implemented (issue C); record demonstrations with "
+          "`python -m dqfd_bc_keras.demos record` meanwhile", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

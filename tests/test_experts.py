@@ -1,0 +1,89 @@
+"""Tests for the scripted demonstrators in dqfd_bc_keras.experts."""
+
+import numpy as np
+import pytest
+
+from dqfd_bc_keras.experts import (
+    EXPERT_NAMES,
+    FAMILIES,
+    RULES,
+    expert_returns,
+    main,
+    make_expert,
+)
+
+
+def test_cartpole_strong_balances_and_imperfect_is_clearly_worse() -> None:
+    strong = expert_returns("cartpole", "strong", episodes=5, seed=0)
+    imperfect = expert_returns("cartpole", "imperfect", episodes=5, seed=0)
+    assert strong.dtype == np.float64 and strong.shape == (5,)
+    np.testing.assert_array_equal(strong, 500.0)
+    assert imperfect.mean() < 400.0
+
+
+def test_mountaincar_strong_solves_and_imperfect_is_worse() -> None:
+    strong = expert_returns("mountaincar", "strong", episodes=10, seed=0)
+    imperfect = expert_returns("mountaincar", "imperfect", episodes=10, seed=0)
+    assert strong.mean() >= -110.0
+    assert imperfect.mean() < strong.mean() - 5.0
+    assert imperfect.mean() < -110.0
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+@pytest.mark.parametrize("name", EXPERT_NAMES)
+def test_epsilon_zero_equals_rule_and_ignores_extra_feature(family: str, name: str) -> None:
+    rng = np.random.default_rng(1)
+    expert = make_expert(family, name, epsilon=0.0, seed=0)
+    width = 4 if family == "cartpole" else 2
+    for _ in range(50):
+        obs = rng.uniform(-0.5, 0.5, size=width).astype(np.float32)
+        action = expert(obs)
+        assert type(action) is int
+        assert action == RULES[family, name](obs)
+        assert expert(np.append(obs, np.float32(0.3))) == action
+
+
+@pytest.mark.parametrize(("family", "n_actions"), [("cartpole", 2), ("mountaincar", 3)])
+def test_epsilon_one_is_uniform_random(family: str, n_actions: int) -> None:
+    expert = make_expert(family, "strong", epsilon=1.0, seed=0)
+    obs = np.zeros(4 if family == "cartpole" else 2, dtype=np.float32)
+    counts = np.bincount([expert(obs) for _ in range(3000)], minlength=n_actions)
+    assert counts.shape == (n_actions,)
+    np.testing.assert_allclose(counts / counts.sum(), 1.0 / n_actions, atol=0.05)
+
+
+def test_same_seed_gives_same_actions_and_returns() -> None:
+    obs = np.array([0.01, -0.02, 0.03, 0.04], dtype=np.float32)
+    a, b = (make_expert("cartpole", "imperfect", 0.5, seed=7) for _ in range(2))
+    seq_a = [a(obs) for _ in range(200)]
+    assert seq_a == [b(obs) for _ in range(200)]
+    assert len(set(seq_a)) == 2
+    np.testing.assert_array_equal(
+        expert_returns("mountaincar", "strong", episodes=2, seed=3, epsilon=0.2),
+        expert_returns("mountaincar", "strong", episodes=2, seed=3, epsilon=0.2),
+    )
+
+
+@pytest.mark.parametrize(
+    ("family", "name", "epsilon", "match"),
+    [
+        ("pong", "strong", 0.0, r"'pong'.*cartpole, mountaincar"),
+        ("cartpole", "perfect", 0.0, r"'perfect'.*strong, imperfect"),
+        ("cartpole", "strong", 1.5, r"1\.5"),
+        ("mountaincar", "strong", -0.1, r"-0\.1"),
+    ],
+)
+def test_bad_input_raises_value_error(family: str, name: str, epsilon: float, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        make_expert(family, name, epsilon)
+    with pytest.raises(ValueError, match=match):
+        expert_returns(family, name, episodes=1, epsilon=epsilon)
+
+
+def test_cli_prints_table(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--episodes", "2"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].startswith("| family | expert | env id |")
+    assert len(lines) == 2 + len(FAMILIES) * len(EXPERT_NAMES)
+    assert any("| cartpole | strong | CartPole-v1 | 2 | 500.00" in line for line in lines)
+    assert any("| mountaincar | imperfect | MountainCar-v0 | 2 |" in line for line in lines)
