@@ -86,6 +86,10 @@ class DemoDataset:
     def n_episodes(self) -> int:
         return len(self.meta.episode_returns)
 
+    def obs_scale(self) -> tuple[np.ndarray, np.ndarray]:
+        """(mean, std) of the demonstrated states, per feature: the networks' input scaling."""
+        return self.obs.mean(axis=0), self.obs.std(axis=0)
+
     def summary(self) -> str:
         """A few human-readable lines: provenance, size and returns."""
         m = self.meta

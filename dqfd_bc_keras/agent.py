@@ -1,0 +1,214 @@
+"""The Q-agent: a Keras model whose custom `train_step` is the only place J(Q) is assembled.
+
+    J(Q) = J_DQ(Q) + λ1·J_n(Q) + λ2·J_E(Q) + λ3·J_L2(Q)          (paper Eq. 4, ALGORITHM.md §2)
+
+`train_step(batch)` takes a prioritized batch, calls the pure loss functions, takes one Adam
+step on θ, refreshes θ' every τ steps and returns δ for the priority write-back. `learn(K)`
+runs K × (sample → train_step → write priorities) in one graph call: pre-training (demos only)
+and online training go through it, and the graph-call boundary, not the math, is what costs.
+"""
+
+from __future__ import annotations
+
+import keras
+import numpy as np
+import tensorflow as tf
+
+from . import losses
+from .bc import BCModel
+from .config import Config
+from .demos import DemoDataset
+from .errors import ConfigError
+from .networks import build_q_network
+from .replay import Batch, PrioritizedReplay
+
+LOSS_TERMS = ("loss", "td", "n_step", "expert", "l2")
+
+
+class DQfDAgent(keras.Model):
+    """Q(s, ·; θ), the target network θ', θ_prior, and the learning step over a replay."""
+
+    def __init__(
+        self,
+        config: Config,
+        obs_dim: int,
+        n_actions: int,
+        replay: PrioritizedReplay,
+        bc_model: BCModel | None = None,
+        obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        super().__init__(name="dqfd_agent")
+        if config.uses_bc and bc_model is None:
+            raise ConfigError(f"expert_loss={config.expert_loss!r} needs a fitted BC model")
+        self.config = config
+        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
+        self.q_network = build_q_network(obs_dim, n_actions, config.hidden, obs_scale)
+        self.target_network = build_q_network(obs_dim, n_actions, config.hidden, obs_scale, name="target_network")
+        self.target_network.trainable = False
+        self.replay = replay
+        self.bc_model = bc_model
+        # θ_prior of the Bayesian loss: zero during pre-training, then (by default) the
+        # pre-trained weights (`capture_prior`).
+        self.prior_weights = [tf.Variable(tf.zeros_like(w), trainable=False, name="prior")
+                              for w in self.q_network.trainable_weights]
+        self.train_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="train_steps")
+        self.trackers = {name: keras.metrics.Mean(name=name) for name in LOSS_TERMS}
+        self.compile(optimizer=keras.optimizers.Adam(config.learning_rate))
+        self.optimizer.build(self.q_network.trainable_variables)
+        self.refresh_target()
+
+    def call(self, obs: tf.Tensor) -> tf.Tensor:
+        return self.q_network(obs)
+
+    @property
+    def metrics(self) -> list[keras.metrics.Metric]:
+        return list(self.trackers.values())
+
+    def refresh_target(self) -> None:
+        """θ' ← θ."""
+        for target, online in zip(self.target_network.weights, self.q_network.weights):
+            target.assign(online)
+
+    def capture_prior(self) -> None:
+        """θ_prior ← θ at the end of pre-training (`prior_center="pretrained"`), else keep 0."""
+        if self.config.prior_center == "pretrained":
+            for prior, weight in zip(self.prior_weights, self.q_network.trainable_weights):
+                prior.assign(weight)
+
+    def beta(self) -> tf.Tensor:
+        """β of the importance weights, linear from β0 to 1 over `beta_anneal_steps` steps."""
+        c = self.config
+        progress = tf.minimum(1.0, tf.cast(self.train_steps, tf.float32) / max(c.beta_anneal_steps, 1))
+        return c.priority_beta0 + (1.0 - c.priority_beta0) * progress
+
+    def expert_targets(self, obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
+        """(π̄_bc (n, A), σ² (n,)) of the BC model for states `obs`; uniform and σ0² without one."""
+        if self.bc_model is None:
+            n = tf.shape(obs)[0]
+            return tf.fill([n, self.n_actions], 1.0 / self.n_actions), tf.fill([n], self.config.sigma0_sq)
+        return self.bc_model.predictive(obs)
+
+    def set_demos(self, obs, actions, rewards, next_obs, terminated, truncated) -> None:
+        """Fill D_demo with these transitions (with the BC model's view of each state)."""
+        pi_bc, sigma_sq = self.expert_targets(tf.constant(obs, tf.float32))
+        self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated,
+                                               pi_bc, sigma_sq))
+
+    def store(self, obs, action, reward, next_obs, terminated, truncated) -> None:
+        """Append one self-generated transition to D_replay (graph-compatible)."""
+        pi_bc, sigma_sq = self.expert_targets(tf.reshape(tf.cast(obs, tf.float32), [1, -1]))
+        self.replay.store(self.replay.rows(obs[None], action, reward, next_obs[None], terminated, truncated,
+                                           pi_bc, sigma_sq)[0])
+
+    def refresh_expert_targets(self, chunk: int = 8192) -> None:
+        """Recompute π̄_bc and σ² of every stored row, after the BC model was refitted."""
+        indices = self.replay.stored_indices()
+        for start in range(0, int(indices.shape[0]), chunk):
+            rows = indices[start:start + chunk]
+            obs = tf.gather(self.replay.table, rows)[:, self.replay.OBS]
+            self.replay.set_expert_targets(rows, *self.expert_targets(obs))
+
+    def expert_loss(self, q: tf.Tensor, batch: Batch) -> tf.Tensor:
+        """J_E, importance-weighted: margin on demonstrations only, the others on every row."""
+        c = self.config
+        if c.expert_loss == "none":
+            return tf.constant(0.0)
+        if c.expert_loss == "margin":
+            per_sample = losses.margin_loss(q, batch.actions, c.margin)
+            return losses.weighted_mean(per_sample, batch.weights * batch.is_demo)
+        if c.expert_loss == "bc_margin":
+            a_e = tf.argmax(batch.pi_bc, axis=1, output_type=tf.int32)
+            return losses.weighted_mean(losses.margin_loss(q, a_e, c.margin), batch.weights)
+        if c.expert_loss == "ce":
+            return losses.weighted_mean(losses.cross_entropy_loss(q, batch.pi_bc, c.temperature), batch.weights)
+        likelihood = losses.bayes_likelihood_loss(q, batch.pi_bc, batch.sigma_sq, c.temperature)
+        prior = losses.bayes_prior_loss(self.q_network.trainable_weights, self.prior_weights,
+                                        c.prior_scale, self.replay.demo_size)
+        return losses.weighted_mean(likelihood, batch.weights) + prior
+
+    def train_step(self, batch: Batch) -> tf.Tensor:
+        """One gradient step on J(Q) for `batch`; returns the 1-step TD errors δ, (B,)."""
+        c = self.config
+        B = tf.shape(batch.actions)[0]
+        theta = self.q_network.trainable_weights
+        q_next_target, q_n_next_target = tf.split(
+            self.target_network(tf.concat([batch.next_obs, batch.n_next_obs], 0)), [B, B])
+        # The online network's view of s' is only read by the double-DQN target.
+        q_next = q_n_next = None
+        if c.target == "double":
+            q_next, q_n_next = tf.split(self.q_network(tf.concat([batch.next_obs, batch.n_next_obs], 0)), [B, B])
+        with tf.GradientTape() as tape:
+            q = self.q_network(batch.obs)
+            # J_DQ: y = r + γ(1 − terminated)·V'(s_{t+1})
+            y = losses.td_target(batch.rewards, batch.discount,
+                                 losses.bootstrap_value(q_next_target, q_next, c.target))
+            delta = losses.td_error(q, batch.actions, y)
+            j_dq = losses.weighted_mean(losses.td_loss(delta, c.td_loss), batch.weights)
+            # J_n: y_n = Σ_{k<m} γ^k r_{t+k} + γ^m(1 − terminated)·V'(s_{t+m})
+            y_n = losses.td_target(batch.n_returns, batch.n_discount,
+                                   losses.bootstrap_value(q_n_next_target, q_n_next, c.target))
+            j_n = losses.weighted_mean(losses.td_loss(losses.td_error(q, batch.actions, y_n), c.td_loss),
+                                       batch.weights)
+            j_e = self.expert_loss(q, batch)
+            j_l2 = losses.l2_loss([layer.kernel for layer in self.q_network.layers if hasattr(layer, "kernel")])
+            loss = j_dq + c.lambda_n * j_n + c.lambda_expert * j_e + c.lambda_l2 * j_l2
+        self.optimizer.apply(tape.gradient(loss, theta), theta)
+        self.train_steps.assign_add(1)
+        tf.cond(self.train_steps % c.target_update_period == 0, self.refresh_target, lambda: None)
+        for name, value in zip(LOSS_TERMS, (loss, j_dq, j_n, j_e, j_l2)):
+            self.trackers[name].update_state(value)
+        return delta
+
+    @tf.function(input_signature=[tf.TensorSpec([], tf.int32)])
+    def learn(self, steps: tf.Tensor) -> dict[str, tf.Tensor]:
+        """`steps` × (sample a prioritized batch → train_step → write back |δ|), one graph call."""
+        for _ in tf.range(steps):
+            batch = self.replay.sample(self.config.batch_size, self.beta())
+            delta = self.train_step(batch)
+            self.replay.update_priorities(batch.indices, tf.abs(delta))
+        return {name: tracker.result() for name, tracker in self.trackers.items()}
+
+    def pretrain(self, steps: int, steps_per_call: int = 100) -> dict[str, float]:
+        """k gradient steps on D_demo alone (Algorithm 1, step 2), then capture θ_prior."""
+        demos = int(self.replay.demo_size.numpy())
+        if demos < self.config.batch_size:
+            raise ConfigError(f"batch_size={self.config.batch_size} is larger than the {demos} "
+                              "demonstration transitions")
+        if int(self.replay.agent_size.numpy()) != 0:
+            raise ConfigError("pre-training samples D_demo alone, but the replay already holds agent data")
+        result: dict[str, tf.Tensor] = {}
+        for done in range(0, steps, steps_per_call):
+            result = self.learn(min(steps_per_call, steps - done))
+        self.capture_prior()
+        return {name: float(value) for name, value in result.items()}
+
+    def reset_metrics(self) -> None:
+        for tracker in self.trackers.values():
+            tracker.reset_state()
+
+    def greedy_actions(self, obs: tf.Tensor) -> tf.Tensor:
+        """argmax_a Q(s, a; θ), (B,)."""
+        return tf.argmax(self.q_network(obs), axis=1, output_type=tf.int32)
+
+    def checkpoint(self) -> tf.train.Checkpoint:
+        """Everything needed to resume learning bit for bit: θ, θ', θ_prior, Adam, replay, BC."""
+        return tf.train.Checkpoint(
+            q_network=self.q_network, target_network=self.target_network, optimizer=self.optimizer,
+            train_steps=self.train_steps, replay=self.replay,
+            **{f"prior_{i}": prior for i, prior in enumerate(self.prior_weights)},
+            **({"bc_model": self.bc_model} if self.bc_model is not None else {}),
+        )
+
+
+def make_agent(config: Config, demos: DemoDataset, bc_model: BCModel | None = None) -> DQfDAgent:
+    """A fresh agent whose D_demo holds `demos` and whose networks are scaled to their states."""
+    obs_dim, n_actions = demos.meta.obs_dim, demos.meta.n_actions
+    c = config
+    replay = PrioritizedReplay(
+        obs_dim, n_actions, capacity=c.replay_capacity, demo_capacity=c.demo_capacity, n_step=c.n_step,
+        gamma=c.gamma, alpha=c.priority_alpha, eps_agent=c.priority_eps_agent, eps_demo=c.priority_eps_demo,
+        seed=c.seed,
+    )
+    agent = DQfDAgent(config, obs_dim, n_actions, replay, bc_model, obs_scale=demos.obs_scale())
+    agent.set_demos(demos.obs, demos.actions, demos.rewards, demos.next_obs, demos.terminated, demos.truncated)
+    return agent
