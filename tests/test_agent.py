@@ -10,35 +10,10 @@ import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401
 from dqfd_bc_keras.agent import DQfDAgent, make_agent
-from dqfd_bc_keras.bc import build_bc_model
 from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.demos import record
 from dqfd_bc_keras.errors import ConfigError
 
 EXPERT_LOSSES = ("margin", "bc_margin", "ce", "bayes")
-
-
-@pytest.fixture(scope="module")
-def demos():
-    return record("cartpole", "strong", episodes=5, seed=0)
-
-
-@pytest.fixture(scope="module")
-def held_out():
-    return record("cartpole", "strong", episodes=2, seed=100)
-
-
-@pytest.fixture(scope="module")
-def bc_models(demos):
-    """One fitted BC model per kind: MAP (bayes) and MLE (ce, bc_margin)."""
-    keras.utils.set_random_seed(0)
-    models = {}
-    for loss in ("bayes", "ce"):
-        config = Config(expert_loss=loss)
-        models[loss] = build_bc_model(config, 4, 2, demos.obs_scale())
-        models[loss].fit_demos(demos.obs, demos.actions, epochs=config.bc_epochs)
-    models["bc_margin"] = models["ce"]
-    return models
 
 
 def agent_for(loss, demos, bc_models, **overrides):

@@ -8,33 +8,10 @@ import tensorflow as tf
 import dqfd_bc_keras  # noqa: F401  (registers the custom objects)
 from dqfd_bc_keras.bc import BCModel, build_bc_model
 from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.demos import record
 
 
-@pytest.fixture(scope="module")
-def demos():
-    return record("cartpole", "strong", episodes=5, seed=0)
-
-
-@pytest.fixture(scope="module")
-def held_out():
-    return record("cartpole", "strong", episodes=2, seed=100)
-
-
-@pytest.fixture(scope="module")
-def fitted(demos):
-    """{expert_loss: BC model fitted with the default config} for the MAP and the MLE kinds."""
-    keras.utils.set_random_seed(0)
-    models = {}
-    for loss in ("bayes", "ce"):
-        model = build_bc_model(Config(expert_loss=loss), 4, 2, demos.obs_scale())
-        model.fit_demos(demos.obs, demos.actions, epochs=Config().bc_epochs)
-        models[loss] = model
-    return models
-
-
-def test_map_model_has_dropout_and_prior_mle_has_neither(fitted):
-    bayes, ce = fitted["bayes"], fitted["ce"]
+def test_map_model_has_dropout_and_prior_mle_has_neither(bc_models):
+    bayes, ce = bc_models["bayes"], bc_models["ce"]
     assert bayes.map_fit and bayes.dropout == Config().bc_dropout > 0
     assert not ce.map_fit and ce.dropout == 0.0
     assert float(ce.prior_loss()) == 0.0
@@ -44,22 +21,22 @@ def test_map_model_has_dropout_and_prior_mle_has_neither(fitted):
 
 
 @pytest.mark.parametrize("loss", ["bayes", "ce"])
-def test_bc_reaches_95_percent_on_the_strong_experts_demos(fitted, demos, held_out, loss):
-    model = fitted[loss]
+def test_bc_reaches_95_percent_on_the_strong_experts_demos(bc_models, demos, held_out, loss):
+    model = bc_models[loss]
     for data in (demos, held_out):
         predicted = np.argmax(model(data.obs).numpy(), axis=1)
         assert np.mean(predicted == data.actions) >= 0.95
 
 
-def test_predictive_of_mle_model_is_its_softmax_with_sigma0(fitted, held_out):
-    model = fitted["ce"]
+def test_predictive_of_mle_model_is_its_softmax_with_sigma0(bc_models, held_out):
+    model = bc_models["ce"]
     pi_bar, sigma_sq = model.predictive(tf.constant(held_out.obs[:50]))
     np.testing.assert_allclose(pi_bar, tf.nn.softmax(model(held_out.obs[:50])), rtol=1e-6)
     np.testing.assert_allclose(sigma_sq, np.full(50, 0.5))
 
 
-def test_predictive_of_map_model_averages_k_dropout_passes(fitted, held_out):
-    model = fitted["bayes"]
+def test_predictive_of_map_model_averages_k_dropout_passes(bc_models, held_out):
+    model = bc_models["bayes"]
     obs = tf.constant(held_out.obs[:50])
     pi_bar, sigma_sq = model.predictive(obs)
     assert pi_bar.shape == (50, 2) and sigma_sq.shape == (50,)
@@ -70,9 +47,9 @@ def test_predictive_of_map_model_averages_k_dropout_passes(fitted, held_out):
     np.testing.assert_array_equal(model(obs), model(obs))
 
 
-def test_map_variance_peaks_where_the_bc_model_is_unsure(fitted, demos):
+def test_map_variance_peaks_where_the_bc_model_is_unsure(bc_models, demos):
     """σ²(s) − σ0², the MC-dropout variance, is largest where the classifier hesitates."""
-    model = fitted["bayes"]
+    model = bc_models["bayes"]
     pi_bar, sigma_sq = (x.numpy() for x in model.predictive(tf.constant(demos.obs)))
     confidence = pi_bar.max(axis=1)
     unsure, sure = sigma_sq[confidence < 0.8] - 0.5, sigma_sq[confidence > 0.99] - 0.5
@@ -80,13 +57,13 @@ def test_map_variance_peaks_where_the_bc_model_is_unsure(fitted, demos):
     assert unsure.mean() > 10 * sure.mean()
 
 
-def test_map_variance_vanishes_far_from_the_demonstrations(fitted, demos):
+def test_map_variance_vanishes_far_from_the_demonstrations(bc_models, demos):
     """A finding, not the hoped-for property: far off the demonstrated states the ReLU
     network's logits grow, the softmax saturates, every dropout pass agrees, and σ² falls
     back to σ0², below its average on the demonstrations themselves. The Bayesian loss
     therefore weakens imitation near the expert's decision boundary, not in unvisited states
     (README, "Findings")."""
-    model = fitted["bayes"]
+    model = bc_models["bayes"]
     rng = np.random.default_rng(0)
     mean, std = demos.obs_scale()
     far = mean + std * rng.uniform(3.0, 6.0, size=(1000, 4)) * rng.choice([-1, 1], size=(1000, 4))
@@ -97,8 +74,8 @@ def test_map_variance_vanishes_far_from_the_demonstrations(fitted, demos):
 
 
 @pytest.mark.parametrize("loss", ["bayes", "ce"])
-def test_save_load_round_trip_in_safe_mode(fitted, held_out, tmp_path, loss):
-    model = fitted[loss]
+def test_save_load_round_trip_in_safe_mode(bc_models, held_out, tmp_path, loss):
+    model = bc_models[loss]
     path = tmp_path / "bc_model.keras"
     model.save(path)
     loaded = keras.saving.load_model(path)  # safe_mode=True by default
@@ -108,9 +85,9 @@ def test_save_load_round_trip_in_safe_mode(fitted, held_out, tmp_path, loss):
     assert float(loaded.n_data) == 2500.0
 
 
-def test_warm_started_refit_keeps_the_fit(fitted, demos, held_out):
+def test_warm_started_refit_keeps_the_fit(bc_models, demos, held_out):
     model = build_bc_model(Config(expert_loss="ce"), 4, 2, demos.obs_scale())
-    model.set_weights(fitted["ce"].get_weights())
+    model.set_weights(bc_models["ce"].get_weights())
     history = model.fit_demos(held_out.obs, held_out.actions, epochs=1)
     assert history.history["accuracy"][0] >= 0.9
     assert float(model.n_data) == len(held_out.obs)
