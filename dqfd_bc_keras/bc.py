@@ -89,20 +89,25 @@ class BCModel(keras.Model):
         obs, actions = data
         with tf.GradientTape() as tape:
             logits = self(obs, training=True)
-            ce = tf.reduce_mean(tf.nn.sparse_softmax_cross_entropy_with_logits(tf.cast(actions, tf.int32), logits))
+            ce = self.cross_entropy(actions, logits)
             loss = ce + self.prior_loss()
         grads = tape.gradient(loss, self.trainable_weights)
         self.optimizer.apply(grads, self.trainable_weights)
-        self.loss_tracker.update_state(loss)
-        self.ce_tracker.update_state(ce)
-        self.accuracy.update_state(actions, logits)
-        return {m.name: m.result() for m in self.metrics}
+        return self._record(actions, logits, ce, loss)
 
     def test_step(self, data):
         obs, actions = data
         logits = self(obs, training=False)
-        ce = tf.reduce_mean(tf.nn.sparse_softmax_cross_entropy_with_logits(tf.cast(actions, tf.int32), logits))
-        self.loss_tracker.update_state(ce + self.prior_loss())
+        ce = self.cross_entropy(actions, logits)
+        return self._record(actions, logits, ce, ce + self.prior_loss())
+
+    @staticmethod
+    def cross_entropy(actions: tf.Tensor, logits: tf.Tensor) -> tf.Tensor:
+        """mean −log π_bc(a_E|s) over the batch."""
+        return tf.reduce_mean(tf.nn.sparse_softmax_cross_entropy_with_logits(tf.cast(actions, tf.int32), logits))
+
+    def _record(self, actions, logits, ce, loss) -> dict[str, tf.Tensor]:
+        self.loss_tracker.update_state(loss)
         self.ce_tracker.update_state(ce)
         self.accuracy.update_state(actions, logits)
         return {m.name: m.result() for m in self.metrics}
