@@ -20,6 +20,7 @@ from .config import Config
 from .demos import DemoDataset
 from .errors import ConfigError
 from .networks import build_q_network
+from .optimizers import FusedAdam
 from .replay import Batch, PrioritizedReplay
 
 LOSS_TERMS = ("loss", "td", "n_step", "expert", "l2")
@@ -53,7 +54,7 @@ class DQfDAgent(keras.Model):
                               for w in self.q_network.trainable_weights]
         self.train_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="train_steps")
         self.trackers = {name: keras.metrics.Mean(name=name) for name in LOSS_TERMS}
-        self.compile(optimizer=keras.optimizers.Adam(config.learning_rate))
+        self.compile(optimizer=FusedAdam(config.learning_rate))
         self.optimizer.build(self.q_network.trainable_variables)
         self.refresh_target()
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
 import tensorflow as tf
 
 from .errors import ConfigError
@@ -71,6 +72,8 @@ class SumTree(tf.Module):
         self.depth = max(1, math.ceil(math.log(size, self.BRANCH) - 1e-9))
         self.levels = [tf.Variable(tf.zeros([self.BRANCH**d]), trainable=False, name=f"level_{d}")
                        for d in range(self.depth + 1)]
+        # (x @ upper)[:, j] = Σ_{i ≤ j} x[:, i]: TensorFlow's CPU cumsum is several times slower.
+        self._upper = tf.constant(np.triu(np.ones((self.BRANCH, self.BRANCH), np.float32)))
 
     @property
     def total(self) -> tf.Tensor:
@@ -95,12 +98,12 @@ class SumTree(tf.Module):
         """The leaf whose cumulative-sum interval holds each of `mass` (n,) in [0, total)."""
         nodes = tf.zeros_like(mass, dtype=tf.int32)
         for d in range(1, self.depth + 1):
-            cumulative = tf.cumsum(tf.gather(self.levels[d], self._children(nodes)), axis=1)
+            children = tf.gather(self.levels[d], self._children(nodes))  # (n, BRANCH)
+            cumulative = tf.matmul(children, self._upper)  # a cumsum along the row, as one matmul
             mass = tf.minimum(mass, cumulative[:, -1] * (1.0 - 1e-6))  # float rounding at the edge
-            child = tf.reduce_sum(tf.cast(cumulative <= mass[:, None], tf.int32), axis=1)
-            before = tf.gather(tf.pad(cumulative, [[0, 0], [1, 0]]), child, axis=1, batch_dims=1)
-            mass -= before
-            nodes = nodes * self.BRANCH + child
+            passed = tf.cast(cumulative <= mass[:, None], tf.float32)  # the children wholly below mass
+            mass -= tf.reduce_sum(children * passed, axis=1)
+            nodes = nodes * self.BRANCH + tf.cast(tf.reduce_sum(passed, axis=1), tf.int32)
         return nodes
 
 
@@ -146,6 +149,7 @@ class PrioritizedReplay(tf.Module):
         self.max_priority = tf.Variable(1.0, trainable=False, name="max_priority")
         """The largest p^α written so far: new transitions enter with it."""
         self.tree = SumTree(rows)
+        self._strictly_upper = tf.constant(np.triu(np.ones((n_step, n_step), np.float32), k=1))
         self.rng = tf.random.Generator.from_seed(seed)
 
     @property
@@ -217,7 +221,7 @@ class PrioritizedReplay(tf.Module):
                          (self.head - 1 - (indices - self.demo_capacity)) % self.capacity)
         done = window[:, :, self.TERMINATED] + window[:, :, self.TRUNCATED] > 0
         # Step k is in the window iff no earlier step ended the episode and it has been stored.
-        ended_before = tf.cumsum(tf.cast(done, tf.int32), axis=1, exclusive=True) > 0
+        ended_before = tf.matmul(tf.cast(done, tf.float32), self._strictly_upper) > 0  # Σ_{i<k} done_i > 0
         inside = tf.cast(tf.logical_and(tf.logical_not(ended_before), k[None, :] <= ahead[:, None]), tf.float32)
         discounts = tf.pow(self.gamma, tf.cast(k, tf.float32))
         n_returns = tf.reduce_sum(inside * discounts * window[:, :, self.REWARD], axis=1)
