@@ -1,16 +1,42 @@
-"""Evaluate a trained agent on the plain env. Not implemented yet: arrives with issue C."""
+"""Evaluate a trained agent: greedy episodes on the plain env (CartPole-v1, MountainCar-v0).
 
+    python evaluate.py runs/cartpole-bayes-0                 # the run's Q-network, 100 episodes
+    python evaluate.py runs/cartpole-bayes-0 --policy bc     # its BC model instead
+    python evaluate.py model.keras --task cartpole --json    # a bare model file: name its task
+"""
+
+import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level, custom Keras objects)
+
+import json
 import sys
+from collections.abc import Sequence
 
-from dqfd_bc_keras.cli import ArgumentParser
+from dqfd_bc_keras.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.envs import TASKS
+from dqfd_bc_keras.evaluation import POLICY_FILES, evaluate, load_policy
+from dqfd_bc_keras.files import write_text
 
 
-def main() -> int:
-    ArgumentParser(prog="evaluate.py", description=__doc__).parse_args()
-    print("evaluate.py: not yet implemented (issue C); record demonstrations with "
-          "`python -m dqfd_bc_keras.demos record` meanwhile", file=sys.stderr)
-    return 2
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="evaluate.py", description=__doc__.splitlines()[0])
+    parser.add_argument("target", help="a run directory (config.json + models) or a .keras file")
+    parser.add_argument("--task", choices=sorted(TASKS), help="the task to play (default: from config.json)")
+    parser.add_argument("--policy", choices=sorted(POLICY_FILES),
+                        help="a run directory's q_network.keras (q, the default) or bc_model.keras (bc)")
+    parser.add_argument("--episodes", type=positive_int, default=100, help="greedy episodes (default 100)")
+    parser.add_argument("--seed", type=int, default=12345, help="episode i is reset with seed + i (default 12345)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
+    parser.add_argument("--out", help="also write the JSON result to this file")
+    args = parser.parse_args(argv)
+
+    policy, settings = load_policy(args.target, args.policy, args.task)
+    result = evaluate(policy, settings.task, args.episodes, args.seed, settings.timeout, settings.max_steps)
+    report = {**result.to_dict(), "model": str(settings.model_path)}
+    if args.out:
+        write_text(args.out, json.dumps(report, indent=2) + "\n")
+    print(json.dumps(report) if args.json else f"{settings.model_path}\n{result.summary()}")
+    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

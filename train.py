@@ -1,16 +1,73 @@
-"""Train an agent (Algorithm 1). Not implemented yet: arrives with issue C."""
+"""Train an agent with Algorithm 1 (DQfD-BC with a supervised expert loss) and evaluate it.
+
+    python train.py                                  # cartpole, bayes, 5 imperfect-expert episodes
+    python train.py --task mountaincar-goals --expert-loss ce --seed 3
+    python train.py --demos demos.npz --set sigma0_sq=1.0 --set total_steps=20000
+    python train.py --out runs/x --resume            # continue a killed run from its checkpoint
+"""
+
+from __future__ import annotations
 
 import sys
 
-from dqfd_bc_keras.cli import ArgumentParser
+import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+from dqfd_bc_keras import cli, demos
+from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.envs import TASKS, TIMEOUT_MODES
+from dqfd_bc_keras.experts import EXPERT_NAMES
+from dqfd_bc_keras.losses import EXPERT_LOSSES, TARGETS
+from dqfd_bc_keras.runs import train
+
+QUICK = ["total_steps=600", "pretrain_steps=50", "bc_epochs=2", "bc_refit_epochs=1", "demo_episodes=2",
+         "eval_every=300", "eval_episodes=2", "final_eval_episodes=2", "checkpoint_every=300",
+         "replay_capacity=2000", "demo_capacity=5000"]
 
 
-def main() -> int:
-    ArgumentParser(prog="train.py", description=__doc__).parse_args()
-    print("train.py: not yet implemented (issue C); record demonstrations with "
-          "`python -m dqfd_bc_keras.demos record` meanwhile", file=sys.stderr)
-    return 2
+def parse(argv):
+    parser = cli.ArgumentParser(prog="train.py", description=__doc__.split("\n\n")[0],
+                                epilog="Every Config field can be set with --set key=value "
+                                       "(see dqfd_bc_keras/config.py for the list and the defaults).")
+    parser.add_argument("--task", choices=sorted(TASKS), default="cartpole", help="task preset (default: cartpole)")
+    parser.add_argument("--expert-loss", choices=(*EXPERT_LOSSES, "none"), help="J_E (default: bayes; none = plain DQN)")
+    parser.add_argument("--target", choices=TARGETS, help="bootstrap target (default: dqn)")
+    parser.add_argument("--timeout", choices=TIMEOUT_MODES, help="time-limit handling (default: bootstrap)")
+    parser.add_argument("--demos", help="demonstration dataset (.npz); else recorded from --expert")
+    parser.add_argument("--expert", choices=EXPERT_NAMES, help="scripted expert to record (default: imperfect)")
+    parser.add_argument("--demo-episodes", type=cli.positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
+    parser.add_argument("--steps", type=cli.positive_int, help="environment-step budget")
+    parser.add_argument("--seed", type=int, help="seed of every random generator (default: 0)")
+    parser.add_argument("--out", help="run directory (default: runs/TASK-LOSS-seedSEED)")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    parser.add_argument("--force", action="store_true", help="replace an existing run in --out")
+    parser.add_argument("--quick", action="store_true", help="a tiny budget (seconds), for tests and smoke checks")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="any Config field")
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse(argv)
+    flags = {"expert_loss": args.expert_loss, "target": args.target, "timeout": args.timeout,
+             "expert": args.expert, "demo_episodes": args.demo_episodes, "total_steps": args.steps,
+             "seed": args.seed}
+    config = Config.for_task(args.task, **{k: v for k, v in flags.items() if v is not None})
+    config = config.with_overrides((QUICK if args.quick else []) + args.set)
+    out = args.out or f"runs/{config.task}-{config.expert_loss}-seed{config.seed}"
+    dataset = demos.load(args.demos, task=config.task, timeout=config.timeout) if args.demos else None
+    if not args.quiet:
+        print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
+              f"config: {out}/config.json", flush=True)
+    result = train(config, out, dataset, resume=args.resume, force=args.force, quiet=args.quiet)
+    if not args.quiet:
+        evaluation = result.evaluation
+        print(f"{result.episodes} episodes, {result.env_steps} env steps"
+              f"{' (early stop)' if result.stopped_early else ''}, {result.wall_time:.0f} s of training")
+        print(f"greedy evaluation on {TASKS[config.task].env_id}, {evaluation['episodes']} episodes: "
+              f"{evaluation['mean_return']:.1f} ± {evaluation['std_return']:.1f} "
+              f"(min {evaluation['min_return']:g}, max {evaluation['max_return']:g})"
+              + (f", goals per episode {evaluation['mean_goals']:.2f}" if "mean_goals" in evaluation else ""))
+    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cli.run(main))

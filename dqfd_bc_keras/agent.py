@@ -160,13 +160,17 @@ class DQfDAgent(keras.Model):
             self.trackers[name].update_state(value)
         return delta
 
+    def learn_step(self) -> None:
+        """Sample a prioritized batch → train_step → write back |δ| as the new priorities."""
+        batch = self.replay.sample(self.config.batch_size, self.beta())
+        delta = self.train_step(batch)
+        self.replay.update_priorities(batch.indices, tf.abs(delta))
+
     @tf.function(input_signature=[tf.TensorSpec([], tf.int32)])
     def learn(self, steps: tf.Tensor) -> dict[str, tf.Tensor]:
-        """`steps` × (sample a prioritized batch → train_step → write back |δ|), one graph call."""
+        """`steps` learning steps in one graph call; returns the trackers' running means."""
         for _ in tf.range(steps):
-            batch = self.replay.sample(self.config.batch_size, self.beta())
-            delta = self.train_step(batch)
-            self.replay.update_priorities(batch.indices, tf.abs(delta))
+            self.learn_step()
         return {name: tracker.result() for name, tracker in self.trackers.items()}
 
     def pretrain(self, steps: int, steps_per_call: int = 100) -> dict[str, float]:
@@ -192,24 +196,41 @@ class DQfDAgent(keras.Model):
         return tf.argmax(self.q_network(obs), axis=1, output_type=tf.int32)
 
     def checkpoint(self) -> tf.train.Checkpoint:
-        """Everything needed to resume learning bit for bit: θ, θ', θ_prior, Adam, replay, BC."""
+        """Everything needed to resume learning bit for bit: θ, θ', θ_prior, Adam, replay, π_bc.
+
+        Variables are listed one by one: TensorFlow's object tracking does not see inside
+        Keras 3's layer lists, nor the dropout layers' random-seed state.
+        """
+        bc_variables = self.bc_model.variables if self.bc_model is not None else []
         return tf.train.Checkpoint(
             q_network=self.q_network, target_network=self.target_network, optimizer=self.optimizer,
             train_steps=self.train_steps, replay=self.replay,
             **{f"prior_{i}": prior for i, prior in enumerate(self.prior_weights)},
-            **({"bc_model": self.bc_model} if self.bc_model is not None else {}),
+            **{f"bc_{i}": variable.value for i, variable in enumerate(bc_variables)},
         )
 
 
-def make_agent(config: Config, demos: DemoDataset, bc_model: BCModel | None = None) -> DQfDAgent:
-    """A fresh agent whose D_demo holds `demos` and whose networks are scaled to their states."""
-    obs_dim, n_actions = demos.meta.obs_dim, demos.meta.n_actions
+def make_agent(
+    config: Config,
+    demos: DemoDataset | None,
+    bc_model: BCModel | None = None,
+    obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
+    spaces: tuple[int, int] | None = None,
+) -> DQfDAgent:
+    """A fresh agent whose D_demo holds `demos`, networks scaled by `obs_scale` (default: the
+    demos' states). Without demos (plain DQN) give `obs_scale` and `spaces` = (obs_dim, n_actions)."""
+    if demos is not None:
+        spaces = spaces or (demos.meta.obs_dim, demos.meta.n_actions)
+        obs_scale = obs_scale or demos.obs_scale()
+    if spaces is None or obs_scale is None:
+        raise ConfigError("an agent without demonstrations needs obs_scale and spaces")
     c = config
     replay = PrioritizedReplay(
-        obs_dim, n_actions, capacity=c.replay_capacity, demo_capacity=c.demo_capacity, n_step=c.n_step,
+        *spaces, capacity=c.replay_capacity, demo_capacity=c.demo_capacity, n_step=c.n_step,
         gamma=c.gamma, alpha=c.priority_alpha, eps_agent=c.priority_eps_agent, eps_demo=c.priority_eps_demo,
         seed=c.seed,
     )
-    agent = DQfDAgent(config, obs_dim, n_actions, replay, bc_model, obs_scale=demos.obs_scale())
-    agent.set_demos(demos.obs, demos.actions, demos.rewards, demos.next_obs, demos.terminated, demos.truncated)
+    agent = DQfDAgent(config, *spaces, replay, bc_model, obs_scale=obs_scale)
+    if demos is not None:
+        agent.set_demos(demos.obs, demos.actions, demos.rewards, demos.next_obs, demos.terminated, demos.truncated)
     return agent

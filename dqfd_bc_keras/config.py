@@ -26,6 +26,8 @@ class Config:
     """Task preset (envs.TASKS)."""
     timeout: str = "bootstrap"
     """Time-limit mode: bootstrap | naive | time-aware."""
+    max_steps: int | None = None
+    """Episode step limit; None: the task's (CartPole 500 or 200, MountainCar 200)."""
 
     # --- the loss J = J_DQ + λ1·J_n + λ2·J_E + λ3·J_L2 (§2) ----------------------------------
     expert_loss: str = "bayes"
@@ -99,14 +101,98 @@ class Config:
     priority_eps_demo: float = 1.0
     """ε_d, added to |δ| for demonstrations (the demo bonus)."""
 
+    # --- demonstrations (§4, §5) ----------------------------------------------------------
+    expert: str = "imperfect"
+    """Scripted expert whose demonstrations are recorded when no dataset file is given."""
+    demo_episodes: int = 5
+    """Episodes recorded from `expert` (seeds seed·1000 + i)."""
+    dynamic_demos: bool = True
+    """DQfD-BC's dynamic demonstrations (BC-based expert losses only)."""
+    dynamic_window: int = 10
+    """W: the moving average of the last W episode returns that must reach a new best."""
+    dynamic_rollouts: int = 5
+    """M: greedy episodes added to D_demo at each new best."""
+    bc_refit_epochs: int = 10
+    """Epochs of each warm-started BC refit on the enlarged D_demo."""
+
+    # --- Algorithm 1's loop (§4) -----------------------------------------------------------
+    total_steps: int = 50_000
+    """Environment-step budget."""
+    train_freq: int = 1
+    """Env steps per gradient step (the paper: 1)."""
+    epsilon_start: float | None = None
+    """ε-greedy at the start; None: 0.1 after pre-training, 1.0 without demonstrations."""
+    epsilon_end: float = 0.01
+    """ε after the decay."""
+    epsilon_fraction: float = 0.1
+    """Fraction of the step budget over which ε decays linearly."""
+    early_stop_window: int = 10
+    """Stop once this many consecutive episodes return ≥ early_stop_fraction × limit (CartPole; 0: never)."""
+    early_stop_fraction: float = 0.98
+    """The paper's 490 of 500."""
+    eval_every: int = 5_000
+    """Env steps between greedy evaluations on the plain env."""
+    eval_episodes: int = 10
+    """Episodes per periodic evaluation."""
+    final_eval_episodes: int = 20
+    """Episodes of the evaluation written to eval.json at the end."""
+    checkpoint_every: int = 10_000
+    """Env steps between checkpoints (taken at the next episode end)."""
+
     seed: int = 0
     """Seed of every random generator of the run."""
+    deterministic: bool = True
+    """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
 
     @classmethod
     def for_task(cls, task: str, **overrides: object) -> Config:
-        """The defaults of task preset `task` with `overrides` applied, validated."""
+        """Task preset `task`'s defaults (its dataclass in `PRESETS`) with `overrides`, validated."""
         get_task(task)
-        return cls(task=task, **overrides).validate()
+        return PRESETS[task](**overrides).validate()
+
+    @classmethod
+    def from_dict(cls, fields: dict) -> Config:
+        """The inverse of `to_dict` (a saved config.json); unknown keys are an error."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(fields) - known)
+        if unknown:
+            raise ConfigError(f"unknown config field(s) {unknown}")
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+        return cls.for_task(values.pop("task", "cartpole"), **values)
+
+    def with_overrides(self, assignments: list[str]) -> Config:
+        """A copy with `key=value` assignments applied (values typed by the field), validated.
+
+        Tuples are comma lists (`hidden=128,128`); `none` sets an optional field to None.
+        """
+        types = {f.name: f.type for f in dataclasses.fields(self)}
+        changes: dict[str, object] = {}
+        for assignment in assignments:
+            key, sep, text = assignment.partition("=")
+            key = key.strip().replace("-", "_")
+            if key == "task":
+                raise ConfigError("the task is chosen with --task: each task has its own preset defaults")
+            if not sep or key not in types:
+                raise ConfigError(f"--set {assignment!r}: expected key=value with a key among {sorted(types)}")
+            changes[key] = _parse(key, types[key], text.strip())
+        fields = {**self.to_dict(), **changes}
+        return self.for_task(fields.pop("task"), **fields)
+
+    @property
+    def limit(self) -> int:
+        """The episode step limit in force."""
+        return get_task(self.task).max_steps if self.max_steps is None else self.max_steps
+
+    @property
+    def uses_demos(self) -> bool:
+        """Every expert loss learns from demonstrations; `none` is plain DQN without any."""
+        return self.expert_loss != "none"
+
+    @property
+    def initial_epsilon(self) -> float:
+        if self.epsilon_start is not None:
+            return self.epsilon_start
+        return 0.1 if self.uses_demos else 1.0
 
     @property
     def uses_bc(self) -> bool:
@@ -148,9 +234,28 @@ class Config:
             ("priority_beta0", 0.0 <= self.priority_beta0 <= 1.0, "in [0, 1]"),
             ("priority_eps_agent", self.priority_eps_agent > 0, "> 0"),
             ("priority_eps_demo", self.priority_eps_demo > 0, "> 0"),
+            ("max_steps", self.max_steps is None or self.max_steps >= 1, "≥ 1 or None"),
+            ("demo_episodes", self.demo_episodes >= 1, "≥ 1"),
+            ("dynamic_window", self.dynamic_window >= 1, "≥ 1"),
+            ("dynamic_rollouts", self.dynamic_rollouts >= 1, "≥ 1"),
+            ("bc_refit_epochs", self.bc_refit_epochs >= 0, "≥ 0"),
+            ("total_steps", self.total_steps >= 1, "≥ 1"),
+            ("train_freq", self.train_freq >= 1, "≥ 1"),
+            ("epsilon_start", self.epsilon_start is None or 0 <= self.epsilon_start <= 1, "in [0, 1] or None"),
+            ("epsilon_end", 0.0 <= self.epsilon_end <= 1.0, "in [0, 1]"),
+            ("epsilon_fraction", 0.0 < self.epsilon_fraction <= 1.0, "in (0, 1]"),
+            ("early_stop_window", self.early_stop_window >= 0, "≥ 0"),
+            ("eval_every", self.eval_every >= 1, "≥ 1"),
+            ("eval_episodes", self.eval_episodes >= 1, "≥ 1"),
+            ("final_eval_episodes", self.final_eval_episodes >= 1, "≥ 1"),
+            ("checkpoint_every", self.checkpoint_every >= 1, "≥ 1"),
             ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
             ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
         ]
+        from .experts import EXPERT_NAMES
+
+        if self.expert not in EXPERT_NAMES:
+            raise ConfigError(f"expert={self.expert!r} is not one of {EXPERT_NAMES}")
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
@@ -158,3 +263,60 @@ class Config:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+@dataclass
+class CartPoleConfig(Config):
+    """`cartpole`: CartPole-v1, 500 steps, −100 on a fall; stops early at 10 episodes ≥ 490."""
+
+    task: str = "cartpole"
+    total_steps: int = 50_000
+
+
+@dataclass
+class CartPole200Config(Config):
+    """`cartpole-200`: the paper's unstable variant with a 200-step limit."""
+
+    task: str = "cartpole-200"
+    total_steps: int = 50_000
+
+
+@dataclass
+class MountainCarConfig(Config):
+    """`mountaincar`: MountainCar-v0, 200 steps, sparse; no early stop (the budget ends it)."""
+
+    task: str = "mountaincar"
+    demo_episodes: int = 10
+    total_steps: int = 100_000
+    early_stop_window: int = 0
+
+
+@dataclass
+class MountainCarGoalsConfig(MountainCarConfig):
+    """`mountaincar-goals`: the paper's goal-count variant (Figs. 9–11)."""
+
+    task: str = "mountaincar-goals"
+
+
+PRESETS: dict[str, type[Config]] = {
+    "cartpole": CartPoleConfig, "cartpole-200": CartPole200Config,
+    "mountaincar": MountainCarConfig, "mountaincar-goals": MountainCarGoalsConfig,
+}
+
+
+def _parse(key: str, annotation: str, text: str) -> object:
+    """`text` as the type named by the dataclass annotation `annotation`."""
+    optional = annotation.endswith("| None")
+    if optional and text.lower() == "none":
+        return None
+    base = annotation.removesuffix(" | None")
+    try:
+        if base == "bool":
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(text)
+            return text.lower() in ("true", "1")
+        if base.startswith("tuple"):
+            return tuple(int(part) for part in text.split(",") if part)
+        return {"int": int, "float": float, "str": str}[base](text)
+    except ValueError:
+        raise ConfigError(f"--set {key}={text!r}: expected {annotation}") from None

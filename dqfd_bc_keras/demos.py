@@ -21,7 +21,7 @@ import dataclasses
 import json
 import sys
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,6 +86,18 @@ class DemoDataset:
     def n_episodes(self) -> int:
         return len(self.meta.episode_returns)
 
+    def episodes(self) -> list[DemoDataset]:
+        """The dataset split into one dataset per episode (ids restart at 0)."""
+        starts = np.flatnonzero(np.diff(self.episode_ids, prepend=-1))
+        ends = np.append(starts[1:], len(self))
+        return [
+            DemoDataset(**{name: getattr(self, name)[a:b] for name in ARRAYS if name != "episode_ids"},
+                        episode_ids=np.zeros(b - a, np.int64),
+                        meta=dataclasses.replace(self.meta, episode_returns=[self.meta.episode_returns[i]],
+                                                 plain_returns=[self.meta.plain_returns[i]]))
+            for i, (a, b) in enumerate(zip(starts, ends))
+        ]
+
     def obs_scale(self) -> tuple[np.ndarray, np.ndarray]:
         """(mean, std) of the demonstrated states, per feature: the networks' input scaling."""
         return self.obs.mean(axis=0), self.obs.std(axis=0)
@@ -114,17 +126,33 @@ def record(
     seed: int = 0,
     epsilon: float = 0.0,
     timeout: str = "bootstrap",
+    max_steps: int | None = None,
 ) -> DemoDataset:
     """Run the scripted `expert` for `episodes` episodes of `task`; episode i resets with seed + i."""
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
     spec = get_task(task)
-    env = make_task(task, timeout=timeout)
+    env = make_task(task, timeout=timeout, max_steps=max_steps)
     policy = make_expert(spec.family, expert, epsilon=epsilon, seed=seed)
+    dataset = rollout(env, policy, [seed + i for i in range(episodes)], task=task, source=expert,
+                      epsilon=epsilon, seed=seed)
+    env.close()
+    return dataset
+
+
+def rollout(
+    env, policy: Callable[[np.ndarray], int], seeds: Sequence[int], *, task: str, source: str,
+    epsilon: float = 0.0, seed: int = 0,
+) -> DemoDataset:
+    """One complete episode of `policy` on the task env `env` per seed, as a dataset.
+
+    `source` names the demonstrator in the metadata (a scripted expert, or the agent's
+    greedy policy for dynamic demonstrations).
+    """
     columns: dict[str, list] = {name: [] for name in ARRAYS}
     returns, plain_returns = [], []
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
+    for episode, episode_seed in enumerate(seeds):
+        obs, _ = env.reset(seed=int(episode_seed))
         done, ret, plain = False, 0.0, 0.0
         while not done:
             action = policy(obs)
@@ -136,13 +164,28 @@ def record(
             obs, done = next_obs, terminated or truncated
         returns.append(ret)
         plain_returns.append(plain)
+    spec = get_task(task)
+    timeout = env.get_wrapper_attr("mode")
     meta = DemoMeta(
         task=task, env_id=spec.env_id, timeout=timeout, obs_dim=int(env.observation_space.shape[0]),
-        n_actions=int(env.action_space.n), expert=expert, epsilon=float(epsilon), seed=int(seed),
+        n_actions=int(env.action_space.n), expert=source, epsilon=float(epsilon), seed=int(seed),
         episode_returns=returns, plain_returns=plain_returns,
     )
-    env.close()
     arrays = {name: np.asarray(columns[name], dtype=dtype) for name, (dtype, _) in ARRAYS.items()}
+    return DemoDataset(**arrays, meta=meta)
+
+
+def concatenate(parts: Sequence[DemoDataset], source: str) -> DemoDataset:
+    """One dataset of the episodes of `parts`, in order, episode ids renumbered 0, 1, 2, …"""
+    first = parts[0].meta
+    offsets = np.cumsum([0] + [p.n_episodes for p in parts[:-1]])
+    arrays = {name: np.concatenate([getattr(p, name) for p in parts]) for name in ARRAYS if name != "episode_ids"}
+    arrays["episode_ids"] = np.concatenate([p.episode_ids + off for p, off in zip(parts, offsets)])
+    meta = dataclasses.replace(
+        first, expert=source,
+        episode_returns=[r for p in parts for r in p.meta.episode_returns],
+        plain_returns=[r for p in parts for r in p.meta.plain_returns],
+    )
     return DemoDataset(**arrays, meta=meta)
 
 

@@ -95,10 +95,9 @@ class TimeLimitMode(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """End episodes after `max_steps` steps; `mode` (one of `TIMEOUT_MODES`) says how.
 
     At the limit, unless the physics terminated on that same step:
-    `bootstrap` → truncated=True, terminated=False; `naive` → terminated=True;
-    `time-aware` → terminated=True, and every observation carries one more feature, the
-    remaining-time fraction 1 − t/max_steps (1 at reset, 0 at the limit).
-    `info["time_limit"]` is True on the step where the limit was hit.
+    `bootstrap` → truncated=True, terminated=False; `naive` and `time-aware` → terminated=True
+    (`make_task` adds `TimeFeature` in time-aware mode, so that there the state shows the
+    time left). `info["time_limit"]` is True on the step where the limit was hit.
     """
 
     def __init__(self, env: gym.Env, max_steps: int, mode: str = "bootstrap") -> None:
@@ -111,24 +110,10 @@ class TimeLimitMode(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.max_steps = int(max_steps)
         self.mode = mode
         self._t = 0
-        if mode == "time-aware":
-            space = env.observation_space
-            self.observation_space = gym.spaces.Box(
-                low=np.append(space.low, 0.0).astype(np.float32),
-                high=np.append(space.high, 1.0).astype(np.float32),
-                dtype=np.float32,
-            )
-
-    def _observe(self, obs: np.ndarray) -> np.ndarray:
-        if self.mode != "time-aware":
-            return obs
-        remaining = 1.0 - self._t / self.max_steps
-        return np.append(obs, remaining).astype(np.float32)
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        obs, info = self.env.reset(**kwargs)
         self._t = 0
-        return self._observe(obs), info
+        return self.env.reset(**kwargs)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
@@ -140,7 +125,39 @@ class TimeLimitMode(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 truncated = True
             else:
                 terminated = True
-        return self._observe(obs), reward, terminated, truncated, info
+        return obs, reward, terminated, truncated, info
+
+
+class TimeFeature(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Append the remaining-time fraction max(0, 1 − t/max_steps) to the observation.
+
+    1 at reset, 0 at the limit (Pardo et al. 2018). Also used to evaluate a time-aware agent
+    on the plain env, whose own limit may differ from the one it was trained with.
+    """
+
+    def __init__(self, env: gym.Env, max_steps: int) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, max_steps=max_steps)
+        gym.ObservationWrapper.__init__(self, env)
+        self.max_steps = int(max_steps)
+        self._t = 0
+        space = env.observation_space
+        self.observation_space = gym.spaces.Box(
+            low=np.append(space.low, 0.0).astype(np.float32),
+            high=np.append(space.high, 1.0).astype(np.float32),
+            dtype=np.float32,
+        )
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self._t = 0
+        return super().reset(**kwargs)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        self._t += 1
+        return super().step(action)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        remaining = max(0.0, 1.0 - self._t / self.max_steps)
+        return np.append(observation, remaining).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -201,12 +218,23 @@ def make_task(
         env = FallPenalty(env, spec.fall_penalty)
     if spec.goal_reward is not None:
         env = GoalCount(env, spec.goal_reward)
-    return TimeLimitMode(env, spec.max_steps if max_steps is None else max_steps, timeout)
+    limit = spec.max_steps if max_steps is None else max_steps
+    env = TimeLimitMode(env, limit, timeout)
+    return TimeFeature(env, limit) if timeout == "time-aware" else env
 
 
-def make_plain_env(name: str, render_mode: str | None = None) -> gym.Env:
-    """The unmodified Gymnasium env of task `name`, with its own time limit."""
-    return gym.make(get_task(name).env_id, render_mode=render_mode)
+def make_plain_env(
+    name: str, timeout: str = "bootstrap", max_steps: int | None = None, render_mode: str | None = None
+) -> gym.Env:
+    """The unmodified Gymnasium env of task `name`, with its own time limit.
+
+    With `timeout="time-aware"` the observation also carries the time feature the agent was
+    trained with (fraction of the training limit `max_steps` left); rewards and ends are untouched.
+    """
+    env = gym.make(get_task(name).env_id, render_mode=render_mode)
+    if timeout == "time-aware":
+        env = TimeFeature(env, get_task(name).max_steps if max_steps is None else max_steps)
+    return env
 
 
 def register_tasks() -> None:

@@ -1,0 +1,191 @@
+"""A training run on disk: what `train.py` writes, checkpoints, and resuming.
+
+    RUN_DIR/config.json        every hyperparameter (written once, at the start)
+            metrics.csv        one row per episode (training.METRIC_FIELDS)
+            evals.csv          periodic greedy evaluations on the plain env
+            dynamic_demos.json every dynamic-demonstration update
+            tb/                TensorBoard events: returns, evaluations, each loss term
+            checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state)
+            q_network.keras  bc_model.keras  demos.npz  eval.json  learning_curve.png   (at the end)
+
+Every file is written atomically; a checkpoint is a new directory made current by rewriting
+`checkpoints/latest.json`, so a run killed at any moment resumes from a complete one.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tensorflow as tf
+
+from . import demos as demo_io
+from .config import Config
+from .errors import ConfigError, OutputExistsError
+from .files import atomic_path, write_text
+from .reports import plot_learning_curve
+from .training import (METRIC_FIELDS, Learner, RunState, build, eval_seed, run_evaluation, state_from_dict,
+                       train_episodes)
+
+EVAL_FIELDS = ("env_step", "episode", "mean_return", "std_return", "mean_goals")
+
+
+@dataclass
+class RunResult:
+    """What a finished run reports: where, how long, and the final evaluation."""
+
+    out: Path
+    episodes: int
+    env_steps: int
+    stopped_early: bool
+    wall_time: float
+    evaluation: dict
+
+
+def prepare_dir(out: Path, resume: bool, force: bool) -> None:
+    """Refuse to overwrite an existing run unless resuming it or forced."""
+    if resume:
+        if not (out / "checkpoints" / "latest.json").is_file():
+            raise ConfigError(f"{out} has no checkpoint to resume from")
+        return
+    if out.exists() and any(out.iterdir()):
+        if not force:
+            raise OutputExistsError(f"{out} already holds a run; pass --resume to continue it or --force to replace it")
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text(path, buffer.getvalue())
+
+
+class Run:
+    """One run directory and the learner training into it."""
+
+    def __init__(self, config: Config, out: Path, learner: Learner, state: RunState, quiet: bool) -> None:
+        self.config, self.out, self.learner, self.state = config, out, learner, state
+        self.tb = tf.summary.create_file_writer(str(out / "tb"))
+        self.progress = None
+        if not quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.progress = tqdm(total=config.total_steps, unit="step", dynamic_ncols=True,
+                                 initial=int(learner.interaction.env_steps.numpy()))
+
+    # --- called after every episode -------------------------------------------------------
+    def on_episode(self, learner: Learner, state: RunState, row: dict) -> None:
+        step = row["env_step"]
+        with self.tb.as_default(step=step):
+            for key in ("return", "plain_return", "length", "goals", "epsilon", "loss", "td", "n_step",
+                        "expert", "l2", "demo_size"):
+                tf.summary.scalar(f"train/{key}", row[key])
+        if self.progress is not None:
+            self.progress.update(step - self.progress.n)
+            self.progress.set_postfix(episode=row["episode"], ret=f"{row['return']:.0f}")
+        if step >= state.next_eval or state.stopped_early:
+            self.evaluate(step)
+            state.next_eval = step + self.config.eval_every
+        write_csv(self.out / "metrics.csv", METRIC_FIELDS, state.metrics)
+        if state.demo_updates:
+            write_text(self.out / "dynamic_demos.json", json.dumps(state.demo_updates, indent=1))
+        if step >= state.next_checkpoint:
+            state.next_checkpoint = step + self.config.checkpoint_every
+            self.save_checkpoint()
+
+    def evaluate(self, step: int) -> None:
+        result = run_evaluation(self.config, self.learner.agent, self.config.eval_episodes, eval_seed(self.config))
+        entry = {"env_step": step, "episode": self.state.episode, "mean_return": result.mean_return,
+                 "std_return": result.std_return,
+                 "mean_goals": float(np.mean(result.goals)) if result.goals is not None else ""}
+        self.state.evals.append(entry)
+        write_csv(self.out / "evals.csv", EVAL_FIELDS, self.state.evals)
+        with self.tb.as_default(step=step):
+            tf.summary.scalar("eval/plain_return", result.mean_return)
+            if result.goals is not None:
+                tf.summary.scalar("eval/goals", float(np.mean(result.goals)))
+        self.tb.flush()
+
+    # --- checkpoints ------------------------------------------------------------------------
+    def save_checkpoint(self) -> None:
+        root = self.out / "checkpoints"
+        name = f"ckpt-{int(self.learner.interaction.env_steps.numpy())}"
+        target = root / name
+        shutil.rmtree(target, ignore_errors=True)
+        self.learner.checkpoint().write(str(target / "tf"))
+        if self.learner.dynamic is not None:
+            demo_io.save(self.learner.dynamic.dataset, target / "demos.npz", force=True)
+        write_text(target / "state.json", json.dumps(dataclasses.asdict(self.state)))
+        previous = json.loads((root / "latest.json").read_text())["dir"] if (root / "latest.json").exists() else None
+        write_text(root / "latest.json", json.dumps({"dir": name}))
+        if previous and previous != name:
+            shutil.rmtree(root / previous, ignore_errors=True)
+
+    def restore_checkpoint(self) -> None:
+        root = self.out / "checkpoints"
+        source = root / json.loads((root / "latest.json").read_text())["dir"]
+        self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
+        if self.learner.dynamic is not None:
+            self.learner.dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
+        self.state = state_from_dict(json.loads((source / "state.json").read_text()))
+
+    # --- the end ----------------------------------------------------------------------------
+    def finish(self) -> RunResult:
+        if self.progress is not None:
+            self.progress.close()
+        learner, out = self.learner, self.out
+        with atomic_path(out / "q_network.keras") as tmp:
+            learner.agent.q_network.save(tmp)
+        if learner.bc is not None:
+            with atomic_path(out / "bc_model.keras") as tmp:
+                learner.bc.save(tmp)
+        if learner.dynamic is not None:
+            demo_io.save(learner.dynamic.dataset, out / "demos.npz", force=True)
+        result = run_evaluation(self.config, learner.agent, self.config.final_eval_episodes,
+                                eval_seed(self.config) + 1_000_000)
+        evaluation = result.to_dict()
+        write_text(out / "eval.json", json.dumps(evaluation, indent=1))
+        plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
+        self.save_checkpoint()
+        self.tb.close()
+        return RunResult(out, self.state.episode, int(learner.interaction.env_steps.numpy()),
+                         self.state.stopped_early, self.state.wall_time, evaluation)
+
+
+def train(
+    config: Config,
+    out: str | Path,
+    dataset: demo_io.DemoDataset | None = None,
+    resume: bool = False,
+    force: bool = False,
+    quiet: bool = False,
+) -> RunResult:
+    """Train `config` into run directory `out` (or continue the run there with `resume`)."""
+    out = Path(out)
+    prepare_dir(out, resume, force)
+    if resume:
+        config = Config.from_dict(json.loads((out / "config.json").read_text()))
+    else:
+        write_text(out / "config.json", json.dumps(config.to_dict(), indent=1))
+    if config.deterministic:
+        tf.config.experimental.enable_op_determinism()
+    learner, _ = build(config, dataset, fresh=not resume)
+    run = Run(config, out, learner, RunState(), quiet)
+    if resume:
+        run.restore_checkpoint()
+    else:
+        run.evaluate(0)  # the pre-trained policy, before any interaction
+        run.state.next_eval, run.state.next_checkpoint = config.eval_every, config.checkpoint_every
+        run.save_checkpoint()
+    train_episodes(learner, run.state, run.on_episode)
+    return run.finish()

@@ -1,0 +1,302 @@
+"""Algorithm 1 of the paper end to end (ALGORITHM.md §4–§5), one function per phase:
+
+    demonstrations → fit π_bc → pre-train k steps on D_demo (θ_prior ← θ) →
+    episodes of ε-greedy interaction, one prioritized update per `train_freq` env steps,
+    θ' ← θ every τ updates → dynamic demonstrations after each episode →
+    stop at the step budget or the task's early-stopping rule.
+
+An episode is one TensorFlow graph call (`Interaction.play`): a `tf.while_loop` acts
+ε-greedily with Q, steps the real Gymnasium env through `tf.numpy_function`, stores the
+transition, and takes the gradient step, so the policy that acts is always the one after
+the latest update. Per-episode work (logging, evaluation, dynamic demonstrations,
+checkpoints) stays in Python; `runs.py` holds the files a run writes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import keras
+import numpy as np
+import tensorflow as tf
+
+from . import demos as demo_io
+from .agent import DQfDAgent, make_agent
+from .bc import BCModel, build_bc_model
+from .config import Config
+from .envs import make_task
+from .evaluation import EvalResult, GreedyPolicy, evaluate
+
+METRIC_FIELDS = ("episode", "env_step", "return", "plain_return", "length", "goals", "epsilon",
+                 "loss", "td", "n_step", "expert", "l2", "demo_size", "wall_time")
+
+
+class Interaction(tf.Module):
+    """The interaction loop of Algorithm 1 (step 3) for one env, compiled into one graph per episode."""
+
+    def __init__(self, agent: DQfDAgent, env: gym.Env, config: Config) -> None:
+        super().__init__()
+        self.agent, self.env, self.config = agent, env, config
+        self.env_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="env_steps")
+        self.rng = tf.random.Generator.from_seed(config.seed + 1)
+        self.episode = EpisodeStats()
+        obs_dim = agent.obs_dim
+        self.play = tf.function(self._play, input_signature=[
+            tf.TensorSpec([obs_dim], tf.float32), tf.TensorSpec([], tf.int64)])
+
+    def epsilon(self) -> tf.Tensor:
+        """ε, linear from its start to `epsilon_end` over `epsilon_fraction` of the budget."""
+        c = self.config
+        start = c.initial_epsilon
+        progress = tf.cast(self.env_steps, tf.float32) / (c.epsilon_fraction * c.total_steps)
+        return tf.maximum(c.epsilon_end, start - (start - c.epsilon_end) * progress)
+
+    def _env_step(self, action: np.ndarray) -> tuple[np.ndarray, np.float32, bool, bool]:
+        """The Python side of `tf.numpy_function`: step the env, keep the episode's tallies."""
+        obs, reward, terminated, truncated, info = self.env.step(int(action))
+        self.episode.add(float(reward), info)
+        return np.asarray(obs, np.float32), np.float32(reward), bool(terminated), bool(truncated)
+
+    def _play(self, obs: tf.Tensor, max_steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
+        """Act, store and learn until the episode ends or `max_steps` env steps; returns (obs, done)."""
+        agent, c = self.agent, self.config
+        done = tf.constant(False)
+        steps = tf.constant(0, tf.int64)
+        while not done and steps < max_steps:
+            tf.autograph.experimental.set_loop_options(shape_invariants=[(obs, tf.TensorShape([agent.obs_dim]))])
+            greedy = agent.greedy_actions(obs[None])[0]
+            explore = self.rng.uniform([]) < self.epsilon()
+            action = tf.where(explore, self.rng.uniform([], 0, agent.n_actions, dtype=tf.int32), greedy)
+            next_obs, reward, terminated, truncated = tf.numpy_function(
+                self._env_step, [action], [tf.float32, tf.float32, tf.bool, tf.bool], stateful=True)
+            next_obs = tf.ensure_shape(next_obs, [agent.obs_dim])
+            reward, terminated, truncated = (tf.ensure_shape(x, []) for x in (reward, terminated, truncated))
+            agent.store(obs, action, reward, next_obs, terminated, truncated)
+            self.env_steps.assign_add(1)
+            steps += 1
+            if self.env_steps % c.train_freq == 0 and agent.replay.size >= c.batch_size:
+                agent.learn_step()
+            obs = next_obs
+            done = tf.logical_or(terminated, truncated)
+        return obs, done
+
+
+@dataclass
+class EpisodeStats:
+    """Tallies of the running episode, kept by the env step in Python."""
+
+    ret: float = 0.0
+    plain: float = 0.0
+    length: int = 0
+    goals: int = 0
+
+    def add(self, reward: float, info: dict) -> None:
+        self.ret += reward
+        self.plain += info["plain_reward"]
+        self.length += 1
+        self.goals = info.get("goals", self.goals)
+
+
+@dataclass
+class RunState:
+    """Everything of a run that lives in Python; saved with each checkpoint."""
+
+    episode: int = 0
+    returns: list[float] = field(default_factory=list)
+    best_average: float = -np.inf
+    metrics: list[dict] = field(default_factory=list)
+    evals: list[dict] = field(default_factory=list)
+    demo_updates: list[dict] = field(default_factory=list)
+    next_eval: int = 0
+    next_checkpoint: int = 0
+    bc_fits: int = 0
+    wall_time: float = 0.0
+    stopped_early: bool = False
+
+
+def episode_seed(config: Config, episode: int, stream: int = 0) -> int:
+    """A reset seed per (run seed, episode, stream): resumed runs replay the same starts."""
+    return int(np.random.SeedSequence([config.seed, stream, episode]).generate_state(1)[0])
+
+
+def demonstrations(config: Config, dataset: demo_io.DemoDataset | None) -> demo_io.DemoDataset | None:
+    """Step 1: the given dataset, or `demo_episodes` recorded from the scripted `expert`."""
+    if not config.uses_demos:
+        return None
+    if dataset is not None:
+        return dataset
+    return demo_io.record(config.task, config.expert, config.demo_episodes, seed=config.seed * 1000,
+                          timeout=config.timeout, max_steps=config.max_steps)
+
+
+def fit_bc(config: Config, bc: BCModel, data: demo_io.DemoDataset, epochs: int, fit_index: int) -> float:
+    """Fit (or refit, warm-started) π_bc on D_demo; returns its training accuracy.
+
+    The global seed is set from (run seed, fit index), so a resumed run refits identically.
+    """
+    keras.utils.set_random_seed(episode_seed(config, fit_index, stream=3) % 2**31)
+    history = bc.fit_demos(data.obs, data.actions, epochs=epochs, batch_size=config.batch_size)
+    return float(history.history["accuracy"][-1]) if epochs else float("nan")
+
+
+def random_obs_scale(env: gym.Env, seed: int, steps: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """Input scaling for plain DQN, which has no demonstrations: states of a random policy."""
+    rng = np.random.default_rng(seed)
+    states, (obs, _) = [], env.reset(seed=seed)
+    for _ in range(steps):
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(env.action_space.n)))
+        states.append(obs)
+        if terminated or truncated:
+            obs, _ = env.reset(seed=int(rng.integers(2**31)))
+    return np.mean(states, axis=0), np.std(states, axis=0)
+
+
+def build_learner(
+    config: Config, data: demo_io.DemoDataset | None, env: gym.Env, fit: bool
+) -> tuple[DQfDAgent, BCModel | None]:
+    """π_bc fitted on D_demo (BC-based losses; only built when `fit` is False, for a resume that
+    restores its weights), and the agent with D_demo loaded."""
+    keras.utils.set_random_seed(config.seed)
+    obs_dim, n_actions = int(env.observation_space.shape[0]), int(env.action_space.n)
+    bc = None
+    if config.uses_bc:
+        bc = build_bc_model(config, obs_dim, n_actions, data.obs_scale())
+        if fit:
+            fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
+        else:
+            bc.optimizer.build(bc.trainable_variables)
+    scale = None if data is not None else random_obs_scale(env, config.seed)
+    return make_agent(config, data, bc, obs_scale=scale, spaces=(obs_dim, n_actions)), bc
+
+
+class DynamicDemos:
+    """DQfD-BC's dynamic demonstrations (§5): D_demo grows with the agent's best greedy episodes."""
+
+    def __init__(self, config: Config, data: demo_io.DemoDataset, env: gym.Env) -> None:
+        self.config, self.env = config, env
+        self.episodes = data.episodes()
+        self.demo_average = float(np.mean(data.meta.episode_returns))
+
+    @property
+    def dataset(self) -> demo_io.DemoDataset:
+        return demo_io.concatenate(self.episodes, source=self.episodes[0].meta.expert)
+
+    def due(self, state: RunState) -> bool:
+        """The moving average of the last W returns reaches a new best, at least the demos' average."""
+        W = self.config.dynamic_window
+        if len(state.returns) < W:
+            return False
+        average = float(np.mean(state.returns[-W:]))
+        if average > state.best_average and average >= self.demo_average:
+            state.best_average = average
+            return True
+        return False
+
+    def update(self, agent: DQfDAgent, bc: BCModel, state: RunState) -> dict:
+        """Roll out M greedy episodes into D_demo (lowest returns dropped past capacity), refit π_bc."""
+        c = self.config
+        seeds = [episode_seed(c, state.episode * 100 + i, stream=2) for i in range(c.dynamic_rollouts)]
+        new = demo_io.rollout(self.env, GreedyPolicy.from_model(agent.q_network), seeds, task=c.task,
+                              source="agent", seed=c.seed)
+        self.episodes += new.episodes()
+        self.episodes.sort(key=lambda e: -e.meta.episode_returns[0])  # stable: older first among ties
+        while sum(len(e) for e in self.episodes) > c.demo_capacity and len(self.episodes) > 1:
+            self.episodes.pop()
+        data = self.dataset
+        state.bc_fits += 1
+        accuracy = fit_bc(c, bc, data, c.bc_refit_epochs, fit_index=state.bc_fits)
+        agent.set_demos(data.obs, data.actions, data.rewards, data.next_obs, data.terminated, data.truncated)
+        agent.refresh_expert_targets()
+        return {"episode": state.episode, "env_step": 0, "moving_average": state.best_average,
+                "new_returns": new.meta.episode_returns, "demo_transitions": len(data),
+                "demo_episodes": len(self.episodes), "bc_accuracy": accuracy}
+
+
+def run_evaluation(config: Config, agent: DQfDAgent, episodes: int, seed: int) -> EvalResult:
+    """Greedy episodes of the current Q-network on the plain env (and goal counts where that applies)."""
+    return evaluate(GreedyPolicy.from_model(agent.q_network), config.task, episodes, seed,
+                    timeout=config.timeout, max_steps=config.max_steps)
+
+
+def early_stop(config: Config, returns: list[float]) -> bool:
+    """CartPole's rule: the last `early_stop_window` episodes all return ≥ fraction × limit."""
+    n = config.early_stop_window
+    threshold = config.early_stop_fraction * config.limit
+    return n > 0 and len(returns) >= n and min(returns[-n:]) >= threshold
+
+
+@dataclass
+class Learner:
+    """Everything a run trains: the agent, π_bc, the interaction loop and D_demo's episodes."""
+
+    config: Config
+    agent: DQfDAgent
+    bc: BCModel | None
+    interaction: Interaction
+    dynamic: DynamicDemos | None
+
+    def checkpoint(self) -> tf.train.Checkpoint:
+        extra = {"bc_optimizer": self.bc.optimizer} if self.bc is not None else {}
+        return tf.train.Checkpoint(agent=self.agent.checkpoint(), env_steps=self.interaction.env_steps,
+                                   rng=self.interaction.rng, **extra)
+
+
+def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: bool = True) -> tuple[Learner, dict]:
+    """Steps 1–2: demonstrations, π_bc, the pre-trained agent; returns the learner and
+    pre-training's losses. `fresh=False` skips the fits: a resume restores their results."""
+    env = make_task(config.task, timeout=config.timeout, max_steps=config.max_steps)
+    data = demonstrations(config, dataset)
+    agent, bc = build_learner(config, data, env, fit=fresh)
+    pretrain = fresh and data is not None and config.pretrain_steps > 0
+    losses = agent.pretrain(config.pretrain_steps) if pretrain else {}
+    agent.reset_metrics()
+    rollout_env = make_task(config.task, timeout=config.timeout, max_steps=config.max_steps)
+    dynamic = DynamicDemos(config, data, rollout_env) if bc is not None and config.dynamic_demos else None
+    return Learner(config, agent, bc, Interaction(agent, env, config), dynamic), losses
+
+
+def train_episodes(
+    learner: Learner, state: RunState, on_episode: Callable[[Learner, RunState, dict], None]
+) -> RunState:
+    """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs, evaluates and saves."""
+    c, agent, interaction = learner.config, learner.agent, learner.interaction
+    env = interaction.env
+    while int(interaction.env_steps.numpy()) < c.total_steps and not state.stopped_early:
+        started = time.perf_counter()
+        obs, _ = env.reset(seed=episode_seed(c, state.episode))
+        interaction.episode = EpisodeStats()
+        budget = c.total_steps - int(interaction.env_steps.numpy())
+        interaction.play(tf.constant(obs, tf.float32), tf.constant(budget, tf.int64))
+        stats = interaction.episode
+        losses = {name: float(t.result()) for name, t in agent.trackers.items()}
+        agent.reset_metrics()
+        state.returns.append(stats.ret)
+        state.episode += 1
+        state.wall_time += time.perf_counter() - started
+        row = {"episode": state.episode, "env_step": int(interaction.env_steps.numpy()), "return": stats.ret,
+               "plain_return": stats.plain, "length": stats.length, "goals": stats.goals,
+               "epsilon": float(interaction.epsilon()), **losses,
+               "demo_size": int(agent.replay.demo_size.numpy()), "wall_time": state.wall_time}
+        state.metrics.append(row)
+        if learner.dynamic is not None and learner.dynamic.due(state):
+            started = time.perf_counter()
+            update = learner.dynamic.update(agent, learner.bc, state)
+            update["env_step"] = row["env_step"]
+            state.demo_updates.append(update)
+            state.wall_time += time.perf_counter() - started
+        state.stopped_early = early_stop(c, state.returns)
+        on_episode(learner, state, row)
+    return state
+
+
+def eval_seed(config: Config) -> int:
+    """Evaluation episodes use their own seeds, apart from training's."""
+    return 10_000 + config.seed * 1000
+
+
+def state_from_dict(fields: dict) -> RunState:
+    return RunState(**{f.name: fields[f.name] for f in dataclasses.fields(RunState) if f.name in fields})
