@@ -112,7 +112,7 @@ class Config:
     """W: the moving average of the last W episode returns that must reach a new best."""
     dynamic_rollouts: int = 5
     """M: greedy episodes added to D_demo at each new best."""
-    bc_refit_epochs: int = 10
+    bc_refit_epochs: int = 3
     """Epochs of each warm-started BC refit on the enlarged D_demo."""
 
     # --- Algorithm 1's loop (§4) -----------------------------------------------------------
@@ -229,7 +229,7 @@ class Config:
             ("target_update_period", self.target_update_period >= 1, "≥ 1"),
             ("pretrain_steps", self.pretrain_steps >= 0, "≥ 0"),
             ("replay_capacity", self.replay_capacity >= self.n_step, "≥ n_step"),
-            ("demo_capacity", self.demo_capacity >= 1, "≥ 1"),
+            ("demo_capacity", self.demo_capacity >= self.limit, f"≥ the episode limit {self.limit}"),
             ("priority_alpha", self.priority_alpha >= 0, "≥ 0"),
             ("priority_beta0", 0.0 <= self.priority_beta0 <= 1.0, "in [0, 1]"),
             ("priority_eps_agent", self.priority_eps_agent > 0, "> 0"),

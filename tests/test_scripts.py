@@ -1,0 +1,135 @@
+"""train.py and evaluate.py as a user runs them: subprocesses, tiny budgets, exit codes."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+LOSSES = ("bayes", "ce", "bc_margin", "margin", "none")
+ENV = {**os.environ, "PYTHONPATH": str(REPO)}
+
+
+def script(name, *args, **kwargs):
+    return [sys.executable, str(REPO / name), *map(str, args)]
+
+
+def run(name, *args, timeout=300):
+    return subprocess.run(script(name, *args), capture_output=True, text=True, timeout=timeout, cwd=REPO, env=ENV)
+
+
+@pytest.fixture(scope="module")
+def quick_runs(tmp_path_factory):
+    """`train.py --quick` once per expert loss, two at a time (one per core)."""
+    root = tmp_path_factory.mktemp("runs")
+    done = {}
+    pending = list(LOSSES)
+    active: dict[str, subprocess.Popen] = {}
+    while pending or active:
+        while pending and len(active) < 2:
+            loss = pending.pop(0)
+            active[loss] = subprocess.Popen(
+                script("train.py", "--quick", "--expert-loss", loss, "--out", root / loss),
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO, env=ENV)
+        for loss, process in list(active.items()):
+            if process.poll() is not None:
+                out, err = process.communicate()
+                done[loss] = (process.returncode, out, err, root / loss)
+                del active[loss]
+        time.sleep(0.2)
+    return done
+
+
+@pytest.mark.parametrize("loss", LOSSES)
+def test_quick_training_writes_a_complete_run(quick_runs, loss):
+    code, out, err, run_dir = quick_runs[loss]
+    assert code == 0, err
+    assert "greedy evaluation on CartPole-v1, 2 episodes:" in out
+    expected = {"config.json", "metrics.csv", "evals.csv", "q_network.keras", "eval.json", "learning_curve.png", "tb"}
+    if loss != "margin" and loss != "none":
+        expected |= {"bc_model.keras", "demos.npz"}
+    assert expected <= {p.name for p in run_dir.iterdir()}
+    assert json.loads((run_dir / "config.json").read_text())["expert_loss"] == loss
+    rows = list(csv.DictReader((run_dir / "metrics.csv").open()))
+    assert rows and int(rows[-1]["env_step"]) <= 600
+
+
+@pytest.mark.parametrize("loss", ["bayes", "margin"])
+def test_evaluate_reads_a_quick_run(quick_runs, loss, tmp_path):
+    run_dir = quick_runs[loss][3]
+    done = run("evaluate.py", run_dir, "--episodes", 3, "--json", "--out", tmp_path / "e.json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["task"] == "cartpole" and result["episodes"] == 3 and len(result["returns"]) == 3
+    assert json.loads((tmp_path / "e.json").read_text())["returns"] == result["returns"]
+
+
+def test_resume_after_sigkill_reproduces_the_uninterrupted_run(tmp_path):
+    """Same seed, op determinism: a run killed mid-way and resumed writes the same metrics."""
+    args = ["--quick", "--set", "total_steps=2500", "--set", "checkpoint_every=500", "--quiet"]
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    assert run("train.py", *args, "--out", whole).returncode == 0
+    process = subprocess.Popen(script("train.py", *args, "--out", cut), cwd=REPO, env=ENV,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    latest = cut / "checkpoints" / "latest.json"
+    deadline = time.time() + 240
+    while time.time() < deadline and process.poll() is None:
+        if latest.exists() and json.loads(latest.read_text())["dir"] != "ckpt-0":
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    checkpoint = json.loads(latest.read_text())["dir"]
+    assert checkpoint != "ckpt-0" and int(checkpoint.split("-")[1]) < 2500, "killed too late to test resuming"
+    resumed = run("train.py", *args, "--out", cut, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+
+    def table(path, drop="wall_time"):
+        rows = list(csv.DictReader(path.open()))
+        return [{k: v for k, v in row.items() if k != drop} for row in rows]
+
+    assert table(cut / "metrics.csv") == table(whole / "metrics.csv")
+    assert table(cut / "evals.csv") == table(whole / "evals.csv")
+    assert json.loads((cut / "eval.json").read_text()) == json.loads((whole / "eval.json").read_text())
+
+
+def one_line_error(done, message):
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert message in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_train_refuses_to_overwrite_a_run(quick_runs):
+    run_dir = quick_runs["bayes"][3]
+    before = (run_dir / "metrics.csv").read_bytes()
+    one_line_error(run("train.py", "--quick", "--out", run_dir), "already holds a run; pass --resume")
+    assert (run_dir / "metrics.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--task", "pong"], "invalid choice: 'pong'"),
+    (["--expert-loss", "kl"], "invalid choice: 'kl'"),
+    (["--steps", "0"], "must be a positive integer, got 0"),
+    (["--set", "gama=0.9"], "--set 'gama=0.9': expected key=value"),
+    (["--set", "gamma=abc"], "--set gamma='abc': expected float"),
+    (["--set", "gamma=2"], "gamma must be in [0, 1], got 2.0"),
+    (["--demos", "missing.npz"], "missing.npz: no such file"),
+    (["--resume", "--out", "nowhere"], "nowhere has no checkpoint to resume from"),
+])
+def test_train_rejects_bad_input_in_one_line(args, message):
+    one_line_error(run("train.py", "--quick", *args), message)
+
+
+def test_train_rejects_demos_of_another_task(tmp_path):
+    demos = tmp_path / "mc.npz"
+    assert subprocess.run([sys.executable, "-m", "dqfd_bc_keras.demos", "record", "--task", "mountaincar",
+                           "--expert", "strong", "--episodes", "1", "--out", demos], cwd=REPO, env=ENV).returncode == 0
+    one_line_error(run("train.py", "--quick", "--demos", demos, "--out", tmp_path / "x"),
+                   "was recorded on task 'mountaincar', not on the requested 'cartpole'")
+    assert not (tmp_path / "x").exists()

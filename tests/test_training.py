@@ -1,0 +1,495 @@
+"""Algorithm 1 end to end (ALGORITHM.md §4–§6): the early-stopping rule, the ε schedule, episode
+seeds, the demonstrations step, one interaction episode as one graph call, dynamic
+demonstrations, the run directory `runs.train` writes, and the config's typed overrides.
+
+Every budget is tiny: two learners are built once per module and shared, and two 300-step runs
+are trained end to end.
+"""
+
+import csv
+import dataclasses
+import json
+
+import keras
+import numpy as np
+import pytest
+import tensorflow as tf
+
+import dqfd_bc_keras  # noqa: F401  (first: TF settings, custom objects)
+from dqfd_bc_keras import demos as demo_io
+from dqfd_bc_keras import runs, training
+from dqfd_bc_keras.agent import LOSS_TERMS
+from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.envs import make_task
+from dqfd_bc_keras.errors import ConfigError, OutputExistsError
+from dqfd_bc_keras.evaluation import GreedyPolicy, load_model
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def tiny(expert_loss: str = "bayes", **overrides) -> Config:
+    settings = dict(expert_loss=expert_loss, total_steps=300, pretrain_steps=20, bc_epochs=1, bc_refit_epochs=1,
+                    demo_episodes=2, eval_every=150, eval_episodes=1, final_eval_episodes=1,
+                    checkpoint_every=150, replay_capacity=2000, demo_capacity=5000)
+    settings.update(overrides)
+    return Config.for_task("cartpole", **settings)
+
+
+def ret(episode: demo_io.DemoDataset) -> float:
+    return episode.meta.episode_returns[0]
+
+
+# --- the early-stopping rule (§6) ----------------------------------------------------------------
+
+def test_early_stop_needs_the_whole_window_at_98_percent_of_the_limit():
+    config = Config.for_task("cartpole", early_stop_window=10, early_stop_fraction=0.98)
+    assert config.limit == 500
+    assert training.early_stop(config, [490.0] * 10)
+    assert training.early_stop(config, [12.0, -80.0] + [490.0] * 10)  # only the last 10 count
+    assert not training.early_stop(config, [500.0] * 9 + [489.9])
+    assert not training.early_stop(config, [489.9] + [500.0] * 9)
+    assert not training.early_stop(config, [500.0] * 9)
+    assert not training.early_stop(config, [])
+    never = Config.for_task("cartpole", early_stop_window=0)
+    assert not training.early_stop(never, [500.0] * 100)
+
+
+def test_early_stop_threshold_follows_the_step_limit():
+    short = Config.for_task("cartpole-200")
+    assert short.limit == 200 and short.early_stop_window == 10
+    assert training.early_stop(short, [196.0] * 10)  # 0.98 × 200
+    assert not training.early_stop(short, [196.0] * 9 + [195.9])
+    capped = Config.for_task("cartpole", max_steps=100)
+    assert training.early_stop(capped, [98.0] * 10)
+    assert not training.early_stop(capped, [97.9] * 10)
+    assert Config.for_task("mountaincar").early_stop_window == 0
+
+
+# --- episode seeds -------------------------------------------------------------------------------
+
+def test_episode_seed_is_deterministic_and_distinct_per_episode_and_stream():
+    config = tiny()
+    seed = training.episode_seed(config, 3)
+    assert isinstance(seed, int) and 0 <= seed < 2**32
+    assert training.episode_seed(config, 3) == seed == training.episode_seed(config, 3, stream=0)
+    assert len({training.episode_seed(config, e) for e in range(200)}) == 200
+    assert len({training.episode_seed(config, 3, stream=s) for s in range(4)}) == 4
+    assert training.episode_seed(dataclasses.replace(config, seed=1), 3) != seed
+
+
+def test_run_state_round_trips_through_json():
+    state = training.RunState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[{"episode": 1}], bc_fits=2)
+    assert state.best_average == -np.inf
+    fields = json.loads(json.dumps(dataclasses.asdict(state)))
+    assert training.state_from_dict({**fields, "unknown": 1}) == state
+
+
+# --- step 1: demonstrations ----------------------------------------------------------------------
+
+def test_demonstrations_records_the_configured_expert_with_the_timeout_and_limit():
+    config = tiny(timeout="naive", max_steps=30, seed=2)
+    data = training.demonstrations(config, None)
+    assert data.n_episodes == 2 and len(data) == 60  # the imperfect expert outlasts 30 steps
+    assert (data.meta.task, data.meta.expert, data.meta.timeout, data.meta.seed) == ("cartpole", "imperfect",
+                                                                                      "naive", 2000)
+    assert data.meta.episode_returns == [30.0, 30.0]
+    # naive mode: the time limit is a termination, never a truncation
+    assert not data.truncated.any()
+    assert np.flatnonzero(data.terminated).tolist() == [29, 59]
+    again = demo_io.record("cartpole", "imperfect", 2, seed=2000, timeout="naive", max_steps=30)
+    np.testing.assert_array_equal(data.obs, again.obs)
+    np.testing.assert_array_equal(data.actions, again.actions)
+
+
+def test_demonstrations_passes_a_dataset_through_and_none_has_none(demos):
+    assert training.demonstrations(tiny(), demos) is demos
+    assert training.demonstrations(tiny("none"), None) is None
+    assert training.demonstrations(tiny("none"), demos) is None
+
+
+# --- step 2: the pre-trained learner -------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def built():
+    """The tiny bayes learner, and its counters right after `build`."""
+    config = tiny()
+    learner, losses = training.build(config)
+    snapshot = {"train_steps": int(learner.agent.train_steps.numpy()),
+                "agent_size": int(learner.agent.replay.agent_size.numpy()),
+                "env_steps": int(learner.interaction.env_steps.numpy())}
+    return learner, losses, snapshot
+
+
+def test_build_fits_bc_and_pretrains_on_the_recorded_demonstrations(built):
+    learner, losses, snapshot = built
+    config, agent = learner.config, learner.agent
+    data = training.demonstrations(config, None)
+    assert snapshot == {"train_steps": config.pretrain_steps, "agent_size": 0, "env_steps": 0}
+    assert int(agent.replay.demo_size.numpy()) == len(data)
+    np.testing.assert_array_equal(agent.replay.table.numpy()[: len(data), agent.replay.OBS], data.obs)
+    assert set(losses) == set(LOSS_TERMS) and all(np.isfinite(v) for v in losses.values())
+    assert learner.bc is not None and learner.dynamic is not None
+    assert learner.dynamic.demo_average == pytest.approx(np.mean(data.meta.episode_returns))
+
+
+# --- step 3: ε-greedy schedule -------------------------------------------------------------------
+
+@pytest.mark.parametrize("loss, start", [("bayes", 0.1), ("none", 1.0)])
+def test_epsilon_decays_linearly_over_the_first_tenth_of_the_budget(built, loss, start):
+    learner = built[0]
+    config = tiny(loss)  # total_steps 300, epsilon_fraction 0.1: the decay ends at env step 30
+    assert config.initial_epsilon == start
+    interaction = training.Interaction(learner.agent, learner.interaction.env, config)
+    end = config.epsilon_end
+    for steps, expected in [(0, start), (6, start - (start - end) * 0.2), (15, (start + end) / 2),
+                            (30, end), (31, end), (300, end)]:
+        interaction.env_steps.assign(steps)
+        assert float(interaction.epsilon()) == pytest.approx(expected, abs=1e-6), steps
+
+
+def test_epsilon_start_can_be_set():
+    assert tiny(epsilon_start=0.5).initial_epsilon == 0.5
+    assert tiny("none", epsilon_start=0.0).initial_epsilon == 0.0
+
+
+# --- step 3: one episode is one graph call -------------------------------------------------------
+
+def episode_rows(agent, length: int) -> np.ndarray:
+    """The last `length` rows stored in D_replay (no wrap-around at these sizes)."""
+    replay = agent.replay
+    head = int(replay.head.numpy())
+    assert head >= length
+    return replay.table.numpy()[replay.demo_capacity + head - length: replay.demo_capacity + head]
+
+
+def test_one_episode_acts_stores_and_learns_every_step(built):
+    learner = built[0]
+    agent, interaction, env = learner.agent, learner.interaction, learner.interaction.env
+    replay = agent.replay
+    assert int(replay.size.numpy()) >= learner.config.batch_size  # the demos alone fill a batch
+    obs, _ = env.reset(seed=training.episode_seed(learner.config, 0))
+    interaction.episode = training.EpisodeStats()
+    env0, size0, train0 = (int(v.numpy()) for v in (interaction.env_steps, replay.agent_size, agent.train_steps))
+
+    last_obs, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(10_000, tf.int64))
+
+    stats = interaction.episode
+    length = stats.length
+    assert bool(done) and 8 <= length <= 500
+    assert int(interaction.env_steps.numpy()) - env0 == length
+    assert int(replay.agent_size.numpy()) - size0 == length
+    assert int(agent.train_steps.numpy()) - train0 == length  # train_freq 1, replay ≥ batch_size throughout
+    assert stats.plain == length
+    rows = episode_rows(agent, length)
+    np.testing.assert_array_equal(rows[0, replay.OBS], obs)
+    np.testing.assert_array_equal(rows[1:, replay.OBS], rows[:-1, replay.NEXT_OBS])  # one continuous episode
+    np.testing.assert_array_equal(rows[-1, replay.NEXT_OBS], last_obs.numpy())
+    assert not rows[:-1, replay.TERMINATED].any() and not rows[:-1, replay.TRUNCATED].any()
+    np.testing.assert_array_equal(rows[:-1, replay.REWARD], 1.0)
+    if rows[-1, replay.TERMINATED]:  # the pole fell: −100 instead of +1 on the last step
+        assert length < 500 and rows[-1, replay.TRUNCATED] == 0
+        assert rows[-1, replay.REWARD] == -100.0
+        assert stats.ret == length - 1 - 100
+    else:  # the 500-step limit
+        assert length == 500 and rows[-1, replay.TRUNCATED] == 1
+        assert stats.ret == 500
+
+
+def test_play_stops_at_the_step_budget_and_the_episode_continues(built):
+    learner = built[0]
+    interaction, env = learner.interaction, learner.interaction.env
+    obs, _ = env.reset(seed=training.episode_seed(learner.config, 1))
+    interaction.episode = training.EpisodeStats()
+    env0 = int(interaction.env_steps.numpy())
+    obs3, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(3, tf.int64))
+    assert not bool(done)
+    assert int(interaction.env_steps.numpy()) - env0 == 3 and interaction.episode.length == 3
+    assert interaction.episode.ret == 3.0  # no pole falls within 3 steps
+    rows = episode_rows(learner.agent, 3)
+    assert not rows[:, learner.agent.replay.TRUNCATED].any() and not rows[:, learner.agent.replay.TERMINATED].any()
+    _, done = interaction.play(obs3, tf.constant(10_000, tf.int64))  # the same episode, on from step 3
+    assert bool(done)
+    assert int(interaction.env_steps.numpy()) - env0 == interaction.episode.length > 3
+
+
+@pytest.mark.parametrize("timeout, terminated, truncated", [("bootstrap", 0.0, 1.0), ("naive", 1.0, 0.0)])
+def test_an_episode_cut_by_the_time_limit_stores_the_timeout_modes_flags(built, timeout, terminated, truncated):
+    """max_steps=5: CartPole's pole cannot fall in fewer than 8 steps, so the limit always ends it.
+    train_freq=2 from env step 0: learning steps at env steps 2 and 4 only."""
+    learner = built[0]
+    agent = learner.agent
+    config = tiny(max_steps=5, timeout=timeout, train_freq=2)
+    env = make_task("cartpole", timeout=timeout, max_steps=5)
+    interaction = training.Interaction(agent, env, config)
+    obs, _ = env.reset(seed=7)
+    train0, size0 = int(agent.train_steps.numpy()), int(agent.replay.agent_size.numpy())
+    _, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(10_000, tf.int64))
+    assert bool(done)
+    assert int(interaction.env_steps.numpy()) == 5 and int(agent.replay.agent_size.numpy()) - size0 == 5
+    assert int(agent.train_steps.numpy()) - train0 == 2
+    assert (interaction.episode.length, interaction.episode.ret, interaction.episode.plain) == (5, 5.0, 5.0)
+    replay = agent.replay
+    head = int(replay.head.numpy())
+    last = replay.table.numpy()[replay.demo_capacity + (head - 1)]
+    assert (last[replay.TERMINATED], last[replay.TRUNCATED]) == (terminated, truncated)
+    assert last[replay.REWARD] == 1.0
+    rows = episode_rows(agent, 5)
+    assert not rows[:-1, replay.TERMINATED].any() and not rows[:-1, replay.TRUNCATED].any()
+
+
+# --- step 4: dynamic demonstrations (§5) ---------------------------------------------------------
+
+def test_dynamic_demos_are_due_at_a_new_best_moving_average_at_least_the_demos(demos):
+    assert demos.meta.episode_returns == [500.0] * 5
+    config = tiny(dynamic_window=3)
+    dynamic = training.DynamicDemos(config, demos, env=None)
+    assert dynamic.demo_average == 500.0
+    state = training.RunState()
+    for r in (500.0, 500.0):
+        state.returns.append(r)
+        assert not dynamic.due(state)  # fewer than W returns
+    state.returns.append(500.0)
+    assert dynamic.due(state) and state.best_average == 500.0
+    state.returns.append(500.0)
+    assert not dynamic.due(state)  # 500 again: no new best
+    state.returns.append(530.0)
+    assert dynamic.due(state) and state.best_average == 510.0  # (500 + 500 + 530) / 3
+    state.returns.append(470.0)
+    assert not dynamic.due(state) and state.best_average == 510.0  # 500: below the best
+
+    below = training.RunState()
+    for r in [499.0] * 5 + [400.0, 600.0, 497.0]:  # moving averages 499, …, 499.0, 499.67, 499.0 < 500
+        below.returns.append(r)
+        assert not dynamic.due(below)
+    assert below.best_average == -np.inf
+
+
+@pytest.fixture(scope="module")
+def capped():
+    """A bayes learner whose episodes last at most 50 steps, M = 3 rollouts per update."""
+    learner, _ = training.build(tiny(max_steps=50, dynamic_rollouts=3, dynamic_window=3))
+    return learner
+
+
+def greedy_rollouts(learner, episode: int) -> demo_io.DemoDataset:
+    """What `update` should add at `state.episode = episode`: M greedy episodes on stream 2."""
+    c = learner.config
+    seeds = [training.episode_seed(c, episode * 100 + i, stream=2) for i in range(c.dynamic_rollouts)]
+    return demo_io.rollout(make_task(c.task, timeout=c.timeout, max_steps=c.max_steps),
+                           GreedyPolicy.from_model(learner.agent.q_network), seeds, task=c.task, source="agent")
+
+
+def test_dynamic_update_adds_m_greedy_episodes_and_refits_bc(capped):
+    learner = capped
+    agent, dynamic, bc = learner.agent, learner.dynamic, learner.bc
+    episodes0 = len(dynamic.episodes)
+    size0 = int(agent.replay.demo_size.numpy())
+    expected = greedy_rollouts(learner, episode=7)
+    weights0 = [w.numpy().copy() for w in bc.trainable_weights]
+    state = training.RunState(episode=7, best_average=50.0)
+
+    update = dynamic.update(agent, bc, state)
+
+    assert update["new_returns"] == expected.meta.episode_returns
+    size = int(agent.replay.demo_size.numpy())
+    assert size == size0 + len(expected)
+    assert update["demo_transitions"] == size == len(dynamic.dataset)
+    assert update["demo_episodes"] == len(dynamic.episodes) == episodes0 + 3
+    assert update["moving_average"] == 50.0 and update["episode"] == 7
+    assert state.bc_fits == 1 and 0.0 <= update["bc_accuracy"] <= 1.0
+    assert any(not np.array_equal(w0, w.numpy()) for w0, w in zip(weights0, bc.trainable_weights))
+    returns = [ret(e) for e in dynamic.episodes]
+    assert returns == sorted(returns, reverse=True)
+    np.testing.assert_array_equal(agent.replay.table.numpy()[:size, agent.replay.OBS], dynamic.dataset.obs)
+    np.testing.assert_array_equal(agent.replay.table.numpy()[:size, agent.replay.ACTION], dynamic.dataset.actions)
+
+
+def test_dynamic_update_past_capacity_drops_the_lowest_returns_first(capped):
+    learner = capped
+    agent, dynamic = learner.agent, learner.dynamic
+    size0 = int(agent.replay.demo_size.numpy())
+    capacity = size0 + 10  # any new episode (≥ 8 steps each, 3 of them) forces an eviction
+    assert capacity >= learner.config.max_steps  # so every single episode fits
+    before = list(dynamic.episodes)
+    new = greedy_rollouts(learner, episode=8).episodes()
+    original = dynamic.config
+    dynamic.config = dataclasses.replace(original, demo_capacity=capacity)
+    try:
+        update = dynamic.update(agent, learner.bc, training.RunState(episode=8, bc_fits=1))
+    finally:
+        dynamic.config = original
+
+    assert update["new_returns"] == [ret(e) for e in new]
+    everything = before + new
+    kept = [ret(e) for e in dynamic.episodes]
+    ranked = sorted((ret(e) for e in everything), reverse=True)
+    assert len(kept) < len(everything)
+    assert kept == ranked[: len(kept)]  # the highest returns stay
+    total = sum(len(e) for e in dynamic.episodes)
+    assert total <= capacity
+    assert int(agent.replay.demo_size.numpy()) == total == update["demo_transitions"]
+    best_dropped = next(e for e in everything if ret(e) == ranked[len(kept)])
+    assert total + len(best_dropped) > capacity  # nothing was dropped that would have fit
+
+
+# --- runs.train end to end -----------------------------------------------------------------------
+
+def read_csv(path):
+    with open(path, newline="") as file:
+        reader = csv.DictReader(file)
+        return reader.fieldnames, list(reader)
+
+
+def tb_tags(directory) -> set[str]:
+    tags = set()
+    for events in directory.glob("events.out.tfevents.*"):
+        for event in tf.compat.v1.train.summary_iterator(str(events)):
+            tags.update(value.tag for value in event.summary.value)
+    return tags
+
+
+@pytest.fixture(scope="module")
+def bayes_run(tmp_path_factory):
+    config = tiny()
+    out = tmp_path_factory.mktemp("bayes") / "run"
+    return config, out, runs.train(config, out, quiet=True)
+
+
+def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
+    config, out, result = bayes_run
+    assert Config.from_dict(json.loads((out / "config.json").read_text())) == config
+    fields, rows = read_csv(out / "metrics.csv")
+    assert fields == list(training.METRIC_FIELDS)
+    assert result.out == out and result.episodes == len(rows) >= 1
+    assert [int(r["episode"]) for r in rows] == list(range(1, len(rows) + 1))
+    steps = [int(r["env_step"]) for r in rows]
+    lengths = [int(r["length"]) for r in rows]
+    assert all(b > a for a, b in zip(steps, steps[1:]))
+    assert not result.stopped_early  # 10 episodes ≥ 490 cannot fit in 300 steps
+    assert steps[-1] == result.env_steps == config.total_steps
+    assert steps == list(np.cumsum(lengths))  # every env step belongs to one episode
+    for row, length in zip(rows[:-1], lengths):  # all but the last (cut by the budget) fell
+        assert float(row["return"]) == length - 101 and float(row["plain_return"]) == length
+    assert float(rows[-1]["plain_return"]) == lengths[-1]
+    for row, step in zip(rows, steps):
+        assert float(row["epsilon"]) == pytest.approx(max(0.01, 0.1 - 0.09 * step / 30), abs=1e-6)
+        assert all(np.isfinite(float(row[k])) for k in LOSS_TERMS)
+    recorded = training.demonstrations(config, None)
+    assert int(rows[0]["demo_size"]) == len(recorded)  # no dynamic update before W = 10 episodes
+
+
+def test_train_evaluates_before_interacting_and_every_eval_every_steps(bayes_run):
+    config, out, _ = bayes_run
+    fields, evals = read_csv(out / "evals.csv")
+    assert fields == list(runs.EVAL_FIELDS)
+    assert (evals[0]["env_step"], evals[0]["episode"]) == ("0", "0")
+    _, rows = read_csv(out / "metrics.csv")
+    expected, due = [0], config.eval_every
+    for row in rows:  # evaluations happen at the first episode end ≥ the next due step
+        if int(row["env_step"]) >= due:
+            expected.append(int(row["env_step"]))
+            due = int(row["env_step"]) + config.eval_every
+    assert [int(e["env_step"]) for e in evals] == expected
+    assert {"train/return", "train/epsilon", "train/expert", "train/demo_size", "eval/plain_return"} <= tb_tags(
+        out / "tb")
+
+
+def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
+    config, out, result = bayes_run
+    q = load_model(out / "q_network.keras")
+    assert q.output_shape == (None, 2)
+    load_model(out / "bc_model.keras")
+    saved = demo_io.load(out / "demos.npz", task="cartpole")
+    updates = out / "dynamic_demos.json"
+    if updates.exists():
+        assert len(saved) == json.loads(updates.read_text())[-1]["demo_transitions"]
+    else:
+        recorded = training.demonstrations(config, None)
+        np.testing.assert_array_equal(saved.obs, recorded.obs)
+        assert saved.meta.episode_returns == recorded.meta.episode_returns
+    evaluation = json.loads((out / "eval.json").read_text())
+    assert {"task", "policy", "episodes", "returns", "mean_return", "std_return"} <= set(evaluation)
+    assert evaluation == result.evaluation
+    assert (evaluation["task"], evaluation["policy"], evaluation["episodes"]) == ("cartpole", "q", 1)
+    assert len(evaluation["returns"]) == 1 and evaluation["mean_return"] == evaluation["returns"][0]
+    assert evaluation["std_return"] == 0.0
+    assert (out / "learning_curve.png").read_bytes()[:8] == PNG_SIGNATURE
+    latest = json.loads((out / "checkpoints" / "latest.json").read_text())
+    assert latest == {"dir": f"ckpt-{config.total_steps}"}
+    checkpoint = out / "checkpoints" / latest["dir"]
+    assert json.loads((checkpoint / "state.json").read_text())["episode"] == result.episodes
+    assert (checkpoint / "tf.index").is_file() and (checkpoint / "demos.npz").is_file()
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(["latest.json", latest["dir"]])
+
+
+def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path):
+    out = tmp_path / "busy"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    with pytest.raises(OutputExistsError) as error:
+        runs.train(tiny("none"), out, quiet=True)
+    assert "--resume" in str(error.value) and "--force" in str(error.value)
+    assert [p.name for p in out.iterdir()] == ["notes.txt"] and (out / "notes.txt").read_text() == "keep me"
+    with pytest.raises(ConfigError, match="checkpoint"):
+        runs.train(tiny("none"), out, resume=True, quiet=True)
+    with pytest.raises(ConfigError, match="checkpoint"):
+        runs.train(tiny("none"), tmp_path / "missing", resume=True, quiet=True)
+    assert (out / "notes.txt").read_text() == "keep me"
+
+    # force: a plain-DQN run replaces it (and writes nothing of demonstrations or BC)
+    result = runs.train(tiny("none"), out, force=True, quiet=True)
+    assert not (out / "notes.txt").exists()
+    assert result.env_steps == 300
+    assert (out / "q_network.keras").is_file() and (out / "eval.json").is_file()
+    assert not (out / "bc_model.keras").exists() and not (out / "demos.npz").exists()
+    assert not (out / "dynamic_demos.json").exists()
+    _, rows = read_csv(out / "metrics.csv")
+    assert len(rows) == result.episodes and all(r["demo_size"] == "0" for r in rows)
+    first = int(rows[0]["env_step"])
+    assert float(rows[0]["epsilon"]) == pytest.approx(max(0.01, 1.0 - 0.99 * first / 30), abs=1e-6)
+    checkpoint = out / "checkpoints" / json.loads((out / "checkpoints" / "latest.json").read_text())["dir"]
+    assert not (checkpoint / "demos.npz").exists()
+    assert json.loads((out / "config.json").read_text())["expert_loss"] == "none"
+
+
+# --- Config --------------------------------------------------------------------------------------
+
+def test_with_overrides_types_each_value():
+    config = tiny().with_overrides(["hidden=32,32", "max_steps=none", "dynamic_demos=false", "gamma=0.9",
+                                    "n-step=3", "epsilon_start=0.2", "expert_loss=ce"])
+    assert config.hidden == (32, 32) and config.max_steps is None and config.dynamic_demos is False
+    assert config.gamma == 0.9 and config.n_step == 3 and config.epsilon_start == 0.2
+    assert config.expert_loss == "ce" and config.total_steps == 300  # the rest is kept
+    assert tiny(max_steps=50).with_overrides(["max_steps=none"]).max_steps is None
+    assert tiny().with_overrides(["max_steps=80"]).max_steps == 80
+    assert type(Config.for_task("mountaincar").with_overrides(["seed=3"])).__name__ == "MountainCarConfig"
+
+
+@pytest.mark.parametrize("assignment, match", [
+    ("nope=1", "key=value with a key among"),
+    ("hidden", "key=value"),
+    ("batch_size=abc", "batch_size='abc': expected int"),
+    ("dynamic_demos=maybe", "expected bool"),
+    ("hidden=a,b", "expected tuple"),
+    ("gamma=2", "gamma must be in"),
+    ("expert_loss=magic", "expert_loss='magic' is not one of"),
+    ("task=mountaincar", "--task"),
+    ("task=", "--task"),
+])
+def test_with_overrides_rejects_bad_keys_values_and_the_task(assignment, match):
+    with pytest.raises(ConfigError, match=match):
+        tiny().with_overrides([assignment])
+
+
+def test_task_presets_and_from_dict():
+    car = Config.for_task("mountaincar")
+    assert (car.demo_episodes, car.total_steps, car.early_stop_window) == (10, 100_000, 0)
+    assert Config.for_task("mountaincar-goals").total_steps == 100_000
+    pole = Config.for_task("cartpole")
+    assert (pole.demo_episodes, pole.total_steps, pole.early_stop_window) == (5, 50_000, 10)
+    with pytest.raises(ConfigError, match="unknown task"):
+        Config.for_task("pong")
+    fields = json.loads(json.dumps(car.to_dict()))
+    assert Config.from_dict(fields) == car
+    with pytest.raises(ConfigError, match="bogus"):
+        Config.from_dict({**fields, "bogus": 1})
