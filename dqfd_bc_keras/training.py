@@ -55,26 +55,29 @@ class Interaction(tf.Module):
         progress = tf.cast(self.env_steps, tf.float32) / (c.epsilon_fraction * c.total_steps)
         return tf.maximum(c.epsilon_end, start - (start - c.epsilon_end) * progress)
 
-    def _env_step(self, action: np.ndarray) -> tuple[np.ndarray, np.float32, bool, bool]:
-        """The Python side of `tf.numpy_function`: step the env, keep the episode's tallies."""
+    def _env_step(self, action: np.ndarray) -> np.ndarray:
+        """The Python side of `tf.numpy_function`: step the env, keep the episode's tallies.
+
+        Returns one float32 vector [s' (d), r, terminated, truncated]: one array crosses the
+        boundary instead of four.
+        """
         obs, reward, terminated, truncated, info = self.env.step(int(action))
         self.episode.add(float(reward), info)
-        return np.asarray(obs, np.float32), np.float32(reward), bool(terminated), bool(truncated)
+        return np.append(obs, (reward, terminated, truncated)).astype(np.float32)
 
     def _play(self, obs: tf.Tensor, max_steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
         """Act, store and learn until the episode ends or `max_steps` env steps; returns (obs, done)."""
-        agent, c = self.agent, self.config
+        agent, c, d = self.agent, self.config, self.agent.obs_dim
         done = tf.constant(False)
         steps = tf.constant(0, tf.int64)
         while not done and steps < max_steps:
-            tf.autograph.experimental.set_loop_options(shape_invariants=[(obs, tf.TensorShape([agent.obs_dim]))])
-            greedy = agent.greedy_actions(obs[None])[0]
-            explore = self.rng.uniform([]) < self.epsilon()
-            action = tf.where(explore, self.rng.uniform([], 0, agent.n_actions, dtype=tf.int32), greedy)
-            next_obs, reward, terminated, truncated = tf.numpy_function(
-                self._env_step, [action], [tf.float32, tf.float32, tf.bool, tf.bool], stateful=True)
-            next_obs = tf.ensure_shape(next_obs, [agent.obs_dim])
-            reward, terminated, truncated = (tf.ensure_shape(x, []) for x in (reward, terminated, truncated))
+            tf.autograph.experimental.set_loop_options(shape_invariants=[(obs, tf.TensorShape([d]))])
+            # ε-greedy: one draw decides whether to explore, the other which action.
+            u = self.rng.uniform([2])
+            random_action = tf.minimum(tf.cast(u[1] * agent.n_actions, tf.int32), agent.n_actions - 1)
+            action = tf.where(u[0] < self.epsilon(), random_action, agent.greedy_actions(obs[None])[0])
+            step = tf.ensure_shape(tf.numpy_function(self._env_step, [action], tf.float32, stateful=True), [d + 3])
+            next_obs, reward, terminated, truncated = step[:d], step[d], step[d + 1] > 0, step[d + 2] > 0
             agent.store(obs, action, reward, next_obs, terminated, truncated)
             self.env_steps.assign_add(1)
             steps += 1
