@@ -64,6 +64,27 @@ def per_call(agent):
     return run
 
 
+def parts(agent) -> dict:
+    """The fused update taken apart: `train_step` alone on a fixed batch, and the prioritized
+    sample + priority write-back alone (with |δ| = 1), each K per graph call."""
+    batch = agent.replay.sample(agent.config.batch_size, agent.beta())
+    ones = tf.ones([agent.config.batch_size])
+
+    @tf.function(input_signature=[tf.TensorSpec([], tf.int32)])
+    def train_only(steps):
+        for _ in tf.range(steps):
+            agent.train_step(batch)
+
+    @tf.function(input_signature=[tf.TensorSpec([], tf.int32)])
+    def replay_only(steps):
+        for _ in tf.range(steps):
+            sampled = agent.replay.sample(agent.config.batch_size, agent.beta())
+            agent.replay.update_priorities(sampled.indices, ones + 0.0 * sampled.rewards)
+
+    return {"train_step_only": lambda n: train_only(tf.constant(n)),
+            "sample_and_priorities_only": lambda n: replay_only(tf.constant(n))}
+
+
 def sb3_rate(updates: int) -> float | None:
     """SB3 DQN's `train()` rate with a 64-64 MLP and batch 64, or None if SB3 is absent."""
     try:
@@ -96,10 +117,16 @@ def main(argv=None) -> int:
         figures[f"{loss}/fused"] = rate(fused(agent, args.steps_per_call), args.updates)
         figures[f"{loss}/per_call"] = rate(per_call(agent), max(args.updates // 5, 50))
         figures[f"{loss}/ratio"] = figures[f"{loss}/fused"] / figures[f"{loss}/per_call"]
+        if loss == "bayes":
+            for name, run in parts(agent).items():
+                figures[f"{loss}/{name}"] = rate(run, args.updates)
         if not args.json:
             print(f"{loss:10s} fused (K={args.steps_per_call}) {figures[f'{loss}/fused']:7.0f} updates/s   "
                   f"one call per update {figures[f'{loss}/per_call']:6.0f} updates/s   "
                   f"ratio {figures[f'{loss}/ratio']:.1f}x", flush=True)
+    if not args.json and "bayes/train_step_only" in figures:
+        print(f"bayes, taken apart: train_step alone {figures['bayes/train_step_only']:.0f} updates/s, "
+              f"prioritized sample + write-back alone {figures['bayes/sample_and_priorities_only']:.0f}/s")
     sb3 = sb3_rate(args.updates)
     if sb3 is not None:
         figures["sb3_dqn"] = sb3
