@@ -12,15 +12,12 @@ import sys
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
-from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.config import QUICK, Config
 from dqfd_bc_keras.envs import TASKS, TIMEOUT_MODES
 from dqfd_bc_keras.experts import EXPERT_NAMES
 from dqfd_bc_keras.losses import EXPERT_LOSSES, TARGETS
 from dqfd_bc_keras.runs import train
 
-QUICK = ["total_steps=600", "pretrain_steps=50", "bc_epochs=2", "bc_refit_epochs=1", "demo_episodes=2",
-         "eval_every=300", "eval_episodes=2", "final_eval_episodes=2", "checkpoint_every=300",
-         "replay_capacity=2000", "demo_capacity=5000"]
 
 
 def parse(argv):
@@ -50,8 +47,8 @@ def main(argv=None) -> int:
     flags = {"expert_loss": args.expert_loss, "target": args.target, "timeout": args.timeout,
              "expert": args.expert, "demo_episodes": args.demo_episodes, "total_steps": args.steps,
              "seed": args.seed}
-    config = Config.for_task(args.task, **{k: v for k, v in flags.items() if v is not None})
-    config = config.with_overrides((QUICK if args.quick else []) + args.set)
+    chosen = {k: v for k, v in flags.items() if v is not None}
+    config = Config.for_task(args.task, **({**QUICK, **chosen} if args.quick else chosen)).with_overrides(args.set)
     out = args.out or f"runs/{config.task}-{config.expert_loss}-seed{config.seed}"
     dataset = demos.load(args.demos, task=config.task, timeout=config.timeout) if args.demos else None
     if not args.quiet:

@@ -16,6 +16,13 @@ from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 
 PRIOR_CENTERS = ("pretrained", "zero")
 
+QUICK: dict[str, object] = {
+    "total_steps": 600, "pretrain_steps": 50, "bc_epochs": 2, "bc_refit_epochs": 1, "demo_episodes": 2,
+    "eval_every": 300, "eval_episodes": 2, "final_eval_episodes": 2, "checkpoint_every": 300,
+    "replay_capacity": 2000, "demo_capacity": 5000,
+}
+"""A budget of seconds per run, for tests and smoke checks (`train.py --quick`, the quick suite)."""
+
 
 @dataclass
 class Config:

@@ -18,7 +18,7 @@ def quick_start_commands() -> list[str]:
 def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
     commands = quick_start_commands()
     assert len(commands) == 2 and all("\n" not in c for c in commands)
-    install = "python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt && "
+    install = "python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt"
     assert all(c.startswith(install) for c in commands)
     assert commands[1].endswith("-m pytest -q")
     ci = (REPO / ".ci" / "run").read_text().splitlines()

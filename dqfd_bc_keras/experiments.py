@@ -1,0 +1,214 @@
+"""Suites of training runs (issue D): declared arms × seeds, run on a local process pool or Ray.
+
+    python -m dqfd_bc_keras.experiments run paper --seeds 10 --workers 2 --out results/paper
+    python -m dqfd_bc_keras.experiments run quick --seeds 2 --backend ray --out /tmp/quick
+    python -m dqfd_bc_keras.experiments report results/paper
+
+A suite is a list of `Arm`s (task, time-limit mode, expert loss and any other Config field);
+each (arm, seed) is one `train.py`-equivalent run in `OUT/<arm>/seed<N>/`. A run is complete
+when its `eval.json` exists: running a suite again skips complete runs and resumes a run that
+was cut off from its last checkpoint, so a sweep killed halfway picks up where it stopped.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+from .cli import ArgumentParser, positive_int, run
+from .config import QUICK, Config
+from .errors import ConfigError
+
+BACKENDS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One configuration of a suite; its seeds are the runs."""
+
+    task: str
+    timeout: str
+    expert_loss: str
+    overrides: tuple[tuple[str, object], ...] = ()
+    """Further Config fields (sensitivity: sigma0_sq, expert; quick: a tiny budget)."""
+    label: str = ""
+    """Suffix of the arm's name that says what the overrides change."""
+
+    @property
+    def name(self) -> str:
+        return "-".join(filter(None, (self.task, self.timeout, self.expert_loss, self.label)))
+
+    def config(self, seed: int) -> Config:
+        return Config.for_task(self.task, timeout=self.timeout, expert_loss=self.expert_loss, seed=seed,
+                               **dict(self.overrides))
+
+
+# The paper's four settings (ALGORITHM.md §7): C1 on cartpole and cartpole-200 with the naive
+# time limit (the paper's Figs. 3–6), C3 with the bootstrap fix (Fig. 7), C4 on the goal count.
+PAPER_SETTINGS = (("cartpole", "naive"), ("cartpole-200", "naive"), ("cartpole", "bootstrap"),
+                  ("mountaincar-goals", "bootstrap"))
+
+
+def _sensitivity() -> list[Arm]:
+    """σ0² of the Bayesian loss and the demonstrator's quality, where the paper fixes neither."""
+    arms = []
+    for task, timeout in (("cartpole", "bootstrap"), ("mountaincar-goals", "bootstrap")):
+        for expert in ("imperfect", "strong"):
+            for sigma0_sq in (0.05, 0.5, 2.0):
+                arms.append(Arm(task, timeout, "bayes", (("sigma0_sq", sigma0_sq), ("expert", expert)),
+                                f"{expert}-sigma{sigma0_sq:g}"))
+            arms.append(Arm(task, timeout, "ce", (("expert", expert),), expert))
+    return arms
+
+
+SUITES: dict[str, list[Arm]] = {
+    "paper": [Arm(t, m, loss) for t, m in PAPER_SETTINGS for loss in ("ce", "bayes")],
+    "baselines": [Arm(t, m, loss) for t, m in PAPER_SETTINGS for loss in ("none", "margin", "bc_margin")],
+    "sensitivity": _sensitivity(),
+    "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick") for loss in ("bayes", "ce")],
+}
+
+
+@dataclass(frozen=True)
+class Job:
+    arm: Arm
+    seed: int
+    out: Path
+
+    @property
+    def directory(self) -> Path:
+        return self.out / self.arm.name / f"seed{self.seed}"
+
+    @property
+    def complete(self) -> bool:
+        return (self.directory / "eval.json").is_file()
+
+
+@dataclass
+class Outcome:
+    """What one finished run reports back to the sweep."""
+
+    job: Job
+    episodes: int
+    env_steps: int
+    mean_return: float
+    seconds: float
+    error: str = ""
+
+
+def run_job(job: Job) -> Outcome:
+    """One run (in a worker process): train, resuming a run cut off before, and summarise it."""
+    from .runs import train
+
+    started = time.perf_counter()
+    resume = (job.directory / "checkpoints" / "latest.json").is_file()
+    try:
+        result = train(job.arm.config(job.seed), job.directory, resume=resume, force=not resume, quiet=True)
+    except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
+        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}")
+    return Outcome(job, result.episodes, result.env_steps, result.evaluation["mean_return"],
+                   time.perf_counter() - started)
+
+
+def jobs_of(suite: str, seeds: int, out: Path) -> list[Job]:
+    if suite not in SUITES:
+        raise ConfigError(f"unknown suite {suite!r}; expected one of {sorted(SUITES)}")
+    return [Job(arm, seed, out) for arm in SUITES[suite] for seed in range(seeds)]
+
+
+def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
+    """A pool of fresh processes (one run each: no TensorFlow state carried between runs)."""
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), max_tasks_per_child=1) as pool:
+        pending = {pool.submit(run_job, job) for job in jobs}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                yield future.result()
+
+
+def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Outcome]:
+    """Each run a Ray task on one CPU; joins `address` (a running cluster) or starts a local Ray."""
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError("the ray backend needs Ray: pip install -r requirements-ray.txt") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        ray.init(address=address, num_cpus=None if address else workers, include_dashboard=False,
+                 log_to_driver=False, runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[1])}})
+    try:
+        task = ray.remote(num_cpus=1, max_calls=1)(run_job)
+        pending = [task.remote(job) for job in jobs]
+        while pending:
+            finished, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(finished[0])
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def run_suite(
+    suite: str, seeds: int, out: str | Path, workers: int = 2, backend: str = "local", address: str | None = None,
+    progress: Callable[[str], None] = print,
+) -> list[Outcome]:
+    """Run every incomplete (arm, seed) of `suite`; one progress line per finished run."""
+    if backend not in BACKENDS:
+        raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+    out = Path(out)
+    jobs = jobs_of(suite, seeds, out)
+    todo = [job for job in jobs if not job.complete]
+    progress(f"{suite}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
+             f"on {workers} {backend} worker(s)")
+    os.environ.setdefault("DQFD_TF_THREADS", "1")  # one core per run
+    outcomes, started = [], time.perf_counter()
+    stream = _local(todo, workers) if backend == "local" else _ray(todo, workers, address)
+    for outcome in stream:
+        outcomes.append(outcome)
+        job = outcome.job
+        status = (f"failed: {outcome.error}" if outcome.error else
+                  f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
+        progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
+                 f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
+    failed = [o for o in outcomes if o.error]
+    if failed:
+        raise ConfigError(f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}")
+    return outcomes
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments", description=__doc__.split("\n\n")[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    go = commands.add_parser("run", help="run a suite's incomplete runs")
+    go.add_argument("suite", choices=sorted(SUITES))
+    go.add_argument("--seeds", type=positive_int, default=10, help="seeds 0 … N−1 per arm (default 10)")
+    go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
+    go.add_argument("--out", required=True, help="suite directory")
+    go.add_argument("--backend", choices=BACKENDS, default="local")
+    go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
+    rep = commands.add_parser("report", help="statistics, figures and a RESULTS-style markdown of a suite dir")
+    rep.add_argument("directory")
+    rep.add_argument("--results", default="docs/RESULTS.md", help="markdown file to write")
+    rep.add_argument("--figures", default="docs/figures", help="directory for the PNG figures")
+    args = parser.parse_args(argv)
+    if args.command == "run":
+        run_suite(args.suite, args.seeds, args.out, args.workers, args.backend, args.address,
+                  progress=lambda line: print(line, flush=True))
+    else:
+        from .analysis import report
+
+        directory = Path(args.directory)
+        if not directory.is_dir():
+            raise ConfigError(f"{directory}: no such suite directory")
+        report(directory, Path(args.results), Path(args.figures))
+        print(f"wrote {args.results} and figures in {args.figures}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))

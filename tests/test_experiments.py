@@ -1,0 +1,65 @@
+"""The experiment runner: suites as declared, the quick suite end to end on both backends."""
+
+import json
+
+import pytest
+
+from dqfd_bc_keras.config import QUICK
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments import SUITES, jobs_of, main, run_suite
+
+
+def test_paper_suite_pits_ce_against_bayes_in_the_four_settings():
+    names = [arm.name for arm in SUITES["paper"]]
+    assert names == [f"{setting}-{loss}" for setting in ("cartpole-naive", "cartpole-200-naive",
+                     "cartpole-bootstrap", "mountaincar-goals-bootstrap") for loss in ("ce", "bayes")]
+    baselines = {arm.expert_loss for arm in SUITES["baselines"]}
+    assert baselines == {"none", "margin", "bc_margin"}
+    config = SUITES["paper"][2].config(seed=7)
+    assert (config.task, config.timeout, config.expert_loss, config.seed, config.max_steps) == (
+        "cartpole-200", "naive", "ce", 7, None)
+
+
+def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
+    cells = {(a.task, a.expert_loss, dict(a.overrides).get("sigma0_sq"), dict(a.overrides)["expert"])
+             for a in SUITES["sensitivity"]}
+    for task in ("cartpole", "mountaincar-goals"):
+        for expert in ("imperfect", "strong"):
+            assert {(task, "bayes", s, expert) for s in (0.05, 0.5, 2.0)} <= cells
+            assert (task, "ce", None, expert) in cells
+    assert SUITES["sensitivity"][0].config(0).sigma0_sq == 0.05
+
+
+def test_unknown_suite_or_backend_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="unknown suite 'everything'"):
+        jobs_of("everything", 1, tmp_path)
+    with pytest.raises(ConfigError, match="unknown backend 'slurm'"):
+        run_suite("quick", 1, tmp_path, backend="slurm")
+
+
+@pytest.mark.parametrize("backend", ["local", "ray"])
+def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_path):
+    lines = []
+    outcomes = run_suite("quick", 1, tmp_path, workers=2, backend=backend, progress=lines.append)
+    assert len(outcomes) == 2 and not any(o.error for o in outcomes)
+    assert lines[0] == f"quick: 2 runs, 0 already complete, 2 to run on 2 {backend} worker(s)"
+    for loss in ("bayes", "ce"):
+        run_dir = tmp_path / f"cartpole-bootstrap-{loss}-quick" / "seed0"
+        result = json.loads((run_dir / "eval.json").read_text())
+        assert result["task"] == "cartpole" and len(result["returns"]) == QUICK["final_eval_episodes"]
+        assert json.loads((run_dir / "config.json").read_text())["total_steps"] == QUICK["total_steps"]
+    assert sum(line.startswith("[") for line in lines) == 2
+    again = []
+    assert run_suite("quick", 1, tmp_path, backend=backend, progress=again.append) == []
+    assert again == [f"quick: 2 runs, 2 already complete, 0 to run on 2 {backend} worker(s)"]
+
+
+def test_cli_rejects_bad_arguments_in_one_line(capsys):
+    from dqfd_bc_keras.cli import run
+
+    with pytest.raises(SystemExit) as exit_:
+        run(main, ["run", "nope", "--out", "x"])
+    assert exit_.value.code == 2
+    assert "invalid choice: 'nope'" in capsys.readouterr().err
+    assert run(main, ["report", "/no/such/dir"]) == 2
+    assert "/no/such/dir: no such suite directory" in capsys.readouterr().err
