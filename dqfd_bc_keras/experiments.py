@@ -116,10 +116,10 @@ def run_job(job: Job) -> Outcome:
                    time.perf_counter() - started)
 
 
-def jobs_of(suite: str, seeds: int, out: Path) -> list[Job]:
+def suite_arms(suite: str) -> list[Arm]:
     if suite not in SUITES:
         raise ConfigError(f"unknown suite {suite!r}; expected one of {sorted(SUITES)}")
-    return [Job(arm, seed, out) for arm in SUITES[suite] for seed in range(seeds)]
+    return SUITES[suite]
 
 
 def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
@@ -154,16 +154,17 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
 
 
 def run_suite(
-    suite: str, seeds: int, out: str | Path, workers: int = 2, backend: str = "local", address: str | None = None,
-    progress: Callable[[str], None] = print,
+    suite: str | Sequence[Arm], seeds: int, out: str | Path, workers: int = 2, backend: str = "local",
+    address: str | None = None, progress: Callable[[str], None] = print,
 ) -> list[Outcome]:
-    """Run every incomplete (arm, seed) of `suite`; one progress line per finished run."""
+    """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms); one progress line per run."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+    name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else ("arms", list(suite))
     out = Path(out)
-    jobs = jobs_of(suite, seeds, out)
+    jobs = [Job(arm, seed, out) for arm in arms for seed in range(seeds)]
     todo = [job for job in jobs if not job.complete]
-    progress(f"{suite}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
+    progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
              f"on {workers} {backend} worker(s)")
     os.environ.setdefault("DQFD_TF_THREADS", "1")  # one core per run
     outcomes, started = [], time.perf_counter()

@@ -6,7 +6,7 @@ import pytest
 
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments import SUITES, jobs_of, main, run_suite
+from dqfd_bc_keras.experiments import SUITES, main, run_suite, suite_arms
 
 
 def test_paper_suite_pits_ce_against_bayes_in_the_four_settings():
@@ -32,7 +32,7 @@ def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
 
 def test_unknown_suite_or_backend_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="unknown suite 'everything'"):
-        jobs_of("everything", 1, tmp_path)
+        suite_arms("everything")
     with pytest.raises(ConfigError, match="unknown backend 'slurm'"):
         run_suite("quick", 1, tmp_path, backend="slurm")
 
@@ -63,3 +63,17 @@ def test_cli_rejects_bad_arguments_in_one_line(capsys):
     assert "invalid choice: 'nope'" in capsys.readouterr().err
     assert run(main, ["report", "/no/such/dir"]) == 2
     assert "/no/such/dir: no such suite directory" in capsys.readouterr().err
+
+
+def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
+    from dqfd_bc_keras.analysis import report
+
+    run_suite("quick", 2, tmp_path / "suite", workers=2, progress=lambda line: None)
+    assert main(["report", str(tmp_path / "suite"), "--results", str(tmp_path / "RESULTS.md"),
+                 "--figures", str(tmp_path / "figures")]) == 0
+    text = (tmp_path / "RESULTS.md").read_text()
+    assert "python -m dqfd_bc_keras.experiments report" in text
+    assert "C1" in text and "C4" in text and "not run" in text  # the quick suite covers no paper setting
+    assert sorted(p.suffix for p in (tmp_path / "figures").iterdir()) and all(
+        p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in (tmp_path / "figures").iterdir())
+    assert report(tmp_path / "suite", tmp_path / "again.md", tmp_path / "figures") == (tmp_path / "again.md").read_text()
