@@ -201,7 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         run_suite(args.suite, args.seeds, args.out, args.workers, args.backend, args.address,
                   progress=lambda line: print(line, flush=True))
     else:
-        from .analysis import report
+        from .results import report
 
         directory = Path(args.directory)
         if not directory.is_dir():

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dqfd_bc_keras import analysis
+from dqfd_bc_keras import analysis, results
 from dqfd_bc_keras.analysis import Arm, RunRecord
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.demos import record, save
@@ -185,7 +185,7 @@ def test_demonstrator_return(tmp_path):
 
 def test_report_writes_markdown_and_figures(suite, tmp_path):
     out = tmp_path / "docs" / "RESULTS.md"
-    text = analysis.report(suite, out, tmp_path / "docs" / "figures")
+    text = results.report(suite, out, tmp_path / "docs" / "figures")
     assert out.read_text() == text
     rows = [line for line in text.splitlines() if line.startswith("| C")]
     claims = [r for r in rows if r.split("|")[2].strip() in ("cartpole/naive", "cartpole/bootstrap")
@@ -208,7 +208,7 @@ def test_report_writes_markdown_and_figures(suite, tmp_path):
 
 
 def test_report_on_an_empty_suite_says_not_run(tmp_path):
-    text = analysis.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
+    text = results.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
     rows = [line for line in text.splitlines() if line.startswith("| C")]
     assert [r.split("|")[1].strip() for r in rows] == ["C1", "C1", "C2", "C3", "C4"]
     assert all(r.endswith("| not run |") for r in rows)

@@ -66,7 +66,7 @@ def test_cli_rejects_bad_arguments_in_one_line(capsys):
 
 
 def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
-    from dqfd_bc_keras.analysis import report
+    from dqfd_bc_keras.results import report
 
     run_suite("quick", 2, tmp_path / "suite", workers=2, progress=lambda line: None)
     assert main(["report", str(tmp_path / "suite"), "--results", str(tmp_path / "RESULTS.md"),

@@ -60,7 +60,7 @@ def test_quick_training_writes_a_complete_run(quick_runs, loss):
     assert rows and int(rows[-1]["env_step"]) <= 600
 
 
-@pytest.mark.parametrize("loss", ["bayes", "margin"])
+@pytest.mark.parametrize("loss", LOSSES)
 def test_evaluate_reads_a_quick_run(quick_runs, loss, tmp_path):
     run_dir = quick_runs[loss][3]
     done = run("evaluate.py", run_dir, "--episodes", 3, "--json", "--out", tmp_path / "e.json")
