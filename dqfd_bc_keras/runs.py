@@ -30,7 +30,7 @@ from . import demos as demo_io
 from .config import Config
 from .errors import ConfigError, OutputExistsError
 from .files import atomic_path, write_text
-from .reports import plot_learning_curve
+from .figures import plot_learning_curve
 from .training import (METRIC_FIELDS, Learner, RunState, build, eval_seed, run_evaluation, state_from_dict,
                        train_episodes)
 
