@@ -9,7 +9,7 @@ reaches the threshold (CartPole-v1 475, MountainCar-v0 −110; a run that never 
 When Stable-Baselines3 is installed (`benchmarks/requirements.txt`), its DQN with rl-zoo3's tuned
 hyperparameters is run under the same evaluation protocol, side by side.
 
-    python benchmarks/bench_sample_efficiency.py [--seeds 10] [--workers 2] [--out results/efficiency] [--json]
+    python benchmarks/bench_sample_efficiency.py [--seeds 10] [--workers 2] [--out results] [--parts ours,sb3] [--json]
     python benchmarks/bench_sample_efficiency.py --quick     # seconds: one seed, tiny budgets (tests)
 """
 
@@ -19,6 +19,8 @@ import argparse
 import csv
 import json
 import sys
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -29,7 +31,9 @@ import numpy as np  # noqa: E402
 from dqfd_bc_keras.config import QUICK  # noqa: E402
 from dqfd_bc_keras.envs import get_task  # noqa: E402
 from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
-from dqfd_bc_keras.experiments import Arm, run_suite  # noqa: E402
+from dqfd_bc_keras.experiments import Arm, arm, run_suite  # noqa: E402
+from dqfd_bc_keras.files import write_text  # noqa: E402
+from dqfd_bc_keras.results import EFFICIENCY_FILE, efficiency_table  # noqa: E402
 from dqfd_bc_keras.stats import bootstrap_ci  # noqa: E402
 
 LOSSES = ("bayes", "ce", "margin", "none")
@@ -51,90 +55,99 @@ ZOO = {
 
 
 def arms(quick: bool) -> list[Arm]:
+    """Ours, with only what differs from the presets overridden: on CartPole these are the paper and
+    baselines suites' `cartpole/bootstrap` arms, so a shared `--out` runs them once."""
     if quick:
         return [Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, **PROTOCOL, "eval_every": 300}.items()), "eff")]
-    return [Arm(task, "bootstrap", loss, tuple({**PROTOCOL, "demo_episodes": episodes}.items()), "eff")
+    return [arm(task, "bootstrap", loss, demo_episodes=episodes, **PROTOCOL)
             for task, episodes in TASKS.items() for loss in LOSSES]
 
 
-def first_solved(evals: list[tuple[int, float]], threshold: float) -> int | None:
-    """The first evaluated env step whose mean return reaches `threshold`, or None."""
-    return next((step for step, mean in evals if mean >= threshold), None)
+def first_solved(evals: list[tuple[int, float]], threshold: float) -> float:
+    """The first evaluated env step whose mean return reaches `threshold`; inf if none does."""
+    return next((float(step) for step, mean in evals if mean >= threshold), np.inf)
 
 
-def summarise(label: str, steps: list[int | None], final_above: list[bool]) -> dict:
-    reached = np.array([s for s in steps if s is not None], dtype=float)
-    row = {"arm": label, "seeds": len(steps), "reached": len(reached),
-           "median_steps": float(np.median(reached)) if len(reached) else None,
-           "ci": list(bootstrap_ci(reached, np.median)) if len(reached) > 1 else None,
-           "above_at_end": int(sum(final_above))}
-    return row
+def summarise(label: str, evals: list[list[tuple[int, float]]], final: list[float], threshold: float) -> dict:
+    """Median and 95% bootstrap CI over all seeds; a seed that never reaches the threshold is
+    censored (inf), so the median is "not reached" (None) once half the seeds never do."""
+    steps = np.array([first_solved(e, threshold) for e in evals])
+    median, ci = float(np.median(steps)), bootstrap_ci(steps, np.median)
+    finite = lambda v: v if np.isfinite(v) else None  # noqa: E731  (JSON has no inf)
+    return {"arm": label, "seeds": len(steps), "reached": int(np.isfinite(steps).sum()),
+            "median_steps": finite(median), "ci": [finite(ci[0]), finite(ci[1])],
+            "above_at_end": int(sum(f >= threshold for f in final))}
 
 
-def ours(run_dirs: list[Path], threshold: float) -> tuple[list[int | None], list[bool]]:
-    steps, final = [], []
+def ours(run_dirs: list[Path]) -> tuple[list[list[tuple[int, float]]], list[float]]:
+    evals, final = [], []
     for run_dir in run_dirs:
         with (run_dir / "evals.csv").open() as f:
-            evals = [(int(r["env_step"]), float(r["mean_return"])) for r in csv.DictReader(f)]
-        steps.append(first_solved(evals, threshold))
-        final.append(json.loads((run_dir / "eval.json").read_text())["mean_return"] >= threshold)
-    return steps, final
+            evals.append([(int(r["env_step"]), float(r["mean_return"])) for r in csv.DictReader(f)])
+        final.append(json.loads((run_dir / "eval.json").read_text())["mean_return"])
+    return evals, final
 
 
-def sb3(task: str, seeds: int, quick: bool) -> tuple[list[int | None], list[bool]] | None:
-    """SB3 DQN (rl-zoo3 hyperparameters), evaluated like ours: 10 greedy episodes every 1,000 steps."""
+def sb3_run(task: str, seed: int, budget: int, path: Path) -> None:
+    """One SB3 DQN run (rl-zoo3 hyperparameters), evaluated like ours: 10 greedy episodes on the
+    plain env with fixed seeds every 1,000 steps; its evaluations are saved to `path`."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import DQN
+
+    torch.set_num_threads(1)
+    spec = ZOO[task]
+    model = DQN("MlpPolicy", gym.make(spec["env"]), seed=seed, verbose=0, **spec["kwargs"])
+    policy = lambda obs: int(model.predict(obs, deterministic=True)[0])  # noqa: E731
+    evals = []
+    for done in range(PROTOCOL["eval_every"], budget + 1, PROTOCOL["eval_every"]):
+        model.learn(PROTOCOL["eval_every"], reset_num_timesteps=False)
+        result = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=10_000 + seed * 1000)
+        evals.append((done, result.mean_return))
+    write_text(path, json.dumps({"task": task, "seed": seed, "budget": budget, "evals": evals}))
+
+
+def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool) -> dict[str, list] | None:
+    """Every (task, seed) of SB3's DQN not yet in `out/sb3-dqn/`, on a process pool; None without SB3."""
     try:
-        import gymnasium as gym
-        import torch
-        from stable_baselines3 import DQN
+        import stable_baselines3  # noqa: F401
     except ImportError:
         return None
-    torch.set_num_threads(1)
-    spec, threshold = ZOO[task], get_task(task).solved_return
-    budget = 3000 if quick else spec["steps"]
-    steps, final = [], []
-    for seed in range(seeds):
-        model = DQN("MlpPolicy", gym.make(spec["env"]), seed=seed, verbose=0, **spec["kwargs"])
-        policy = lambda obs: int(model.predict(obs, deterministic=True)[0])  # noqa: E731
-        evals = []
-        for done in range(PROTOCOL["eval_every"], budget + 1, PROTOCOL["eval_every"]):
-            model.learn(PROTOCOL["eval_every"], reset_num_timesteps=False)
-            result = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=10_000 + seed * 1000)
-            evals.append((done, result.mean_return))
-        steps.append(first_solved(evals, threshold))
-        final.append(evals[-1][1] >= threshold)
-    return steps, final
+    jobs = {(task, seed): out / "sb3-dqn" / task / f"seed{seed}{'-quick' if quick else ''}.json"
+            for task in tasks for seed in range(seeds)}
+    todo = [(task, seed, 3000 if quick else ZOO[task]["steps"], path)
+            for (task, seed), path in jobs.items() if not path.is_file()]
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        for future in [pool.submit(sb3_run, *job) for job in todo]:
+            future.result()
+    runs = {task: [json.loads(jobs[task, seed].read_text())["evals"] for seed in range(seeds)] for task in tasks}
+    return {task: (evals, [e[-1][1] for e in evals]) for task, evals in runs.items()}
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--out", default="results/efficiency", help="suite directory (runs are reused)")
+    parser.add_argument("--out", default="results", help="suite directory (runs are reused; the table is "
+                        f"written there as {EFFICIENCY_FILE})")
+    parser.add_argument("--parts", default="ours,sb3", help="what to run: ours, sb3 or both (default)")
     parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the script runs")
     parser.add_argument("--json", action="store_true", help="one JSON object with every row")
     args = parser.parse_args(argv)
-    seeds = 1 if args.quick else args.seeds
+    seeds, out, parts = 1 if args.quick else args.seeds, Path(args.out), set(args.parts.split(","))
     suite = arms(args.quick)
-    run_suite(suite, seeds, args.out, workers=args.workers, progress=lambda line: None if args.json else print(line))
     rows = []
-    for arm in suite:
-        threshold = get_task(arm.task).solved_return
-        run_dirs = [Path(args.out) / arm.name / f"seed{seed}" for seed in range(seeds)]
-        rows.append(summarise(f"{arm.task} {arm.expert_loss}", *ours(run_dirs, threshold)))
-    for task in sorted({arm.task for arm in suite}):
-        baseline = sb3(task, seeds, args.quick)
-        if baseline is not None:
-            rows.append(summarise(f"{task} SB3 DQN (rl-zoo3)", *baseline))
-    if args.json:
-        print(json.dumps(rows))
-        return 0
-    print(f"{'arm':34s} {'median steps to solve':>22s}  {'95% CI':>18s}  reached  above at end")
-    for row in rows:
-        median = "not reached" if row["median_steps"] is None else f"{row['median_steps']:,.0f}"
-        ci = "" if row["ci"] is None else f"[{row['ci'][0]:,.0f}, {row['ci'][1]:,.0f}]"
-        print(f"{row['arm']:34s} {median:>22s}  {ci:>18s}  {row['reached']}/{row['seeds']}"
-              f"      {row['above_at_end']}/{row['seeds']}")
+    if "ours" in parts:
+        run_suite(suite, seeds, out, workers=args.workers, progress=lambda line: None if args.json else print(line))
+        for a in suite:
+            dirs = [out / a.name / f"seed{seed}" for seed in range(seeds)]
+            rows.append(summarise(f"{a.task} {a.expert_loss}", *ours(dirs), get_task(a.task).solved_return))
+    baseline = sb3(sorted({a.task for a in suite}), seeds, args.workers, out, args.quick) if "sb3" in parts else None
+    for task, (evals, final) in (baseline or {}).items():
+        rows.append(summarise(f"{task} SB3 DQN (rl-zoo3)", evals, final, get_task(task).solved_return))
+    if not args.quick:
+        write_text(out / EFFICIENCY_FILE, json.dumps(rows, indent=1))
+    print(json.dumps(rows) if args.json else "\n".join(efficiency_table(rows)))
     return 0
 
 

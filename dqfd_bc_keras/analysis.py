@@ -35,11 +35,12 @@ EARLY_EPISODES = 30
 """C4's "early in training": the first 30 training episodes."""
 BAYES_ONLY = ("sigma0_sq", "mc_passes", "prior_scale", "prior_center", "bc_dropout", "bc_prior_scale")
 """Config fields only the bayes loss reads: a bayes arm pairs with the ce arm equal in every other field."""
-SENSITIVITY_FIELDS = ("timeout", "sigma0_sq", "expert")
-"""The reference bayes-vs-ce pair of a setting differs least from the task preset in these."""
 PEAK_FRACTION, COLLAPSE_FRACTION = 0.98, 0.5
 """A collapse (the paper's perturbation): plain return < 0.5 × limit after the first episode ≥ 0.98 × limit."""
-REGENERATE = "python -m dqfd_bc_keras.experiments report DIR"
+REGENERATE = ("python -m dqfd_bc_keras.experiments run all --out results && "
+              "python benchmarks/bench_sample_efficiency.py --out results && "
+              "python -m dqfd_bc_keras.experiments report results")
+"""Every run, the benchmark and this report (finished runs are skipped, so it also resumes)."""
 
 METRICS = {
     "episodes_to_solve": "training episodes until the early-stopping rule fired (the last `early_stop_window` "
@@ -164,7 +165,9 @@ def group_arms(runs: list[RunRecord]) -> list[Arm]:
     arms: dict[str, Arm] = {}
     for run in runs:
         fields = {k: v for k, v in run.config.to_dict().items() if k != "seed"}
-        arms.setdefault(json.dumps(fields, sort_keys=True), Arm(fields, [])).runs.append(run)
+        arm = arms.setdefault(json.dumps(fields, sort_keys=True), Arm(fields, []))
+        if all(r.config.seed != run.config.seed for r in arm.runs):  # a run repeated elsewhere counts once
+            arm.runs.append(run)
     for arm in arms.values():
         arm.runs.sort(key=lambda r: r.config.seed)
         peers = [a.config for a in arms.values() if a.setting == arm.setting]
@@ -175,18 +178,23 @@ def group_arms(runs: list[RunRecord]) -> list[Arm]:
     return sorted(arms.values(), key=lambda a: a.label)
 
 
+def preset_distance(arm: Arm) -> int:
+    """How many config fields besides the loss (and the timeout) differ from the task preset:
+    0 for the paper's and the baselines' arms, more for a sensitivity or benchmark variant."""
+    preset = Config.for_task(arm.config["task"]).to_dict()
+    return sum(v != preset[k] for k, v in arm.config.items() if k not in ("expert_loss", "timeout"))
+
+
 def bayes_ce_pairs(arms: list[Arm], task: str, timeout: str | None) -> list[tuple[Arm, Arm | None]]:
     """Each bayes arm of the setting with its ce arm (equal in every field but the Bayes-only
     ones and the loss), the reference pair first: the one closest to the task preset."""
     def strip(arm: Arm) -> dict:
         return {k: v for k, v in arm.config.items() if k not in ("expert_loss", *BAYES_ONLY)}
 
-    preset = Config.for_task(task).to_dict()
     pairs = [(b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
              for b in arms if b.config["expert_loss"] == "bayes" and b.config["task"] == task
              and timeout in (None, b.config["timeout"])]
-    return sorted(pairs, key=lambda p: (p[1] is None, sum(p[0].config[k] != preset[k] for k in SENSITIVITY_FIELDS),
-                                        -len(p[0].runs), p[0].label))
+    return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0]), -len(p[0].runs), p[0].label))
 
 
 # --- the claims -----------------------------------------------------------------------------

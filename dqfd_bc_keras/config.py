@@ -278,6 +278,8 @@ class CartPoleConfig(Config):
 
     task: str = "cartpole"
     total_steps: int = 50_000
+    eval_every: int = 1_000
+    """Runs end within ~10–50k steps: a finer grid makes steps-to-threshold meaningful."""
 
 
 @dataclass
@@ -286,6 +288,7 @@ class CartPole200Config(Config):
 
     task: str = "cartpole-200"
     total_steps: int = 50_000
+    eval_every: int = 1_000
 
 
 @dataclass

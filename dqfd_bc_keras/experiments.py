@@ -1,8 +1,9 @@
 """Suites of training runs (issue D): declared arms × seeds, run on a local process pool or Ray.
 
-    python -m dqfd_bc_keras.experiments run paper --seeds 10 --workers 2 --out results/paper
+    python -m dqfd_bc_keras.experiments run paper --seeds 10 --workers 2 --out results
+    python -m dqfd_bc_keras.experiments run all --out results     # paper, baselines, sensitivity
     python -m dqfd_bc_keras.experiments run quick --seeds 2 --backend ray --out /tmp/quick
-    python -m dqfd_bc_keras.experiments report results/paper
+    python -m dqfd_bc_keras.experiments report results
 
 A suite is a list of `Arm`s (task, time-limit mode, expert loss and any other Config field);
 each (arm, seed) is one `train.py`-equivalent run in `OUT/<arm>/seed<N>/`. A run is complete
@@ -12,6 +13,7 @@ was cut off from its last checkpoint, so a sweep killed halfway picks up where i
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -24,8 +26,11 @@ from pathlib import Path
 from .cli import ArgumentParser, positive_int, run
 from .config import QUICK, Config
 from .errors import ConfigError
+from .files import write_text
 
 BACKENDS = ("local", "ray")
+SWEEP_LOG = "sweeps.jsonl"
+"""One line per sweep in the suite directory: what ran, on how many workers, in how many seconds."""
 
 
 @dataclass(frozen=True)
@@ -55,15 +60,26 @@ PAPER_SETTINGS = (("cartpole", "naive"), ("cartpole-200", "naive"), ("cartpole",
                   ("mountaincar-goals", "bootstrap"))
 
 
+_SHORT = {"sigma0_sq": "sigma", "expert": "", "eval_every": "eval"}
+
+
+def arm(task: str, timeout: str, expert_loss: str, **overrides: object) -> Arm:
+    """An arm that keeps only the overrides differing from the task preset, labelled by them:
+    arms equal in config get one name, so suites sharing an `--out` share their runs."""
+    preset = Config.for_task(task).to_dict()
+    changed = {k: v for k, v in overrides.items() if preset[k] != v}
+    label = "-".join(f"{_SHORT.get(k, k)}{v:g}" if isinstance(v, float) else f"{_SHORT.get(k, k)}{v}"
+                     for k, v in changed.items())
+    return Arm(task, timeout, expert_loss, tuple(changed.items()), label)
+
+
 def _sensitivity() -> list[Arm]:
     """σ0² of the Bayesian loss and the demonstrator's quality, where the paper fixes neither."""
     arms = []
     for task, timeout in (("cartpole", "bootstrap"), ("mountaincar-goals", "bootstrap")):
         for expert in ("imperfect", "strong"):
-            for sigma0_sq in (0.05, 0.5, 2.0):
-                arms.append(Arm(task, timeout, "bayes", (("sigma0_sq", sigma0_sq), ("expert", expert)),
-                                f"{expert}-sigma{sigma0_sq:g}"))
-            arms.append(Arm(task, timeout, "ce", (("expert", expert),), expert))
+            arms += [arm(task, timeout, "bayes", expert=expert, sigma0_sq=s) for s in (0.05, 0.5, 2.0)]
+            arms.append(arm(task, timeout, "ce", expert=expert))
     return arms
 
 
@@ -73,6 +89,10 @@ SUITES: dict[str, list[Arm]] = {
     "sensitivity": _sensitivity(),
     "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick") for loss in ("bayes", "ce")],
 }
+SEEDS = {"paper": 10, "baselines": 10, "sensitivity": 5, "quick": 2}
+"""Seeds per arm when `--seeds` is not given (sensitivity: the issue's minimum of 5 per cell)."""
+ALL = ("paper", "baselines", "sensitivity")
+"""`run all`: every suite of RESULTS.md, in this order, into one directory (shared arms run once)."""
 
 
 @dataclass(frozen=True)
@@ -176,6 +196,11 @@ def run_suite(
                   f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
         progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
                  f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
+    if todo:
+        log = out / SWEEP_LOG
+        entry = {"suite": name, "seeds": seeds, "runs": len(todo), "workers": workers, "backend": backend,
+                 "seconds": round(time.perf_counter() - started, 1), "ended": time.strftime("%Y-%m-%d %H:%M:%S")}
+        write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
     failed = [o for o in outcomes if o.error]
     if failed:
         raise ConfigError(f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}")
@@ -186,8 +211,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments", description=__doc__.split("\n\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
     go = commands.add_parser("run", help="run a suite's incomplete runs")
-    go.add_argument("suite", choices=sorted(SUITES))
-    go.add_argument("--seeds", type=positive_int, default=10, help="seeds 0 … N−1 per arm (default 10)")
+    go.add_argument("suite", choices=[*sorted(SUITES), "all"], help=f"a suite, or all: {', '.join(ALL)}")
+    go.add_argument("--seeds", type=positive_int, help=f"seeds 0 … N−1 per arm (default: {SEEDS})")
     go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     go.add_argument("--out", required=True, help="suite directory")
     go.add_argument("--backend", choices=BACKENDS, default="local")
@@ -198,8 +223,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     rep.add_argument("--figures", default="docs/figures", help="directory for the PNG figures")
     args = parser.parse_args(argv)
     if args.command == "run":
-        run_suite(args.suite, args.seeds, args.out, args.workers, args.backend, args.address,
-                  progress=lambda line: print(line, flush=True))
+        for suite in ALL if args.suite == "all" else (args.suite,):
+            run_suite(suite, args.seeds or SEEDS[suite], args.out, args.workers, args.backend, args.address,
+                      progress=lambda line: print(line, flush=True))
     else:
         from .results import report
 

@@ -50,7 +50,9 @@ def _percentiles(values: np.ndarray, level: float) -> tuple[float, float]:
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be in (0, 1), got {level}")
     tail = 100.0 * (1.0 - level) / 2.0
-    low, high = np.percentile(values, [tail, 100.0 - tail])
+    # Censored samples (inf: "never reached") have no interpolation between values: take order statistics.
+    method = "linear" if np.isfinite(values).all() else "inverted_cdf"
+    low, high = np.percentile(values, [tail, 100.0 - tail], method=method)
     return float(low), float(high)
 
 
@@ -140,5 +142,6 @@ class Summary:
         return cls(int(sample.size), float(sample.mean()), float(iqm(sample)), low, high)
 
     def format(self, digits: int = 1) -> str:
-        """`mean [low, high]` for a table cell."""
-        return f"{self.mean:.{digits}f} [{self.ci_low:.{digits}f}, {self.ci_high:.{digits}f}]"
+        """`mean [low, high] (IQM x)` for a table cell."""
+        return (f"{self.mean:.{digits}f} [{self.ci_low:.{digits}f}, {self.ci_high:.{digits}f}] "
+                f"(IQM {self.iqm:.{digits}f})")

@@ -198,8 +198,8 @@ def test_report_writes_markdown_and_figures(suite, tmp_path):
     assert len(sensitivity) == 1 and sensitivity[0].endswith("| does not hold | yes |")
     assert "total training wall time 20.0 min" in text
     assert analysis.REGENERATE in text
-    assert "| cartpole-200/naive | none | 2 | — | 25.0 [25.0, 25.0] |" in text
-    assert "| 500.0 [500.0, 500.0] | " in text and "10,000 (3/3)" in text
+    assert "| cartpole-200/naive | none | 2 | — | 25.0 [25.0, 25.0] (IQM 25.0) |" in text
+    assert "| 500.0 [500.0, 500.0] (IQM 500.0) | " in text and "10,000 (3/3)" in text
     for setting in ("cartpole-200-naive", "mountaincar-goals-bootstrap"):
         for kind in ("curves", "cases"):
             png = tmp_path / "docs" / "figures" / f"{setting}-{kind}.png"
@@ -220,3 +220,52 @@ def test_a_bad_config_names_its_file(tmp_path):
     (tmp_path / "run" / "config.json").write_text(json.dumps({"task": "cartpole", "colour": "red"}))
     with pytest.raises(ConfigError, match=r"run/config.json: unknown config field\(s\) \['colour'\]"):
         analysis.load_runs(tmp_path)
+
+
+def test_a_run_repeated_in_another_suite_directory_counts_once(tmp_path):
+    """Suites sharing arms (paper, sensitivity, the benchmark) may hold the same run twice."""
+    for where in ("paper", "sensitivity"):
+        write_run(make_run(tmp_path / where / "run", cartpole_rows([30]), expert_loss="ce", seed=3, **CP))
+    write_run(make_run(tmp_path / "paper" / "other", cartpole_rows([30]), expert_loss="ce", seed=4, **CP))
+    [only] = analysis.group_arms(analysis.load_runs(tmp_path))
+    assert [r.config.seed for r in only.runs] == [3, 4]
+
+
+def test_the_reference_pair_is_the_one_at_the_preset(tmp_path):
+    """A variant with more seeds (a shorter budget, σ0² …) never displaces the preset pair."""
+    runs = []
+    for loss in ("bayes", "ce"):
+        runs.append(make_run(tmp_path / loss, goal_rows([1]), expert_loss=loss, **MC))
+        runs += [make_run(tmp_path / f"{loss}{s}", goal_rows([1]), expert_loss=loss, total_steps=20_000, seed=s, **MC)
+                 for s in range(3)]
+    arms = analysis.group_arms(runs)
+    assert sorted(analysis.preset_distance(a) for a in arms) == [0, 0, 1, 1]
+    bayes, ce = analysis.bayes_ce_pairs(arms, "mountaincar-goals", "bootstrap")[0]
+    assert (bayes.config["total_steps"], ce.config["total_steps"], len(bayes.runs)) == (100_000, 100_000, 1)
+
+
+def test_report_quotes_the_sweep_log_and_the_efficiency_table(tmp_path):
+    (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(
+        {"suite": suite, "seeds": 10, "runs": runs, "workers": 2, "backend": "local", "seconds": seconds,
+         "ended": "2026-11-26 08:00:00"}) + "\n" for suite, runs, seconds in (("paper", 80, 600.0), ("baselines", 9, 300.0))))
+    (tmp_path / results.EFFICIENCY_FILE).write_text(json.dumps([
+        {"arm": "cartpole bayes", "seeds": 10, "reached": 9, "median_steps": 3000.0, "ci": [2000.0, None],
+         "above_at_end": 9},
+        {"arm": "mountaincar none", "seeds": 10, "reached": 2, "median_steps": None, "ci": [None, None],
+         "above_at_end": 0}]))
+    text = results.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
+    assert "| paper | 10 | 80 | 2 × local | 10.0 min | 2026-11-26 08:00:00 |" in text
+    assert "| baselines | 10 | 9 | 2 × local | 5.0 min |" in text and "Sum: 15.0 min" in text
+    assert "| cartpole bayes | 3,000 | [2,000, ∞] | 9/10 | 9/10 |" in text
+    assert "| mountaincar none | not reached | [∞, ∞] | 2/10 | 0/10 |" in text
+    assert "5 episodes of the imperfect scripted expert on CartPole" in text
+
+
+def test_regenerating_the_report_keeps_the_hand_written_notes(tmp_path):
+    out = tmp_path / "RESULTS.md"
+    notes = f"{results.NOTES[0]}\n## Summary\nC4 does not hold: see below.\n{results.NOTES[1]}"
+    out.write_text(f"# old report\n\n{notes}\n\n| stale | table |\n")
+    text = results.report(tmp_path, out, tmp_path / "figures")
+    assert text.count(notes) == 1 and "stale" not in text
+    assert text.index(notes) < text.index("## Claims")
+    assert results.report(tmp_path, out, tmp_path / "figures") == text  # stable on a second pass

@@ -1,5 +1,6 @@
 """The benchmark scripts run and print what they promise (tiny budgets; figures are not judged here)."""
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -35,3 +36,13 @@ def test_bench_sample_efficiency_quick(tmp_path):
     assert ours["arm"] == "cartpole bayes" and ours["seeds"] == 1
     assert ours["reached"] in (0, 1) and ours["above_at_end"] in (0, 1)
     assert (tmp_path / "cartpole-bootstrap-bayes-eff" / "seed0" / "evals.csv").is_file()
+
+
+def test_sample_efficiency_median_counts_never_reached_as_infinite():
+    spec = importlib.util.spec_from_file_location("bench_se", REPO / "benchmarks" / "bench_sample_efficiency.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    evals = [[(1000, 100.0), (2000, 480.0)], [(1000, 500.0)], [(1000, 10.0), (2000, 20.0)]]
+    row = module.summarise("cartpole x", evals, [500.0, 474.0, 20.0], 475.0)
+    assert (row["median_steps"], row["reached"], row["above_at_end"], row["seeds"]) == (2000.0, 2, 1, 3)
+    assert module.summarise("y", evals[2:] * 2 + evals[:1], [0.0] * 3, 475.0)["median_steps"] is None

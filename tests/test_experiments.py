@@ -6,7 +6,7 @@ import pytest
 
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments import SUITES, main, run_suite, suite_arms
+from dqfd_bc_keras.experiments import ALL, SEEDS, SUITES, main, run_suite, suite_arms
 
 
 def test_paper_suite_pits_ce_against_bayes_in_the_four_settings():
@@ -21,13 +21,23 @@ def test_paper_suite_pits_ce_against_bayes_in_the_four_settings():
 
 
 def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
-    cells = {(a.task, a.expert_loss, dict(a.overrides).get("sigma0_sq"), dict(a.overrides)["expert"])
-             for a in SUITES["sensitivity"]}
+    configs = [a.config(0) for a in SUITES["sensitivity"]]
+    cells = {(c.task, c.expert_loss, c.sigma0_sq if c.expert_loss == "bayes" else None, c.expert) for c in configs}
     for task in ("cartpole", "mountaincar-goals"):
         for expert in ("imperfect", "strong"):
             assert {(task, "bayes", s, expert) for s in (0.05, 0.5, 2.0)} <= cells
             assert (task, "ce", None, expert) in cells
-    assert SUITES["sensitivity"][0].config(0).sigma0_sq == 0.05
+    assert len(cells) == len(configs) == 16
+    assert set(SEEDS) == set(SUITES) and SEEDS["sensitivity"] >= 5 and set(ALL) <= set(SUITES)
+
+
+def test_arms_equal_in_config_share_a_name_across_suites():
+    """The sensitivity suite's preset cells are the paper's arms: with one --out they share runs."""
+    names = {a.name for a in SUITES["sensitivity"]}
+    assert {"cartpole-bootstrap-bayes", "cartpole-bootstrap-ce", "mountaincar-goals-bootstrap-bayes",
+            "mountaincar-goals-bootstrap-ce"} <= names & {a.name for a in SUITES["paper"]}
+    assert {"cartpole-bootstrap-bayes-sigma0.05", "cartpole-bootstrap-bayes-strong-sigma2",
+            "mountaincar-goals-bootstrap-ce-strong"} <= names
 
 
 def test_unknown_suite_or_backend_is_refused(tmp_path):
@@ -52,6 +62,9 @@ def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_pat
     again = []
     assert run_suite("quick", 1, tmp_path, backend=backend, progress=again.append) == []
     assert again == [f"quick: 2 runs, 2 already complete, 0 to run on 2 {backend} worker(s)"]
+    [logged] = [json.loads(line) for line in (tmp_path / "sweeps.jsonl").read_text().splitlines()]
+    assert (logged["suite"], logged["runs"], logged["workers"], logged["backend"]) == ("quick", 2, 2, backend)
+    assert logged["seconds"] > 0  # the second call ran nothing and logged nothing
 
 
 def test_cli_rejects_bad_arguments_in_one_line(capsys):

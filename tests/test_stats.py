@@ -118,4 +118,15 @@ def test_summary():
     s = Summary.of(SAMPLE)
     assert (s.n, s.mean, s.iqm) == (10, 5.5, 5.5)
     assert (s.ci_low, s.ci_high) == bootstrap_ci(SAMPLE)
-    assert Summary.of([2.0, 2.0]).format() == "2.0 [2.0, 2.0]"
+    assert Summary.of([2.0, 2.0]).format() == "2.0 [2.0, 2.0] (IQM 2.0)"
+    assert Summary.of([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 100.0]).format().endswith("(IQM 4.5)")  # mean of 3…6
+
+
+def test_bootstrap_ci_of_a_censored_median_uses_order_statistics():
+    """Seeds that never reach a threshold count as inf: the CI stays defined, its end inf once
+    resamples with a majority of them are likely."""
+    steps = [1000.0, 2000.0, 3000.0, np.inf, np.inf, 4000.0, 2000.0, 1000.0, 1000.0, 5000.0]
+    low, high = bootstrap_ci(steps, np.median)
+    assert low == 1000.0 and high == np.inf
+    low, high = bootstrap_ci([1000.0, 2000.0, 3000.0, 4000.0] * 3 + [np.inf], np.median)
+    assert {low, high} <= {1000.0, 2000.0, 3000.0, 4000.0} and low < high  # one inf in 13: order statistics

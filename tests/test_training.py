@@ -393,6 +393,18 @@ def test_train_evaluates_before_interacting_and_every_eval_every_steps(bayes_run
         out / "tb")
 
 
+def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
+    """Evaluations use their own env seeds and a NumPy copy of the network: the CartPole presets'
+    eval grid (1,000 steps) can change without changing a single training number."""
+    config, out, _ = bayes_run
+    often = dataclasses.replace(config, eval_every=50)
+    runs.train(often, tmp_path / "often", quiet=True)
+    columns = [f for f in training.METRIC_FIELDS if f != "wall_time"]
+    rows = [[[r[f] for f in columns] for r in read_csv(d / "metrics.csv")[1]] for d in (out, tmp_path / "often")]
+    assert rows[0] == rows[1]
+    assert len(read_csv(tmp_path / "often" / "evals.csv")[1]) > len(read_csv(out / "evals.csv")[1])
+
+
 def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
     config, out, result = bayes_run
     q = load_model(out / "q_network.keras")
