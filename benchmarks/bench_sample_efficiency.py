@@ -33,7 +33,7 @@ from dqfd_bc_keras.envs import get_task  # noqa: E402
 from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
 from dqfd_bc_keras.experiments import Arm, arm, run_suite  # noqa: E402
 from dqfd_bc_keras.files import write_text  # noqa: E402
-from dqfd_bc_keras.results import EFFICIENCY_FILE, efficiency_table  # noqa: E402
+from dqfd_bc_keras.results import EFFICIENCY_FILE, SB3_LABEL, efficiency_table  # noqa: E402
 from dqfd_bc_keras.stats import bootstrap_ci  # noqa: E402
 
 LOSSES = ("bayes", "ce", "margin", "none")
@@ -144,7 +144,7 @@ def main(argv=None) -> int:
             rows.append(summarise(f"{a.task} {a.expert_loss}", *ours(dirs), get_task(a.task).solved_return))
     baseline = sb3(sorted({a.task for a in suite}), seeds, args.workers, out, args.quick) if "sb3" in parts else None
     for task, (evals, final) in (baseline or {}).items():
-        rows.append(summarise(f"{task} SB3 DQN (rl-zoo3)", evals, final, get_task(task).solved_return))
+        rows.append(summarise(f"{task} {SB3_LABEL}", evals, final, get_task(task).solved_return))
     if not args.quick:
         write_text(out / EFFICIENCY_FILE, json.dumps(rows, indent=1))
     print(json.dumps(rows) if args.json else "\n".join(efficiency_table(rows)))

@@ -17,6 +17,8 @@ from .files import write_text
 from .stats import Summary
 
 
+SB3_LABEL = "SB3 DQN (rl-zoo3)"
+"""The method name of the benchmark's Stable-Baselines3 rows."""
 EFFICIENCY_FILE = "efficiency.json"
 """Written into the suite directory by benchmarks/bench_sample_efficiency.py; quoted by the report."""
 DEMOS = (
@@ -113,16 +115,21 @@ def _figures(arms: list[Arm], figures_dir: Path, markdown_dir: Path) -> list[str
 
 
 def efficiency_table(rows: list[dict]) -> list[str]:
-    """The sample-efficiency rows (bench_sample_efficiency.py) as a markdown table."""
+    """The sample-efficiency rows (bench_sample_efficiency.py, arms named "<task> <method>") as a
+    markdown table, with how many times fewer steps than SB3's median each median is."""
     def steps(value: float | None, missing: str) -> str:
         return missing if value is None else f"{value:,.0f}"
 
-    lines = ["| arm | median env steps to threshold | 95% CI | seeds that reached it | above it at the end |",
-             "| --- | --- | --- | --- | --- |"]
+    sb3 = {row["arm"].removesuffix(f" {SB3_LABEL}"): row["median_steps"] for row in rows
+           if row["arm"].endswith(SB3_LABEL)}
+    lines = ["| arm | median env steps to threshold | 95% CI | seeds that reached it | above it at the end "
+             "| SB3's median ÷ this median |", "| --- | --- | --- | --- | --- | --- |"]
     for row in rows:
         ci = f"[{steps(row['ci'][0], '∞')}, {steps(row['ci'][1], '∞')}]"
-        lines.append(f"| {row['arm']} | {steps(row['median_steps'], 'not reached')} | {ci} | "
-                     f"{row['reached']}/{row['seeds']} | {row['above_at_end']}/{row['seeds']} |")
+        theirs, ours = sb3.get(row["arm"].split()[0]), row["median_steps"]
+        ratio = f"{theirs / ours:.1f}×" if theirs and ours else "—"
+        lines.append(f"| {row['arm']} | {steps(ours, 'not reached')} | {ci} | {row['reached']}/{row['seeds']} | "
+                     f"{row['above_at_end']}/{row['seeds']} | {ratio} |")
     return lines
 
 

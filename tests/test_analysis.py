@@ -252,12 +252,15 @@ def test_report_quotes_the_sweep_log_and_the_efficiency_table(tmp_path):
         {"arm": "cartpole bayes", "seeds": 10, "reached": 9, "median_steps": 3000.0, "ci": [2000.0, None],
          "above_at_end": 9},
         {"arm": "mountaincar none", "seeds": 10, "reached": 2, "median_steps": None, "ci": [None, None],
-         "above_at_end": 0}]))
+         "above_at_end": 0},
+        {"arm": f"cartpole {results.SB3_LABEL}", "seeds": 10, "reached": 10, "median_steps": 22500.0,
+         "ci": [16000.0, 27000.0], "above_at_end": 7}]))
     text = results.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
     assert "| paper | 10 | 80 | 2 × local | 10.0 min | 2026-11-26 08:00:00 |" in text
     assert "| baselines | 10 | 9 | 2 × local | 5.0 min |" in text and "Sum: 15.0 min" in text
-    assert "| cartpole bayes | 3,000 | [2,000, ∞] | 9/10 | 9/10 |" in text
-    assert "| mountaincar none | not reached | [∞, ∞] | 2/10 | 0/10 |" in text
+    assert "| cartpole bayes | 3,000 | [2,000, ∞] | 9/10 | 9/10 | 7.5× |" in text  # 22,500 / 3,000
+    assert "| mountaincar none | not reached | [∞, ∞] | 2/10 | 0/10 | — |" in text  # no SB3 row, no median
+    assert f"| cartpole {results.SB3_LABEL} | 22,500 | [16,000, 27,000] | 10/10 | 7/10 | 1.0× |" in text
     assert "5 episodes of the imperfect scripted expert on CartPole" in text
 
 
