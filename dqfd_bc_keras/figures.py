@@ -39,8 +39,9 @@ def _save(fig, path: Path) -> None:
 
 
 def mean_band(curves: Curves, level: float = 0.95, resamples: int = 1_000, seed: int = 0
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per episode: the mean over the runs still going, and its percentile-bootstrap band.
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per episode: the mean over the runs still going, its percentile-bootstrap band, and how
+    many runs are still going.
 
     A bootstrap resample of the runs is a vector of counts (how often each run was drawn), so
     every resample's per-episode mean is one matrix product: Σ_j w_j·x_je / Σ_j w_j·[run j
@@ -59,25 +60,30 @@ def mean_band(curves: Curves, level: float = 0.95, resamples: int = 1_000, seed:
     boot = np.divide(sums, counts, out=np.full_like(sums, np.nan), where=counts > 0)
     tail = 100.0 * (1.0 - level) / 2.0
     low, high = np.nanpercentile(boot, [tail, 100.0 - tail], axis=0)
-    return mean, low, high
+    return mean, low, high, present.sum(axis=0)
 
 
 def learning_curves(title: str, arms: dict[str, Curves], ylabel: str, path: Path) -> None:
     """Each arm's mean per-episode curve over seeds with its 95% bootstrap band.
 
-    Runs stop at different episodes; the mean at episode e is over the runs that reached e,
-    so late episodes of an early-stopping task show the slower seeds only.
+    Runs stop at different episodes (CartPole's early stop) and the mean at episode e is over the
+    runs that reached e: once fewer than half the runs are still going, it shows the slowest
+    seeds only, so from there the mean is drawn dotted and without a band.
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for color, (name, curves) in zip(itertools.cycle(plt.cm.tab10.colors), arms.items()):
-        mean, low, high = mean_band(curves)
+        mean, low, high, running = mean_band(curves)
         episodes = np.arange(1, len(mean) + 1)
-        ax.plot(episodes, mean, color=color, lw=1.5, label=f"{name} ({len(curves)} seeds)")
-        ax.fill_between(episodes, low, high, color=color, alpha=0.2, lw=0)
+        most = running >= len(curves) / 2  # a prefix: runs only ever stop
+        ax.plot(episodes[most], mean[most], color=color, lw=1.5, label=f"{name} ({len(curves)} seeds)")
+        ax.fill_between(episodes[most], low[most], high[most], color=color, alpha=0.2, lw=0)
+        tail = max(int(most.sum()) - 1, 0)
+        ax.plot(episodes[tail:], mean[tail:], color=color, lw=0.8, ls=":")
     ax.set_xlabel("training episode")
     ax.set_ylabel(ylabel)
-    ax.set_title(f"{title}: mean over seeds, 95% bootstrap band")
+    ax.set_title(f"{title}: mean over seeds, 95% bootstrap band\n(dotted: fewer than half the seeds still running)",
+                 fontsize=10)
     ax.legend(loc="best", fontsize=8)
     _save(fig, path)
 
