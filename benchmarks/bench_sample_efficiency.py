@@ -138,7 +138,8 @@ def main(argv=None) -> int:
     suite = arms(args.quick)
     rows = []
     if "ours" in parts:
-        run_suite(suite, seeds, out, workers=args.workers, progress=lambda line: None if args.json else print(line))
+        run_suite(suite, seeds, out, workers=args.workers, progress=lambda line: None if args.json else print(line),
+                  name="sample efficiency")
         for a in suite:
             dirs = [out / a.name / f"seed{seed}" for seed in range(seeds)]
             rows.append(summarise(f"{a.task} {a.expert_loss}", *ours(dirs), get_task(a.task).solved_return))

@@ -175,12 +175,13 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
 
 def run_suite(
     suite: str | Sequence[Arm], seeds: int, out: str | Path, workers: int = 2, backend: str = "local",
-    address: str | None = None, progress: Callable[[str], None] = print,
+    address: str | None = None, progress: Callable[[str], None] = print, name: str = "arms",
 ) -> list[Outcome]:
-    """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms); one progress line per run."""
+    """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms called `name` in the
+    progress lines and the sweep log); one progress line per run."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
-    name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else ("arms", list(suite))
+    name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
     out = Path(out)
     jobs = [Job(arm, seed, out) for arm in arms for seed in range(seeds)]
     todo = [job for job in jobs if not job.complete]
