@@ -88,6 +88,14 @@ def learning_curves(title: str, arms: dict[str, Curves], ylabel: str, path: Path
     _save(fig, path)
 
 
+def trailing_mean(curve: np.ndarray, window: int) -> np.ndarray:
+    """Entry e: the mean of the last `window` entries up to e (fewer at the start)."""
+    sums = np.cumsum(np.concatenate([[0.0], curve]))
+    ends = np.arange(1, len(curve) + 1)
+    starts = np.maximum(ends - window, 0)
+    return (sums[ends] - sums[starts]) / (ends - starts)
+
+
 def pick_cases(runs: list[Run]) -> dict[str, Run]:
     """The paper's three cases: best (highest score), average (closest to the median), worst."""
     scores = np.array([score for _, _, score in runs])

@@ -33,6 +33,11 @@ DEMOS = (
     "seeds includes the draw of the demonstrations. The sensitivity suite swaps in the strong experts.")
 
 
+SMOOTH_ABOVE, SMOOTH_WINDOW = 150, 10
+"""Settings whose runs are longer than 150 episodes (MountainCar's 500–1,000) are drawn as trailing
+means of 10 episodes: a flag count of 0–2 per episode is unreadable raw."""
+
+
 def _cell(comparisons: list[Comparison], part: Callable[[Comparison], str]) -> str:
     return "<br>".join(part(c) for c in comparisons) or "—"
 
@@ -96,8 +101,11 @@ def _figures(arms: list[Arm], figures_dir: Path, markdown_dir: Path) -> list[str
         goals = get_task(task).goal_count
         column, score = ("goals", "goals_all") if goals else ("plain_return", "mean_train_return")
         ylabel = "flags reached per episode" if goals else "plain-env return per episode"
-        runs = {a.name: [(f"seed {r.config.seed}", r.column(column), PER_RUN[score](r)) for r in a.runs]
-                for a in members}
+        window = SMOOTH_WINDOW if max(len(r.metrics) for a in members for r in a.runs) > SMOOTH_ABOVE else 1
+        if window > 1:
+            ylabel += f"\n(trailing mean of {window} episodes)"
+        runs = {a.name: [(f"seed {r.config.seed}", figures.trailing_mean(r.column(column), window), PER_RUN[score](r))
+                         for r in a.runs] for a in members}
         pair = next((p for p in bayes_ce_pairs(members, task, timeout) if p[1] is not None), members)
         main = [a.name for a in members if preset_distance(a) == 0] or list(runs)
         stem = figures_dir / setting.replace("/", "-")
@@ -107,7 +115,7 @@ def _figures(arms: list[Arm], figures_dir: Path, markdown_dir: Path) -> list[str
         if variants:
             path = stem.with_name(f"{stem.name}-variants.png")
             shown = [a.name for a in pair if a.name in main] + variants
-            figures.learning_curves(f"{setting}: variants beside the reference pair",
+            figures.learning_curves(f"{setting}, variants",
                                     {n: [curve for _, curve, _ in runs[n]] for n in shown}, ylabel, path)
             paths.append(path)
         links += [f"![{setting} {p.stem}]({Path(os.path.relpath(p, markdown_dir)).as_posix()})" for p in paths]

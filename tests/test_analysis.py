@@ -272,3 +272,10 @@ def test_regenerating_the_report_keeps_the_hand_written_notes(tmp_path):
     assert text.count(notes) == 1 and "stale" not in text
     assert text.index(notes) < text.index("## Claims")
     assert results.report(tmp_path, out, tmp_path / "figures") == text  # stable on a second pass
+
+
+def test_trailing_mean_by_hand():
+    from dqfd_bc_keras.figures import trailing_mean
+
+    np.testing.assert_allclose(trailing_mean(np.array([2.0, 4.0, 0.0, 8.0]), 2), [2.0, 3.0, 2.0, 4.0])
+    np.testing.assert_allclose(trailing_mean(np.array([1.0, 2.0]), 1), [1.0, 2.0])
