@@ -16,7 +16,6 @@ hyperparameters is run under the same evaluation protocol, side by side.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -28,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log level)
 import numpy as np  # noqa: E402
 
+from dqfd_bc_keras.analysis import first_reaching, load_runs  # noqa: E402
 from dqfd_bc_keras.config import QUICK  # noqa: E402
 from dqfd_bc_keras.envs import get_task  # noqa: E402
 from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
@@ -63,15 +63,11 @@ def arms(quick: bool) -> list[Arm]:
             for task, episodes in TASKS.items() for loss in LOSSES]
 
 
-def first_solved(evals: list[tuple[int, float]], threshold: float) -> float:
-    """The first evaluated env step whose mean return reaches `threshold`; inf if none does."""
-    return next((float(step) for step, mean in evals if mean >= threshold), np.inf)
-
-
 def summarise(label: str, evals: list[list[tuple[int, float]]], final: list[float], threshold: float) -> dict:
     """Median and 95% bootstrap CI over all seeds; a seed that never reaches the threshold is
     censored (inf), so the median is "not reached" (None) once half the seeds never do."""
-    steps = np.array([first_solved(e, threshold) for e in evals])
+    firsts = [first_reaching(e, threshold) for e in evals]
+    steps = np.array([np.inf if step is None else step for step in firsts])  # step 0 is a real answer
     median, ci = float(np.median(steps)), bootstrap_ci(steps, np.median)
     finite = lambda v: v if np.isfinite(v) else None  # noqa: E731  (JSON has no inf)
     return {"arm": label, "seeds": len(steps), "reached": int(np.isfinite(steps).sum()),
@@ -80,12 +76,10 @@ def summarise(label: str, evals: list[list[tuple[int, float]]], final: list[floa
 
 
 def ours(run_dirs: list[Path]) -> tuple[list[list[tuple[int, float]]], list[float]]:
-    evals, final = [], []
-    for run_dir in run_dirs:
-        with (run_dir / "evals.csv").open() as f:
-            evals.append([(int(r["env_step"]), float(r["mean_return"])) for r in csv.DictReader(f)])
-        final.append(json.loads((run_dir / "eval.json").read_text())["mean_return"])
-    return evals, final
+    """Each run's (env step, mean return) evaluations and its final evaluation's mean return."""
+    runs = [record for run_dir in run_dirs for record in load_runs(run_dir)]
+    return ([[(e["env_step"], e["mean_return"]) for e in r.evals] for r in runs],
+            [r.final["mean_return"] for r in runs])
 
 
 def sb3_run(task: str, seed: int, budget: int, path: Path) -> None:

@@ -11,7 +11,7 @@ import csv
 import functools
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -121,9 +121,14 @@ def collapses(run: RunRecord) -> int:
     return int(np.sum(run.column("plain_return")[peaks[0] + 1:] < COLLAPSE_FRACTION * run.config.limit))
 
 
+def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> float | None:
+    """The first evaluated env step of (env step, mean return) pairs whose mean reaches `threshold`."""
+    return next((float(step) for step, mean in evals if mean >= threshold), None)
+
+
 def steps_to_threshold(run: RunRecord) -> float | None:
-    solved = get_task(run.config.task).solved_return
-    return next((e["env_step"] for e in run.evals if e["mean_return"] >= solved), None)
+    return first_reaching(((e["env_step"], e["mean_return"]) for e in run.evals),
+                          get_task(run.config.task).solved_return)
 
 
 PER_RUN: dict[str, Callable[[RunRecord], float]] = {
