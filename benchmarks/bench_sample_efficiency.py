@@ -27,14 +27,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log level)
 import numpy as np  # noqa: E402
 
-from dqfd_bc_keras.analysis import first_reaching, load_runs  # noqa: E402
+from dqfd_bc_keras.experiments.claims import first_reaching
+from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.config import QUICK  # noqa: E402
 from dqfd_bc_keras.envs import get_task  # noqa: E402
 from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
-from dqfd_bc_keras.experiments import Arm, arm, run_suite  # noqa: E402
+from dqfd_bc_keras.experiments.suites import Arm, arm, run_suite  # noqa: E402
 from dqfd_bc_keras.files import write_text  # noqa: E402
-from dqfd_bc_keras.results import EFFICIENCY_FILE, SB3_LABEL, efficiency_table  # noqa: E402
-from dqfd_bc_keras.stats import bootstrap_ci  # noqa: E402
+from dqfd_bc_keras.experiments.report import EFFICIENCY_FILE, SB3_LABEL, efficiency_table  # noqa: E402
+from dqfd_bc_keras.experiments.stats import bootstrap_ci  # noqa: E402
 
 LOSSES = ("bayes", "ce", "margin", "none")
 TASKS = {"cartpole": 5, "mountaincar": 10}

@@ -30,8 +30,8 @@ from . import demos as demo_io
 from .config import Config
 from .errors import ConfigError, OutputExistsError
 from .files import atomic_path, write_text
-from .figures import plot_learning_curve
-from .training import (METRIC_FIELDS, Learner, RunState, build, eval_seed, run_evaluation, state_from_dict,
+from .envs import get_task
+from .training import (METRIC_FIELDS, Learner, TrainingState, build, eval_seed, run_evaluation, state_from_dict,
                        train_episodes)
 
 EVAL_FIELDS = ("env_step", "episode", "mean_return", "std_return", "mean_goals")
@@ -70,10 +70,10 @@ def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
     write_text(path, buffer.getvalue())
 
 
-class Run:
+class RunDirectory:
     """One run directory and the learner training into it."""
 
-    def __init__(self, config: Config, out: Path, learner: Learner, state: RunState, quiet: bool) -> None:
+    def __init__(self, config: Config, out: Path, learner: Learner, state: TrainingState, quiet: bool) -> None:
         self.config, self.out, self.learner, self.state = config, out, learner, state
         self.tb = tf.summary.create_file_writer(str(out / "tb"))
         self.progress = None
@@ -84,7 +84,7 @@ class Run:
                                  initial=int(learner.interaction.env_steps.numpy()))
 
     # --- called after every episode -------------------------------------------------------
-    def on_episode(self, learner: Learner, state: RunState, row: dict) -> None:
+    def on_episode(self, learner: Learner, state: TrainingState, row: dict) -> None:
         step = row["env_step"]
         with self.tb.as_default(step=step):
             for key in ("return", "plain_return", "length", "goals", "epsilon", "loss", "td", "n_step",
@@ -180,7 +180,7 @@ def train(
     if config.deterministic:
         tf.config.experimental.enable_op_determinism()
     learner, _ = build(config, dataset, fresh=not resume)
-    run = Run(config, out, learner, RunState(), quiet)
+    run = RunDirectory(config, out, learner, TrainingState(), quiet)
     if resume:
         run.restore_checkpoint()
     else:
@@ -189,3 +189,34 @@ def train(
         run.save_checkpoint()
     train_episodes(learner, run.state, run.on_episode)
     return run.finish()
+
+
+def plot_learning_curve(metrics: list[dict], evals: list[dict], config: Config, path: Path) -> None:
+    """Training returns per episode (plain env's scale), their moving average, and the greedy
+    evaluations, against environment steps, with the plain env's "solved" threshold."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    if metrics:
+        steps = np.array([row["env_step"] for row in metrics])
+        returns = np.array([row["plain_return"] for row in metrics], dtype=float)
+        ax.plot(steps, returns, color="tab:blue", alpha=0.3, lw=1, label="training episode")
+        window = min(config.dynamic_window, len(returns))
+        average = np.convolve(returns, np.ones(window) / window, mode="valid")
+        ax.plot(steps[window - 1:], average, color="tab:blue", lw=2, label=f"moving average ({window})")
+    if evals:
+        ax.plot([e["env_step"] for e in evals], [e["mean_return"] for e in evals], "o-", color="tab:orange",
+                label="greedy evaluation")
+    spec = get_task(config.task)
+    ax.axhline(spec.solved_return, color="grey", ls="--", lw=1, label=f"solved ({spec.solved_return:g})")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel(f"return on {spec.env_id}")
+    ax.set_title(f"{config.task} · {config.expert_loss} · timeout={config.timeout} · seed {config.seed}")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)

@@ -105,7 +105,7 @@ class EpisodeStats:
 
 
 @dataclass
-class RunState:
+class TrainingState:
     """Everything of a run that lives in Python; saved with each checkpoint."""
 
     episode: int = 0
@@ -188,7 +188,7 @@ class DynamicDemos:
     def dataset(self) -> demo_io.DemoDataset:
         return demo_io.concatenate(self.episodes, source=self.episodes[0].meta.expert)
 
-    def due(self, state: RunState) -> bool:
+    def due(self, state: TrainingState) -> bool:
         """The moving average of the last W returns reaches a new best, at least the demos' average."""
         W = self.config.dynamic_window
         if len(state.returns) < W:
@@ -199,7 +199,7 @@ class DynamicDemos:
             return True
         return False
 
-    def update(self, agent: DQfDAgent, bc: BCModel, state: RunState) -> dict:
+    def update(self, agent: DQfDAgent, bc: BCModel, state: TrainingState) -> dict:
         """Roll out M greedy episodes into D_demo (lowest returns dropped past capacity), refit π_bc."""
         c = self.config
         seeds = [episode_seed(c, state.episode * 100 + i, stream=2) for i in range(c.dynamic_rollouts)]
@@ -263,8 +263,8 @@ def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: boo
 
 
 def train_episodes(
-    learner: Learner, state: RunState, on_episode: Callable[[Learner, RunState, dict], None]
-) -> RunState:
+    learner: Learner, state: TrainingState, on_episode: Callable[[Learner, TrainingState, dict], None]
+) -> TrainingState:
     """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs, evaluates and saves."""
     c, agent, interaction = learner.config, learner.agent, learner.interaction
     env = interaction.env
@@ -301,5 +301,5 @@ def eval_seed(config: Config) -> int:
     return 10_000 + config.seed * 1000
 
 
-def state_from_dict(fields: dict) -> RunState:
-    return RunState(**{f.name: fields[f.name] for f in dataclasses.fields(RunState) if f.name in fields})
+def state_from_dict(fields: dict) -> TrainingState:
+    return TrainingState(**{f.name: fields[f.name] for f in dataclasses.fields(TrainingState) if f.name in fields})

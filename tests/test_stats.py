@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from dqfd_bc_keras.stats import (Summary, bootstrap_ci, bootstrap_diff_ci, equivalent, excludes_zero, fisher_exact,
+from dqfd_bc_keras.experiments.stats import (Summary, bootstrap_ci, bootstrap_diff_ci, equivalent, excludes_zero, fisher_exact,
                                  iqm, mann_whitney)
 
 SAMPLE = np.arange(1.0, 11.0)  # 1..10: mean 5.5, population std √8.25

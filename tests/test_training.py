@@ -77,7 +77,7 @@ def test_episode_seed_is_deterministic_and_distinct_per_episode_and_stream():
 
 
 def test_run_state_round_trips_through_json():
-    state = training.RunState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[{"episode": 1}], bc_fits=2)
+    state = training.TrainingState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[{"episode": 1}], bc_fits=2)
     assert state.best_average == -np.inf
     fields = json.loads(json.dumps(dataclasses.asdict(state)))
     assert training.state_from_dict({**fields, "unknown": 1}) == state
@@ -243,7 +243,7 @@ def test_dynamic_demos_are_due_at_a_new_best_moving_average_at_least_the_demos(d
     config = tiny(dynamic_window=3)
     dynamic = training.DynamicDemos(config, demos, env=None)
     assert dynamic.demo_average == 500.0
-    state = training.RunState()
+    state = training.TrainingState()
     for r in (500.0, 500.0):
         state.returns.append(r)
         assert not dynamic.due(state)  # fewer than W returns
@@ -256,7 +256,7 @@ def test_dynamic_demos_are_due_at_a_new_best_moving_average_at_least_the_demos(d
     state.returns.append(470.0)
     assert not dynamic.due(state) and state.best_average == 510.0  # 500: below the best
 
-    below = training.RunState()
+    below = training.TrainingState()
     for r in [499.0] * 5 + [400.0, 600.0, 497.0]:  # moving averages 499, …, 499.0, 499.67, 499.0 < 500
         below.returns.append(r)
         assert not dynamic.due(below)
@@ -285,7 +285,7 @@ def test_dynamic_update_adds_m_greedy_episodes_and_refits_bc(capped):
     size0 = int(agent.replay.demo_size.numpy())
     expected = greedy_rollouts(learner, episode=7)
     weights0 = [w.numpy().copy() for w in bc.trainable_weights]
-    state = training.RunState(episode=7, best_average=50.0)
+    state = training.TrainingState(episode=7, best_average=50.0)
 
     update = dynamic.update(agent, bc, state)
 
@@ -314,7 +314,7 @@ def test_dynamic_update_past_capacity_drops_the_lowest_returns_first(capped):
     original = dynamic.config
     dynamic.config = dataclasses.replace(original, demo_capacity=capacity)
     try:
-        update = dynamic.update(agent, learner.bc, training.RunState(episode=8, bc_fits=1))
+        update = dynamic.update(agent, learner.bc, training.TrainingState(episode=8, bc_fits=1))
     finally:
         dynamic.config = original
 

@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from . import figures
-from .analysis import (ALPHA, CLAIMS, METRICS, PER_RUN, REGENERATE, Arm, Comparison, setting_name, bayes_ce_pairs,
-                       demonstrator_return, group_arms, judge, load_runs, preset_distance, steps_to_threshold)
-from .envs import get_task
-from .files import write_text
+from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, REGENERATE, ArmRuns, Comparison, setting_name, bayes_ce_pairs,
+                       demonstrator_return, group_arms, judge, preset_distance, steps_to_threshold)
+from ..envs import get_task
+from ..files import write_text
+from .data import load_runs
 from .stats import Summary
 
 
@@ -48,7 +49,7 @@ def _flips(verdict: str, reference: str) -> str:
     return "yes" if {verdict, reference} == {"holds", "does not hold"} else "unclear"
 
 
-def _claim_rows(arms: list[Arm]) -> tuple[list[str], list[str]]:
+def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
     """The claims table's rows (the reference pair of each claim's setting) and the sensitivity
     table's rows (every other bayes arm of that setting, against its ce arm)."""
     claims, sensitivity = [], []
@@ -74,7 +75,7 @@ def _claim_rows(arms: list[Arm]) -> tuple[list[str], list[str]]:
     return claims, sensitivity
 
 
-def _baseline_row(arm: Arm) -> str:
+def _baseline_row(arm: ArmRuns) -> str:
     steps = [steps_to_threshold(r) for r in arm.runs]
     reached = sum(s is not None for s in steps)  # the median is finite once more than half reached it
     median = f"{np.median([np.inf if s is None else s for s in steps]):,.0f}" if 2 * reached > len(steps) else "—"
@@ -89,7 +90,7 @@ def _baseline_row(arm: Arm) -> str:
             f"{teacher} | {beats} |")
 
 
-def _figures(arms: list[Arm], figures_dir: Path, markdown_dir: Path) -> list[str]:
+def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list[str]:
     """Per setting: learning curves of the preset arms (the paper's and the baselines'); the best,
     average and worst run of each arm of its reference bayes–ce pair (of every arm if it has
     none); and, where a setting has variants (sensitivity), their curves beside the reference

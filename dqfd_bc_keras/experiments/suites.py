@@ -23,10 +23,10 @@ from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 
-from .cli import ArgumentParser, positive_int, run
-from .config import QUICK, Config
-from .errors import ConfigError
-from .files import write_text
+from ..cli import ArgumentParser, positive_int, run
+from ..config import QUICK, Config
+from ..errors import ConfigError
+from ..files import write_text
 
 BACKENDS = ("local", "ray")
 SWEEP_LOG = "sweeps.jsonl"
@@ -124,7 +124,7 @@ class Outcome:
 
 def run_job(job: Job) -> Outcome:
     """One run (in a worker process): train, resuming a run cut off before, and summarise it."""
-    from .runs import train
+    from ..runs import train
 
     started = time.perf_counter()
     resume = (job.directory / "checkpoints" / "latest.json").is_file()
@@ -161,7 +161,7 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
     started_here = not ray.is_initialized()
     if started_here:
         ray.init(address=address, num_cpus=None if address else workers, include_dashboard=False,
-                 log_to_driver=False, runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[1])}})
+                 log_to_driver=False, runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2])}})
     try:
         task = ray.remote(num_cpus=1, max_calls=1)(run_job)
         pending = [task.remote(job) for job in jobs]
@@ -206,37 +206,3 @@ def run_suite(
     if failed:
         raise ConfigError(f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}")
     return outcomes
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments", description=__doc__.split("\n\n")[0])
-    commands = parser.add_subparsers(dest="command", required=True)
-    go = commands.add_parser("run", help="run a suite's incomplete runs")
-    go.add_argument("suite", choices=[*sorted(SUITES), "all"], help=f"a suite, or all: {', '.join(ALL)}")
-    go.add_argument("--seeds", type=positive_int, help=f"seeds 0 … N−1 per arm (default: {SEEDS})")
-    go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
-    go.add_argument("--out", required=True, help="suite directory")
-    go.add_argument("--backend", choices=BACKENDS, default="local")
-    go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
-    rep = commands.add_parser("report", help="statistics, figures and a RESULTS-style markdown of a suite dir")
-    rep.add_argument("directory")
-    rep.add_argument("--results", default="docs/RESULTS.md", help="markdown file to write")
-    rep.add_argument("--figures", default="docs/figures", help="directory for the PNG figures")
-    args = parser.parse_args(argv)
-    if args.command == "run":
-        for suite in ALL if args.suite == "all" else (args.suite,):
-            run_suite(suite, args.seeds or SEEDS[suite], args.out, args.workers, args.backend, args.address,
-                      progress=lambda line: print(line, flush=True))
-    else:
-        from .results import report
-
-        directory = Path(args.directory)
-        if not directory.is_dir():
-            raise ConfigError(f"{directory}: no such suite directory")
-        report(directory, Path(args.results), Path(args.figures))
-        print(f"wrote {args.results} and figures in {args.figures}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(run(main))

@@ -6,8 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dqfd_bc_keras import analysis, results
-from dqfd_bc_keras.analysis import Arm, RunRecord
+from dqfd_bc_keras.experiments import claims as analysis, report as results
+from dqfd_bc_keras.experiments.claims import ArmRuns
+from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.demos import record, save
 from dqfd_bc_keras.errors import ConfigError
@@ -30,7 +31,7 @@ def goal_rows(goals: list[int]) -> list[dict]:
             for g in goals]
 
 
-def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: float = 0.0, **fields) -> RunRecord:
+def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: float = 0.0, **fields) -> FinishedRun:
     """A run of `rows` (episode, env_step, wall_time and losses filled in); evals every 5k steps."""
     config = Config.for_task(**fields)
     steps = np.cumsum([r["length"] for r in rows])
@@ -38,10 +39,10 @@ def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: f
                 "wall_time": 60.0 * (i + 1) / len(rows)} for i, r in enumerate(rows)]
     evaluations = [{"env_step": 5000 * i, "episode": 0, "mean_return": m, "std_return": 0.0, "mean_goals": None}
                    for i, m in enumerate(evals)]
-    return RunRecord(path, config, metrics, evaluations, {"task": config.task, "mean_return": final})
+    return FinishedRun(path, config, metrics, evaluations, {"task": config.task, "mean_return": final})
 
 
-def write_run(run: RunRecord) -> None:
+def write_run(run: FinishedRun) -> None:
     run.path.mkdir(parents=True)
     (run.path / "config.json").write_text(json.dumps(run.config.to_dict()))
     for name, fields, rows in (("metrics.csv", METRIC_FIELDS, run.metrics), ("evals.csv", EVAL_FIELDS, run.evals)):
@@ -52,7 +53,7 @@ def write_run(run: RunRecord) -> None:
     (run.path / "eval.json").write_text(json.dumps(run.final))
 
 
-def arm(runs: list[RunRecord]) -> Arm:
+def arm(runs: list[FinishedRun]) -> ArmRuns:
     return analysis.group_arms(runs)[0]
 
 
@@ -114,7 +115,7 @@ def test_early_stop_rule_follows_the_config(tmp_path):
 
 
 def test_runs_are_grouped_into_arms_by_config(suite):
-    runs = analysis.load_runs(suite)
+    runs = load_runs(suite)
     assert len(runs) == 20  # the run without eval.json is left out
     arms = analysis.group_arms(runs)
     assert [(a.label, len(a.runs)) for a in arms] == [
@@ -126,7 +127,7 @@ def test_runs_are_grouped_into_arms_by_config(suite):
     assert [(b.name, c.name) for b, c in pairs] == [("bayes sigma0_sq=0.5", "ce"), ("bayes sigma0_sq=0.05", "ce")]
 
 
-def cartpole_arm(tmp_path, loss: str, lengths: list[list[int]]) -> Arm:
+def cartpole_arm(tmp_path, loss: str, lengths: list[list[int]]) -> ArmRuns:
     return arm([make_run(tmp_path, cartpole_rows(n), expert_loss=loss, seed=s, **CP) for s, n in enumerate(lengths)])
 
 
@@ -146,7 +147,7 @@ def test_c1_verdicts_on_clear_data(tmp_path):
     assert mixed == "inconclusive"
 
 
-def goals_arm(tmp_path, loss: str, first30: list[float]) -> Arm:
+def goals_arm(tmp_path, loss: str, first30: list[float]) -> ArmRuns:
     return arm([make_run(tmp_path, goal_rows([g] * 30), expert_loss=loss, seed=s, **MC)
                 for s, g in enumerate(first30)])
 
@@ -161,13 +162,13 @@ def test_c4_verdicts_on_clear_data(tmp_path):
 
 
 def test_c2_and_n_below_two(suite):
-    arms = analysis.group_arms(analysis.load_runs(suite))
+    arms = analysis.group_arms(load_runs(suite))
     bayes, ce = analysis.bayes_ce_pairs(arms, "cartpole-200", "naive")[0]
     verdict, (unfinished, falls) = analysis.judge_c2(bayes, ce)
     assert verdict == "holds"  # 1 of 3 unfinished in each arm, collapses in both
     assert unfinished.bayes.mean == pytest.approx(1 / 3) and unfinished.p == 1.0
     assert falls.bayes.mean == pytest.approx((1 + 2 + 1) / 3)
-    lone = Arm(bayes.config, bayes.runs[:1], "bayes")
+    lone = ArmRuns(bayes.config, bayes.runs[:1], "bayes")
     assert analysis.judge(analysis.CLAIMS[1], lone, ce)[0] == "inconclusive (n < 2)"
 
 
@@ -219,7 +220,7 @@ def test_a_bad_config_names_its_file(tmp_path):
     write_run(make_run(tmp_path / "run", cartpole_rows([30]), **CP))
     (tmp_path / "run" / "config.json").write_text(json.dumps({"task": "cartpole", "colour": "red"}))
     with pytest.raises(ConfigError, match=r"run/config.json: unknown config field\(s\) \['colour'\]"):
-        analysis.load_runs(tmp_path)
+        load_runs(tmp_path)
 
 
 def test_a_run_repeated_in_another_suite_directory_counts_once(tmp_path):
@@ -227,7 +228,7 @@ def test_a_run_repeated_in_another_suite_directory_counts_once(tmp_path):
     for where in ("paper", "sensitivity"):
         write_run(make_run(tmp_path / where / "run", cartpole_rows([30]), expert_loss="ce", seed=3, **CP))
     write_run(make_run(tmp_path / "paper" / "other", cartpole_rows([30]), expert_loss="ce", seed=4, **CP))
-    [only] = analysis.group_arms(analysis.load_runs(tmp_path))
+    [only] = analysis.group_arms(load_runs(tmp_path))
     assert [r.config.seed for r in only.runs] == [3, 4]
 
 
@@ -275,7 +276,7 @@ def test_regenerating_the_report_keeps_the_hand_written_notes(tmp_path):
 
 
 def test_trailing_mean_by_hand():
-    from dqfd_bc_keras.figures import trailing_mean
+    from dqfd_bc_keras.experiments.figures import trailing_mean
 
     np.testing.assert_allclose(trailing_mean(np.array([2.0, 4.0, 0.0, 8.0]), 2), [2.0, 3.0, 2.0, 4.0])
     np.testing.assert_allclose(trailing_mean(np.array([1.0, 2.0]), 1), [1.0, 2.0])

@@ -6,7 +6,8 @@ import pytest
 
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments import ALL, SEEDS, SUITES, main, run_suite, suite_arms
+from dqfd_bc_keras.experiments.__main__ import main
+from dqfd_bc_keras.experiments.suites import ALL, SEEDS, SUITES, run_suite, suite_arms
 
 
 def test_paper_suite_pits_ce_against_bayes_in_the_four_settings():
@@ -79,7 +80,7 @@ def test_cli_rejects_bad_arguments_in_one_line(capsys):
 
 
 def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
-    from dqfd_bc_keras.results import report
+    from dqfd_bc_keras.experiments.report import report
 
     run_suite("quick", 2, tmp_path / "suite", workers=2, progress=lambda line: None)
     assert main(["report", str(tmp_path / "suite"), "--results", str(tmp_path / "RESULTS.md"),

@@ -7,20 +7,19 @@ directory names) and grouped into arms by config.json: every field except `seed`
 
 from __future__ import annotations
 
-import csv
 import functools
 import json
-import os
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .config import Config
-from .demos import record
-from .envs import get_task
-from .errors import ConfigError
+from ..config import Config
+from ..demos import record
+from ..envs import get_task
+from ..errors import ConfigError
+from .data import FinishedRun
 from .stats import Summary, bootstrap_diff_ci, equivalent, excludes_zero, fisher_exact, mann_whitney
 
 ALPHA = 0.05
@@ -58,44 +57,8 @@ METRICS = {
 }
 
 
-@dataclass
-class RunRecord:
-    """One complete run directory, parsed."""
-
-    path: Path
-    config: Config
-    metrics: list[dict]
-    evals: list[dict]
-    final: dict
-
-    def column(self, name: str) -> np.ndarray:
-        return np.array([row[name] for row in self.metrics], dtype=float)
-
-
-def _read_csv(path: Path) -> list[dict]:
-    if not path.is_file():
-        return []
-    with path.open(newline="") as f:
-        return [{k: float(v) if v != "" else None for k, v in row.items()} for row in csv.DictReader(f)]
-
-
-def load_runs(suite_dir: str | os.PathLike) -> list[RunRecord]:
-    """Every complete run (one with eval.json) below `suite_dir`, in path order."""
-    runs = []
-    for final in sorted(Path(suite_dir).rglob("eval.json")):
-        path = final.parent
-        if (path / "config.json").is_file() and (path / "metrics.csv").is_file():
-            try:
-                config = Config.from_dict(json.loads((path / "config.json").read_text()))
-            except (ConfigError, json.JSONDecodeError) as error:
-                raise ConfigError(f"{path / 'config.json'}: {error}") from None
-            runs.append(RunRecord(path, config, _read_csv(path / "metrics.csv"), _read_csv(path / "evals.csv"),
-                                  json.loads(final.read_text())))
-    return runs
-
-
 # --- per-run metrics ------------------------------------------------------------------------
-def episodes_to_solve(run: RunRecord) -> int | None:
+def episodes_to_solve(run: FinishedRun) -> int | None:
     """The episode at which the task's early-stopping rule fired; None if it never did."""
     c = run.config
     if c.early_stop_window == 0:
@@ -108,11 +71,11 @@ def episodes_to_solve(run: RunRecord) -> int | None:
     return None
 
 
-def finished(run: RunRecord) -> bool:
+def finished(run: FinishedRun) -> bool:
     return episodes_to_solve(run) is not None
 
 
-def collapses(run: RunRecord) -> int:
+def collapses(run: FinishedRun) -> int:
     """The paper's perturbations: episodes whose plain return falls below COLLAPSE_FRACTION × limit
     after the first whose task return reached PEAK_FRACTION × limit."""
     peaks = np.flatnonzero(run.column("return") >= PEAK_FRACTION * run.config.limit)
@@ -126,12 +89,12 @@ def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> fl
     return next((float(step) for step, mean in evals if mean >= threshold), None)
 
 
-def steps_to_threshold(run: RunRecord) -> float | None:
+def steps_to_threshold(run: FinishedRun) -> float | None:
     return first_reaching(((e["env_step"], e["mean_return"]) for e in run.evals),
                           get_task(run.config.task).solved_return)
 
 
-PER_RUN: dict[str, Callable[[RunRecord], float]] = {
+PER_RUN: dict[str, Callable[[FinishedRun], float]] = {
     "episodes_to_solve": lambda r: len(r.metrics) + 1 if episodes_to_solve(r) is None else episodes_to_solve(r),
     "unfinished": lambda r: float(not finished(r)),
     "mean_train_return": lambda r: float(r.column("plain_return").mean()),
@@ -145,11 +108,11 @@ PER_RUN: dict[str, Callable[[RunRecord], float]] = {
 
 # --- arms and settings ----------------------------------------------------------------------
 @dataclass
-class Arm:
+class ArmRuns:
     """The runs of one configuration (all fields but the seed)."""
 
     config: dict
-    runs: list[RunRecord]
+    runs: list[FinishedRun]
     name: str = ""
 
     @property
@@ -164,13 +127,13 @@ class Arm:
         return np.array([PER_RUN[metric](run) for run in self.runs], dtype=float)
 
 
-def group_arms(runs: list[RunRecord]) -> list[Arm]:
+def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
     """Runs with equal configs but for `seed` form an arm; each arm is named by its expert loss
     and every field in which the arms of its setting (task, timeout) differ."""
-    arms: dict[str, Arm] = {}
+    arms: dict[str, ArmRuns] = {}
     for run in runs:
         fields = {k: v for k, v in run.config.to_dict().items() if k != "seed"}
-        arm = arms.setdefault(json.dumps(fields, sort_keys=True), Arm(fields, []))
+        arm = arms.setdefault(json.dumps(fields, sort_keys=True), ArmRuns(fields, []))
         if all(r.config.seed != run.config.seed for r in arm.runs):  # a run repeated elsewhere counts once
             arm.runs.append(run)
     for arm in arms.values():
@@ -183,17 +146,17 @@ def group_arms(runs: list[RunRecord]) -> list[Arm]:
     return sorted(arms.values(), key=lambda a: a.label)
 
 
-def preset_distance(arm: Arm) -> int:
+def preset_distance(arm: ArmRuns) -> int:
     """How many config fields besides the loss (and the timeout) differ from the task preset:
     0 for the paper's and the baselines' arms, more for a sensitivity or benchmark variant."""
     preset = Config.for_task(arm.config["task"]).to_dict()
     return sum(v != preset[k] for k, v in arm.config.items() if k not in ("expert_loss", "timeout"))
 
 
-def bayes_ce_pairs(arms: list[Arm], task: str, timeout: str | None) -> list[tuple[Arm, Arm | None]]:
+def bayes_ce_pairs(arms: list[ArmRuns], task: str, timeout: str | None) -> list[tuple[ArmRuns, ArmRuns | None]]:
     """Each bayes arm of the setting with its ce arm (equal in every field but the Bayes-only
     ones and the loss), the reference pair first: the one closest to the task preset."""
-    def strip(arm: Arm) -> dict:
+    def strip(arm: ArmRuns) -> dict:
         return {k: v for k, v in arm.config.items() if k not in ("expert_loss", *BAYES_ONLY)}
 
     pairs = [(b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
@@ -215,7 +178,7 @@ class Comparison:
     p: float
 
 
-def compare(metric: str, bayes: Arm, ce: Arm) -> Comparison:
+def compare(metric: str, bayes: ArmRuns, ce: ArmRuns) -> Comparison:
     """Mann–Whitney U on the per-run values; Fisher's exact test for the 0/1 `unfinished`."""
     x, y = bayes.values(metric), ce.values(metric)
     if metric == "unfinished":
@@ -225,7 +188,7 @@ def compare(metric: str, bayes: Arm, ce: Arm) -> Comparison:
     return Comparison(metric, Summary.of(x), Summary.of(y), bootstrap_diff_ci(x, y), test, p)
 
 
-def _same_return(bayes: Arm, ce: Arm, episodes: bool) -> tuple[str, list[Comparison]]:
+def _same_return(bayes: ArmRuns, ce: ArmRuns, episodes: bool) -> tuple[str, list[Comparison]]:
     ret = compare("mean_train_return", bayes, ce)
     comparisons = [compare("episodes_to_solve", bayes, ce), ret] if episodes else [ret]
     differ = episodes and comparisons[0].p < ALPHA
@@ -234,7 +197,7 @@ def _same_return(bayes: Arm, ce: Arm, episodes: bool) -> tuple[str, list[Compari
     return ("does not hold" if excludes_zero(ret.diff) or differ else "inconclusive"), comparisons
 
 
-def judge_c1(bayes: Arm, ce: Arm) -> tuple[str, list[Comparison]]:
+def judge_c1(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
     """holds: the CI of the difference of mean training returns lies within ±RETURN_MARGIN × limit
     and Mann–Whitney p ≥ ALPHA on episodes_to_solve; does not hold: that CI excludes 0 or p < ALPHA;
     else inconclusive. Equivalence is checked first: a significant difference of returns inside
@@ -242,13 +205,13 @@ def judge_c1(bayes: Arm, ce: Arm) -> tuple[str, list[Comparison]]:
     return _same_return(bayes, ce, episodes=True)
 
 
-def judge_c3(bayes: Arm, ce: Arm) -> tuple[str, list[Comparison]]:
+def judge_c3(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
     """holds: the CI of the difference of mean training returns lies within ±RETURN_MARGIN × limit;
     does not hold: it excludes 0 (and is not within the margin); else inconclusive."""
     return _same_return(bayes, ce, episodes=False)
 
 
-def judge_c2(bayes: Arm, ce: Arm) -> tuple[str, list[Comparison]]:
+def judge_c2(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
     """holds: both arms show perturbations (an unfinished run or a collapse), Fisher's p ≥ ALPHA
     on unfinished runs and their shares differ by ≤ SHARE_MARGIN; does not hold: Fisher's
     p < ALPHA; else inconclusive. Collapses are compared with Mann–Whitney U (reported)."""
@@ -259,7 +222,7 @@ def judge_c2(bayes: Arm, ce: Arm) -> tuple[str, list[Comparison]]:
     return ("does not hold" if unfinished.p < ALPHA else "inconclusive"), [unfinished, falls]
 
 
-def judge_c4(bayes: Arm, ce: Arm) -> tuple[str, list[Comparison]]:
+def judge_c4(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
     """holds: the CI of bayes − ce in goals_first30 lies above 0 and Mann–Whitney p < ALPHA;
     does not hold: that CI lies at or below 0, or p ≥ ALPHA with the CI within ±GOALS_MARGIN; else
     inconclusive. goals_all is reported beside it."""
@@ -277,7 +240,7 @@ class Claim:
     statement: str
     settings: tuple[tuple[str, str | None], ...]
     """(task, timeout) pairs it is tested on; timeout None: any."""
-    judge: Callable[[Arm, Arm], tuple[str, list[Comparison]]]
+    judge: Callable[[ArmRuns, ArmRuns], tuple[str, list[Comparison]]]
 
     @property
     def rule(self) -> str:
@@ -304,7 +267,7 @@ def setting_name(task: str, timeout: str | None) -> str:
     return f"{task}/{timeout or '*'}"
 
 
-def judge(claim: Claim, bayes: Arm, ce: Arm | None) -> tuple[str, list[Comparison]]:
+def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> tuple[str, list[Comparison]]:
     if ce is None:
         return "not run (no ce arm)", []
     if min(len(bayes.runs), len(ce.runs)) < 2:
@@ -320,7 +283,7 @@ def _recorded_plain_return(task: str, expert: str, episodes: int, seed: int, tim
                                 max_steps=max_steps).meta.plain_returns))
 
 
-def demonstrator_return(run: RunRecord) -> float | None:
+def demonstrator_return(run: FinishedRun) -> float | None:
     """The mean plain return of the demonstrations the run started from (None for plain DQN).
 
     demos.npz holds D_demo at the end, which dynamic demonstrations enlarge with the agent's

@@ -1,5 +1,4 @@
-"""Figures (matplotlib, drawn off-screen, written atomically): one run's learning curve, and
-the figures over seeds for RESULTS.md.
+"""Figures over seeds for RESULTS.md (matplotlib, drawn off-screen, written atomically).
 
 `learning_curves` is the analogue of the paper's Figs. 3–7 and 9–11 with many seeds;
 `case_runs` is the paper's own kind of picture: one best, one average and one worst run per arm.
@@ -12,13 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Config
-from .envs import get_task
-from .files import atomic_path
+from ..files import atomic_path
 
 Curves = list[np.ndarray]
 """One per-episode series per run; runs differ in length (CartPole stops early)."""
-Run = tuple[str, np.ndarray, float]
+Trace = tuple[str, np.ndarray, float]
 """A run as drawn: its label (`seed 3`), its per-episode series and the score that ranks it."""
 
 
@@ -96,14 +93,14 @@ def trailing_mean(curve: np.ndarray, window: int) -> np.ndarray:
     return (sums[ends] - sums[starts]) / (ends - starts)
 
 
-def pick_cases(runs: list[Run]) -> dict[str, Run]:
+def pick_cases(runs: list[Trace]) -> dict[str, Trace]:
     """The paper's three cases: best (highest score), average (closest to the median), worst."""
     scores = np.array([score for _, _, score in runs])
     return {"best": runs[int(np.argmax(scores))], "average": runs[int(np.argmin(np.abs(scores - np.median(scores))))],
             "worst": runs[int(np.argmin(scores))]}
 
 
-def case_runs(title: str, cases: dict[str, dict[str, Run]], ylabel: str, path: Path) -> None:
+def case_runs(title: str, cases: dict[str, dict[str, Trace]], ylabel: str, path: Path) -> None:
     """The paper's picture: per case (best, average, worst) one panel with one run of each arm.
 
     `cases[case][arm]` is the run drawn.
@@ -121,7 +118,7 @@ def case_runs(title: str, cases: dict[str, dict[str, Run]], ylabel: str, path: P
     _save(fig, path)
 
 
-def setting_figures(setting: str, arms: dict[str, list[Run]], case_arms: list[str], score: str, ylabel: str,
+def setting_figures(setting: str, arms: dict[str, list[Trace]], case_arms: list[str], score: str, ylabel: str,
                     stem: Path) -> list[Path]:
     """A setting's two figures, `<stem>-curves.png` (every arm) and `<stem>-cases.png` (the arms
     `case_arms`, runs ranked by `score`); returns their paths."""
@@ -132,30 +129,3 @@ def setting_figures(setting: str, arms: dict[str, list[Run]], case_arms: list[st
               {case: {name: picked[name][case] for name in case_arms} for case in ("best", "average", "worst")},
               ylabel, cases)
     return [curves, cases]
-
-
-def plot_learning_curve(metrics: list[dict], evals: list[dict], config: Config, path: Path) -> None:
-    """Training returns per episode (plain env's scale), their moving average, and the greedy
-    evaluations, against environment steps, with the plain env's "solved" threshold."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 4))
-    if metrics:
-        steps = np.array([row["env_step"] for row in metrics])
-        returns = np.array([row["plain_return"] for row in metrics], dtype=float)
-        ax.plot(steps, returns, color="tab:blue", alpha=0.3, lw=1, label="training episode")
-        window = min(config.dynamic_window, len(returns))
-        average = np.convolve(returns, np.ones(window) / window, mode="valid")
-        ax.plot(steps[window - 1:], average, color="tab:blue", lw=2, label=f"moving average ({window})")
-    if evals:
-        ax.plot([e["env_step"] for e in evals], [e["mean_return"] for e in evals], "o-", color="tab:orange",
-                label="greedy evaluation")
-    spec = get_task(config.task)
-    ax.axhline(spec.solved_return, color="grey", ls="--", lw=1, label=f"solved ({spec.solved_return:g})")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel(f"return on {spec.env_id}")
-    ax.set_title(f"{config.task} · {config.expert_loss} · timeout={config.timeout} · seed {config.seed}")
-    ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)
