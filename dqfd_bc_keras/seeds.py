@@ -1,0 +1,33 @@
+"""Every seed a run derives from its own `Config.seed`, one function each.
+
+A run's randomness comes from several independent streams (demonstrations, training resets,
+evaluations, BC refits, …); deriving each in one place keeps them apart and lets anything
+outside the run (the lab, the SB3 baseline) use exactly the same evaluation episodes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+TRAIN, ROLLOUT, BC_FIT = 0, 2, 3
+"""Streams of `episode_seed`: training resets, dynamic-demonstration roll-outs, BC (re)fits."""
+
+
+def demo_seed(seed: int) -> int:
+    """Reset seed of the first recorded demonstration episode (episode i uses this + i)."""
+    return seed * 1000
+
+
+def eval_seed(seed: int) -> int:
+    """Reset seed of the first periodic-evaluation episode, apart from training's seeds."""
+    return 10_000 + seed * 1000
+
+
+def final_eval_seed(seed: int) -> int:
+    """Reset seed of the first episode of the final evaluation (eval.json)."""
+    return eval_seed(seed) + 1_000_000
+
+
+def episode_seed(seed: int, episode: int, stream: int = TRAIN) -> int:
+    """A reset seed per (run seed, episode, stream): a resumed run replays the same starts."""
+    return int(np.random.SeedSequence([seed, stream, episode]).generate_state(1)[0])
