@@ -56,13 +56,9 @@ def main(argv=None) -> int:
               f"config: {out}/config.json", flush=True)
     result = train(config, out, dataset, resume=args.resume, force=args.force, quiet=args.quiet)
     if not args.quiet:
-        evaluation = result.evaluation
-        print(f"{result.episodes} episodes, {result.env_steps} env steps"
+        print(f"{result.episodes} episodes, {result.env_steps} env steps, {result.interactions} interactions in all"
               f"{' (early stop)' if result.stopped_early else ''}, {result.wall_time:.0f} s of training")
-        print(f"greedy evaluation on {TASKS[config.task].env_id}, {evaluation['episodes']} episodes: "
-              f"{evaluation['mean_return']:.1f} ± {evaluation['std_return']:.1f} "
-              f"(min {evaluation['min_return']:g}, max {evaluation['max_return']:g})"
-              + (f", goals per episode {evaluation['mean_goals']:.2f}" if "mean_goals" in evaluation else ""))
+        print(result.evaluation.summary())
     return 0
 
 

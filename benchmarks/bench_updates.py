@@ -33,7 +33,7 @@ LOSSES = ("bayes", "ce", "bc_margin", "margin", "none")
 
 def agent_for(loss: str, demos):
     keras.utils.set_random_seed(0)
-    config = Config(expert_loss=loss).validate()
+    config = Config.for_task("cartpole", expert_loss=loss)
     bc = None
     if config.uses_bc:
         bc = build_bc_model(config, demos.meta.obs_dim, demos.meta.n_actions, demos.obs_scale())

@@ -122,10 +122,12 @@ class DQfDAgent(keras.Model):
             return losses.weighted_mean(losses.margin_loss(q, a_e, c.margin), batch.weights)
         if c.expert_loss == "ce":
             return losses.weighted_mean(losses.cross_entropy_loss(q, batch.pi_bc, c.temperature), batch.weights)
-        likelihood = losses.bayes_likelihood_loss(q, batch.pi_bc, batch.sigma_sq, c.temperature)
-        prior = losses.bayes_prior_loss(self.q_network.trainable_weights, self.prior_weights,
-                                        c.prior_scale, self.replay.demo_size)
-        return losses.weighted_mean(likelihood, batch.weights) + prior
+        likelihood = losses.weighted_mean(
+            losses.bayes_likelihood_loss(q, batch.pi_bc, batch.sigma_sq, c.temperature), batch.weights)
+        if not c.bayes_prior:
+            return likelihood
+        return likelihood + losses.bayes_prior_loss(self.q_network.trainable_weights, self.prior_weights,
+                                                    c.prior_scale, self.replay.demo_size)
 
     def train_step(self, batch: Batch) -> tf.Tensor:
         """One gradient step on J(Q) for `batch`; returns the 1-step TD errors δ, (B,)."""

@@ -32,6 +32,7 @@ class BCModel(keras.Model):
         prior_scale: float | None = None,
         mc_passes: int = 10,
         sigma0_sq: float = 0.5,
+        mc_dropout: bool = True,
         obs_mean: Sequence[float] | None = None,
         obs_std: Sequence[float] | None = None,
         **kwargs,
@@ -39,12 +40,14 @@ class BCModel(keras.Model):
         """`prior_scale=None` fits by MLE; a number s fits by MAP with the prior N(0, s²I).
 
         `obs_mean`/`obs_std` standardise the input (the demonstrations' statistics).
+        `mc_dropout=False` predicts with one deterministic pass even when trained with dropout
+        (the ablation "σ² fixed at σ0²").
         """
         super().__init__(**kwargs)
         self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
         self.hidden, self.dropout = tuple(int(h) for h in hidden), float(dropout)
         self.prior_scale = None if prior_scale is None else float(prior_scale)
-        self.mc_passes, self.sigma0_sq = int(mc_passes), float(sigma0_sq)
+        self.mc_passes, self.sigma0_sq, self.mc_dropout = int(mc_passes), float(sigma0_sq), bool(mc_dropout)
         self.obs_mean = None if obs_mean is None else [float(x) for x in obs_mean]
         self.obs_std = None if obs_std is None else [float(x) for x in obs_std]
         self.stack = dense_stack(self.hidden, self.n_actions, self.dropout)
@@ -115,9 +118,10 @@ class BCModel(keras.Model):
     def predictive(self, obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
         """(π̄_bc (B, A), σ² (B,)): the mean and variance of K MC-dropout passes, in one graph.
 
-        Without dropout (the MLE model) every pass is the same: π̄_bc = π_bc and σ² = σ0².
+        Without dropout (the MLE model) every pass is the same: π̄_bc = π_bc and σ² = σ0²; so it
+        is with `mc_dropout=False`.
         """
-        if self.dropout == 0.0:
+        if self.dropout == 0.0 or not self.mc_dropout:
             probs = tf.nn.softmax(self(obs, training=False))
             return probs, tf.fill(tf.shape(probs)[:1], tf.constant(self.sigma0_sq, probs.dtype))
         batch = tf.shape(obs)[0]
@@ -140,7 +144,7 @@ class BCModel(keras.Model):
             **super().get_config(),
             "obs_dim": self.obs_dim, "n_actions": self.n_actions, "hidden": list(self.hidden),
             "dropout": self.dropout, "prior_scale": self.prior_scale, "mc_passes": self.mc_passes,
-            "sigma0_sq": self.sigma0_sq, "obs_mean": self.obs_mean, "obs_std": self.obs_std,
+            "sigma0_sq": self.sigma0_sq, "mc_dropout": self.mc_dropout, "obs_mean": self.obs_mean, "obs_std": self.obs_std,
         }
 
 
@@ -153,7 +157,7 @@ def build_bc_model(
     model = BCModel(
         obs_dim, n_actions, hidden=config.bc_hidden, dropout=config.bc_dropout if bayesian else 0.0,
         prior_scale=config.bc_prior_scale if bayesian else None, mc_passes=config.mc_passes,
-        sigma0_sq=config.sigma0_sq, obs_mean=mean, obs_std=std, name="bc_model",
+        sigma0_sq=config.sigma0_sq, mc_dropout=config.mc_dropout, obs_mean=mean, obs_std=std, name="bc_model",
     )
     # 32 batches per graph call: a Keras fit step per call costs ~2 ms here, mostly call overhead.
     model.compile(optimizer=keras.optimizers.Adam(config.bc_learning_rate), steps_per_execution=32)

@@ -15,6 +15,8 @@ from .errors import ConfigError
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 
 PRIOR_CENTERS = ("pretrained", "zero")
+DYNAMIC_MODES = ("episodes", "rollouts", "off")
+"""How D_demo grows (§5): the agent's own training episodes, M extra greedy roll-outs, or not at all."""
 
 QUICK: dict[str, object] = {
     "total_steps": 600, "pretrain_steps": 50, "bc_epochs": 2, "bc_refit_epochs": 1, "demo_episodes": 2,
@@ -67,6 +69,11 @@ class Config:
     """s_p, standard deviation of the Gaussian prior around θ_prior."""
     prior_center: str = "pretrained"
     """θ_prior: the Q-network's weights at the end of pre-training, or zero."""
+    bayes_prior: bool = True
+    """The prior term ‖θ − θ_prior‖²/(2 s_p² N) of J_E (False: an ablation, the likelihood alone)."""
+    mc_dropout: bool = True
+    """σ²(s) from K MC-dropout passes of π_bc (False: an ablation, π̄_bc from one deterministic pass
+    and σ² = σ0² everywhere)."""
 
     # --- networks and optimisation (ours: the paper gives none) ----------------------------
     hidden: tuple[int, ...] = (64, 64)
@@ -113,18 +120,22 @@ class Config:
     """Scripted expert whose demonstrations are recorded when no dataset file is given."""
     demo_episodes: int = 5
     """Episodes recorded from `expert` (seeds seed·1000 + i)."""
-    dynamic_demos: bool = True
-    """DQfD-BC's dynamic demonstrations (BC-based expert losses only)."""
+    dynamic_demos: str = "episodes"
+    """DQfD-BC's dynamic demonstrations (BC-based expert losses only): at each new best moving
+    average, `episodes` inserts the agent's own training episodes since the last update that
+    reach that average (no extra interaction); `rollouts` plays M extra greedy episodes (counted
+    as interactions); `off` never grows D_demo."""
     dynamic_window: int = 10
     """W: the moving average of the last W episode returns that must reach a new best."""
     dynamic_rollouts: int = 5
-    """M: greedy episodes added to D_demo at each new best."""
+    """M: greedy episodes added to D_demo at each new best (`dynamic_demos="rollouts"`)."""
     bc_refit_epochs: int = 3
     """Epochs of each warm-started BC refit on the enlarged D_demo."""
 
     # --- Algorithm 1's loop (§4) -----------------------------------------------------------
     total_steps: int = 50_000
-    """Environment-step budget."""
+    """Budget of the learning loop's env steps (interactions also count demo roll-outs and the
+    random play that scales plain DQN's inputs)."""
     train_freq: int = 1
     """Env steps per gradient step (the paper: 1)."""
     epsilon_start: float | None = None
@@ -138,7 +149,8 @@ class Config:
     early_stop_fraction: float = 0.98
     """The paper's 490 of 500."""
     eval_every: int = 5_000
-    """Env steps between greedy evaluations on the plain env."""
+    """Interactions between greedy evaluations on the plain env: exactly at 0, E, 2E, … (an
+    episode is paused at a grid point, evaluated, and continues)."""
     eval_episodes: int = 10
     """Episodes per periodic evaluation."""
     final_eval_episodes: int = 20
@@ -151,11 +163,18 @@ class Config:
     deterministic: bool = True
     """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
 
+    def __post_init__(self) -> None:
+        if type(self) is Config:
+            raise ConfigError("Config holds the shared defaults only: use Config.for_task(task, ...) "
+                              "or a task preset, whose defaults differ")
+        self.validate()
+
     @classmethod
     def for_task(cls, task: str, **overrides: object) -> Config:
-        """Task preset `task`'s defaults (its dataclass in `PRESETS`) with `overrides`, validated."""
+        """Task preset `task`'s defaults (its dataclass in `PRESETS`) with `overrides`, validated:
+        the only way to make a Config."""
         get_task(task)
-        return PRESETS[task](**overrides).validate()
+        return PRESETS[task](**overrides)
 
     @classmethod
     def from_dict(cls, fields: dict) -> Config:
@@ -216,7 +235,7 @@ class Config:
         get_task(self.task)
         choices = {
             "timeout": TIMEOUT_MODES, "expert_loss": (*EXPERT_LOSSES, "none"), "target": TARGETS,
-            "td_loss": TD_LOSSES, "prior_center": PRIOR_CENTERS,
+            "td_loss": TD_LOSSES, "prior_center": PRIOR_CENTERS, "dynamic_demos": DYNAMIC_MODES,
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:

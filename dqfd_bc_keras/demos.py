@@ -140,6 +140,63 @@ def record(
     return dataset
 
 
+class EpisodeRecorder:
+    """Transitions of complete episodes as they are played, turned into a dataset on demand.
+
+    One recorder serves scripted demonstrations, greedy roll-outs and the agent's own training
+    episodes (dynamic demonstrations), so every D_demo episode has the same layout and meta.
+    """
+
+    def __init__(self, env, *, task: str, source: str, epsilon: float = 0.0, seed: int = 0) -> None:
+        self.task, self.source, self.epsilon, self.seed = task, source, float(epsilon), int(seed)
+        self.obs_dim, self.n_actions = int(env.observation_space.shape[0]), int(env.action_space.n)
+        self.timeout = env.get_wrapper_attr("mode")
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget every recorded episode (and the one being played)."""
+        self.columns: dict[str, list] = {name: [] for name in ARRAYS}
+        self.returns: list[float] = []
+        self.plain_returns: list[float] = []
+        self.open = 0
+
+    def reset(self, obs: np.ndarray) -> None:
+        """A new episode starts in `obs`; an unfinished one before it is dropped."""
+        for column in self.columns.values():
+            del column[len(column) - self.open:]
+        self.obs, self.open, self.ret, self.plain = obs, 0, 0.0, 0.0
+
+    def step(self, action: int, next_obs: np.ndarray, reward: float, terminated: bool, truncated: bool,
+             info: dict) -> None:
+        values = (self.obs, action, reward, next_obs, terminated, truncated, len(self.returns))
+        for name, value in zip(ARRAYS, values):
+            self.columns[name].append(value)
+        self.obs, self.open = next_obs, self.open + 1
+        self.ret += float(reward)
+        self.plain += info["plain_reward"]
+        if terminated or truncated:
+            self.returns.append(self.ret)
+            self.plain_returns.append(self.plain)
+            self.open = 0
+
+    @property
+    def episodes(self) -> int:
+        return len(self.returns)
+
+    def dataset(self) -> DemoDataset:
+        """The complete episodes recorded so far (an episode still being played is left out)."""
+        if not self.returns:
+            raise ConfigError("no complete episode has been recorded")
+        end = len(self.columns["actions"]) - self.open
+        meta = DemoMeta(
+            task=self.task, env_id=get_task(self.task).env_id, timeout=self.timeout, obs_dim=self.obs_dim,
+            n_actions=self.n_actions, expert=self.source, epsilon=self.epsilon, seed=self.seed,
+            episode_returns=list(self.returns), plain_returns=list(self.plain_returns),
+        )
+        arrays = {name: np.asarray(self.columns[name][:end], dtype=dtype) for name, (dtype, _) in ARRAYS.items()}
+        return DemoDataset(**arrays, meta=meta)
+
+
 def rollout(
     env, policy: Callable[[np.ndarray], int], seeds: Sequence[int], *, task: str, source: str,
     epsilon: float = 0.0, seed: int = 0,
@@ -149,30 +206,17 @@ def rollout(
     `source` names the demonstrator in the metadata (a scripted expert, or the agent's
     greedy policy for dynamic demonstrations).
     """
-    columns: dict[str, list] = {name: [] for name in ARRAYS}
-    returns, plain_returns = [], []
-    for episode, episode_seed in enumerate(seeds):
+    recorder = EpisodeRecorder(env, task=task, source=source, epsilon=epsilon, seed=seed)
+    for episode_seed in seeds:
         obs, _ = env.reset(seed=int(episode_seed))
-        done, ret, plain = False, 0.0, 0.0
+        recorder.reset(obs)
+        done = False
         while not done:
             action = policy(obs)
-            next_obs, reward, terminated, truncated, info = env.step(action)
-            for name, value in zip(ARRAYS, (obs, action, reward, next_obs, terminated, truncated, episode)):
-                columns[name].append(value)
-            ret += float(reward)
-            plain += info["plain_reward"]
-            obs, done = next_obs, terminated or truncated
-        returns.append(ret)
-        plain_returns.append(plain)
-    spec = get_task(task)
-    timeout = env.get_wrapper_attr("mode")
-    meta = DemoMeta(
-        task=task, env_id=spec.env_id, timeout=timeout, obs_dim=int(env.observation_space.shape[0]),
-        n_actions=int(env.action_space.n), expert=source, epsilon=float(epsilon), seed=int(seed),
-        episode_returns=returns, plain_returns=plain_returns,
-    )
-    arrays = {name: np.asarray(columns[name], dtype=dtype) for name, (dtype, _) in ARRAYS.items()}
-    return DemoDataset(**arrays, meta=meta)
+            obs, reward, terminated, truncated, info = env.step(action)
+            recorder.step(action, obs, reward, terminated, truncated, info)
+            done = terminated or truncated
+    return recorder.dataset()
 
 
 def concatenate(parts: Sequence[DemoDataset], source: str) -> DemoDataset:

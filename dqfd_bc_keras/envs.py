@@ -160,6 +160,30 @@ class TimeFeature(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return np.append(observation, remaining).astype(np.float32)
 
 
+@dataclass
+class Tally:
+    """A count shared by the envs of one learner: the interactions its data came from."""
+
+    count: int = 0
+
+
+class CountInteractions(gym.Wrapper):
+    """Adds each `step` to a shared `Tally`.
+
+    Every env whose transitions a learner may train on (the training loop's, the dynamic
+    demonstrations' roll-outs, random play that scales the inputs) is wrapped with the same
+    tally, so the total of interactions is counted in one place however the data arrives.
+    """
+
+    def __init__(self, env: gym.Env, tally: Tally) -> None:
+        super().__init__(env)
+        self.tally = tally
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        self.tally.count += 1
+        return self.env.step(action)
+
+
 @dataclass(frozen=True)
 class TaskSpec:
     """A task preset: which plain env, which shaping, which step limit (paper's settings)."""

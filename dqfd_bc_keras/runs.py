@@ -2,7 +2,8 @@
 
     RUN_DIR/config.json        every hyperparameter (written once, at the start)
             metrics.csv        one row per episode (training.METRIC_FIELDS)
-            evals.csv          periodic greedy evaluations on the plain env
+            evals.csv          greedy evaluations on the plain env at exactly every eval_every interactions
+            demonstrations.json  the initial D_demo: size and returns (runs with demonstrations)
             dynamic_demos.json every dynamic-demonstration update
             tb/                TensorBoard events: returns, evaluations, each loss term
             checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state)
@@ -31,22 +32,25 @@ from .config import Config
 from .errors import ConfigError, OutputExistsError
 from .files import atomic_path, write_text
 from .envs import get_task
-from .training import (METRIC_FIELDS, Learner, TrainingState, build, eval_seed, run_evaluation, state_from_dict,
+from .evaluation import EvalResult
+from .seeds import eval_seed, final_eval_seed
+from .training import (METRIC_FIELDS, Learner, TrainingState, build, run_evaluation, state_from_dict,
                        train_episodes)
 
-EVAL_FIELDS = ("env_step", "episode", "mean_return", "std_return", "mean_goals")
+EVAL_FIELDS = ("env_step", "interactions", "episode", "mean_return", "std_return", "mean_goals")
 
 
 @dataclass
 class RunResult:
-    """What a finished run reports: where, how long, and the final evaluation."""
+    """What a finished run reports: where, how long, its counts and the final evaluation."""
 
     out: Path
     episodes: int
     env_steps: int
+    interactions: int
     stopped_early: bool
     wall_time: float
-    evaluation: dict
+    evaluation: EvalResult
 
 
 def prepare_dir(out: Path, resume: bool, force: bool) -> None:
@@ -83,19 +87,26 @@ class RunDirectory:
             self.progress = tqdm(total=config.total_steps, unit="step", dynamic_ncols=True,
                                  initial=int(learner.interaction.env_steps.numpy()))
 
+    def write_demonstrations(self, data: demo_io.DemoDataset | None) -> None:
+        """What the run was given before any interaction (not interactions themselves)."""
+        if data is None:
+            return
+        meta = data.meta
+        write_text(self.out / "demonstrations.json", json.dumps({
+            "transitions": len(data), "episodes": data.n_episodes, "expert": meta.expert,
+            "episode_returns": meta.episode_returns, "plain_returns": meta.plain_returns,
+            "pretrain_steps": self.config.pretrain_steps}, indent=1))
+
     # --- called after every episode -------------------------------------------------------
     def on_episode(self, learner: Learner, state: TrainingState, row: dict) -> None:
         step = row["env_step"]
-        with self.tb.as_default(step=step):
-            for key in ("return", "plain_return", "length", "goals", "epsilon", "loss", "td", "n_step",
+        with self.tb.as_default(step=row["interactions"]):  # TensorBoard's x axis: interactions
+            for key in ("env_step", "return", "plain_return", "length", "goals", "epsilon", "loss", "td", "n_step",
                         "expert", "l2", "demo_size"):
                 tf.summary.scalar(f"train/{key}", row[key])
         if self.progress is not None:
             self.progress.update(step - self.progress.n)
             self.progress.set_postfix(episode=row["episode"], ret=f"{row['return']:.0f}")
-        if step >= state.next_eval or state.stopped_early:
-            self.evaluate(step)
-            state.next_eval = step + self.config.eval_every
         write_csv(self.out / "metrics.csv", METRIC_FIELDS, state.metrics)
         if state.demo_updates:
             write_text(self.out / "dynamic_demos.json", json.dumps(state.demo_updates, indent=1))
@@ -103,17 +114,22 @@ class RunDirectory:
             state.next_checkpoint = step + self.config.checkpoint_every
             self.save_checkpoint()
 
-    def evaluate(self, step: int) -> None:
-        result = run_evaluation(self.config, self.learner.agent, self.config.eval_episodes, eval_seed(self.config))
-        entry = {"env_step": step, "episode": self.state.episode, "mean_return": result.mean_return,
-                 "std_return": result.std_return,
-                 "mean_goals": float(np.mean(result.goals)) if result.goals is not None else ""}
-        self.state.evals.append(entry)
+    def evaluate(self, points: list[int]) -> None:
+        """One greedy evaluation of the current network, logged at each grid point in `points`."""
+        result = run_evaluation(self.config, self.learner.agent, self.config.eval_episodes,
+                                eval_seed(self.config.seed))
+        env_step = int(self.learner.interaction.env_steps.numpy())
+        for point in points:
+            self.state.evals.append({
+                "env_step": env_step, "interactions": point, "episode": self.state.episode,
+                "mean_return": result.mean_return, "std_return": result.std_return,
+                "mean_goals": float(np.mean(result.goals)) if result.goals is not None else ""})
+            with self.tb.as_default(step=point):
+                tf.summary.scalar("eval/plain_return", result.mean_return)
+                tf.summary.scalar("eval/env_step", env_step)
+                if result.goals is not None:
+                    tf.summary.scalar("eval/goals", float(np.mean(result.goals)))
         write_csv(self.out / "evals.csv", EVAL_FIELDS, self.state.evals)
-        with self.tb.as_default(step=step):
-            tf.summary.scalar("eval/plain_return", result.mean_return)
-            if result.goals is not None:
-                tf.summary.scalar("eval/goals", float(np.mean(result.goals)))
         self.tb.flush()
 
     # --- checkpoints ------------------------------------------------------------------------
@@ -123,8 +139,12 @@ class RunDirectory:
         target = root / name
         shutil.rmtree(target, ignore_errors=True)
         self.learner.checkpoint().write(str(target / "tf"))
-        if self.learner.dynamic is not None:
-            demo_io.save(self.learner.dynamic.dataset, target / "demos.npz", force=True)
+        dynamic = self.learner.dynamic
+        if dynamic is not None:
+            demo_io.save(dynamic.dataset, target / "demos.npz", force=True)
+            if dynamic.recent:
+                demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
+        self.state.interactions = self.learner.interactions
         write_text(target / "state.json", json.dumps(dataclasses.asdict(self.state)))
         previous = json.loads((root / "latest.json").read_text())["dir"] if (root / "latest.json").exists() else None
         write_text(root / "latest.json", json.dumps({"dir": name}))
@@ -135,9 +155,13 @@ class RunDirectory:
         root = self.out / "checkpoints"
         source = root / json.loads((root / "latest.json").read_text())["dir"]
         self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
-        if self.learner.dynamic is not None:
-            self.learner.dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
+        dynamic = self.learner.dynamic
+        if dynamic is not None:
+            dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
+            recent = source / "recent.npz"
+            dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
         self.state = state_from_dict(json.loads((source / "state.json").read_text()))
+        self.learner.tally.count = self.state.interactions
 
     # --- the end ----------------------------------------------------------------------------
     def finish(self) -> RunResult:
@@ -151,14 +175,13 @@ class RunDirectory:
                 learner.bc.save(tmp)
         if learner.dynamic is not None:
             demo_io.save(learner.dynamic.dataset, out / "demos.npz", force=True)
-        result = run_evaluation(self.config, learner.agent, self.config.final_eval_episodes,
-                                eval_seed(self.config) + 1_000_000)
-        evaluation = result.to_dict()
-        write_text(out / "eval.json", json.dumps(evaluation, indent=1))
+        evaluation = run_evaluation(self.config, learner.agent, self.config.final_eval_episodes,
+                                    final_eval_seed(self.config.seed))
+        write_text(out / "eval.json", json.dumps(evaluation.to_dict(), indent=1))
         plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
         self.save_checkpoint()
         self.tb.close()
-        return RunResult(out, self.state.episode, int(learner.interaction.env_steps.numpy()),
+        return RunResult(out, self.state.episode, int(learner.interaction.env_steps.numpy()), learner.interactions,
                          self.state.stopped_early, self.state.wall_time, evaluation)
 
 
@@ -184,10 +207,10 @@ def train(
     if resume:
         run.restore_checkpoint()
     else:
-        run.evaluate(0)  # the pre-trained policy, before any interaction
-        run.state.next_eval, run.state.next_checkpoint = config.eval_every, config.checkpoint_every
+        run.write_demonstrations(learner.demos)
+        run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
-    train_episodes(learner, run.state, run.on_episode)
+    train_episodes(learner, run.state, run.on_episode, run.evaluate)
     return run.finish()
 
 

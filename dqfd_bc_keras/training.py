@@ -5,6 +5,10 @@
     θ' ← θ every τ updates → dynamic demonstrations after each episode →
     stop at the step budget or the task's early-stopping rule.
 
+Every env step whose transition the learner may train on is an interaction, counted in one
+place (`envs.CountInteractions` on every env of the learner); greedy evaluations happen at
+exactly every `eval_every` interactions, pausing an episode at the grid point if need be.
+
 An episode is one TensorFlow graph call (`Interaction.play`): a `tf.while_loop` acts
 ε-greedily with Q, steps the real Gymnasium env through `tf.numpy_function`, stores the
 transition, and takes the gradient step, so the policy that acts is always the one after
@@ -28,22 +32,27 @@ from . import demos as demo_io
 from .agent import DQfDAgent, make_agent
 from .bc import BCModel, build_bc_model
 from .config import Config
-from .envs import make_task
+from .envs import CountInteractions, Tally, make_task
 from .evaluation import EvalResult, GreedyPolicy, evaluate
+from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed
 
-METRIC_FIELDS = ("episode", "env_step", "return", "plain_return", "length", "goals", "epsilon",
+METRIC_FIELDS = ("episode", "env_step", "interactions", "return", "plain_return", "length", "goals", "epsilon",
                  "loss", "td", "n_step", "expert", "l2", "demo_size", "wall_time")
 
 
 class Interaction(tf.Module):
     """The interaction loop of Algorithm 1 (step 3) for one env, compiled into one graph per episode."""
 
-    def __init__(self, agent: DQfDAgent, env: gym.Env, config: Config) -> None:
+    def __init__(self, agent: DQfDAgent, env: gym.Env, config: Config, record: bool = False) -> None:
+        """`record`: keep the transitions of the running episode (dynamic demonstrations from
+        the agent's own episodes)."""
         super().__init__()
         self.agent, self.env, self.config = agent, env, config
         self.env_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="env_steps")
         self.rng = tf.random.Generator.from_seed(config.seed + 1)
         self.episode = EpisodeStats()
+        self.recorder = demo_io.EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed) \
+            if record else None
         obs_dim = agent.obs_dim
         self.play = tf.function(self._play, input_signature=[
             tf.TensorSpec([obs_dim], tf.float32), tf.TensorSpec([], tf.int64)])
@@ -55,6 +64,15 @@ class Interaction(tf.Module):
         progress = tf.cast(self.env_steps, tf.float32) / (c.epsilon_fraction * c.total_steps)
         return tf.maximum(c.epsilon_end, start - (start - c.epsilon_end) * progress)
 
+    def reset(self, seed: int) -> np.ndarray:
+        """Start an episode (reset seed `seed`); returns s_0."""
+        obs, _ = self.env.reset(seed=seed)
+        self.episode = EpisodeStats()
+        if self.recorder is not None:
+            self.recorder.clear()
+            self.recorder.reset(obs)
+        return obs
+
     def _env_step(self, action: np.ndarray) -> np.ndarray:
         """The Python side of `tf.numpy_function`: step the env, keep the episode's tallies.
 
@@ -63,6 +81,8 @@ class Interaction(tf.Module):
         """
         obs, reward, terminated, truncated, info = self.env.step(int(action))
         self.episode.add(float(reward), info)
+        if self.recorder is not None:
+            self.recorder.step(int(action), obs, reward, terminated, truncated, info)
         return np.append(obs, (reward, terminated, truncated)).astype(np.float32)
 
     def _play(self, obs: tf.Tensor, max_steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
@@ -109,6 +129,8 @@ class TrainingState:
     """Everything of a run that lives in Python; saved with each checkpoint."""
 
     episode: int = 0
+    interactions: int = 0
+    """The learner's tally of interactions, as of the last checkpoint."""
     returns: list[float] = field(default_factory=list)
     best_average: float = -np.inf
     metrics: list[dict] = field(default_factory=list)
@@ -121,18 +143,13 @@ class TrainingState:
     stopped_early: bool = False
 
 
-def episode_seed(config: Config, episode: int, stream: int = 0) -> int:
-    """A reset seed per (run seed, episode, stream): resumed runs replay the same starts."""
-    return int(np.random.SeedSequence([config.seed, stream, episode]).generate_state(1)[0])
-
-
 def demonstrations(config: Config, dataset: demo_io.DemoDataset | None) -> demo_io.DemoDataset | None:
     """Step 1: the given dataset, or `demo_episodes` recorded from the scripted `expert`."""
     if not config.uses_demos:
         return None
     if dataset is not None:
         return dataset
-    return demo_io.record(config.task, config.expert, config.demo_episodes, seed=config.seed * 1000,
+    return demo_io.record(config.task, config.expert, config.demo_episodes, seed=demo_seed(config.seed),
                           timeout=config.timeout, max_steps=config.max_steps)
 
 
@@ -141,7 +158,7 @@ def fit_bc(config: Config, bc: BCModel, data: demo_io.DemoDataset, epochs: int, 
 
     The global seed is set from (run seed, fit index), so a resumed run refits identically.
     """
-    keras.utils.set_random_seed(episode_seed(config, fit_index, stream=3) % 2**31)
+    keras.utils.set_random_seed(episode_seed(config.seed, fit_index, BC_FIT) % 2**31)
     history = bc.fit_demos(data.obs, data.actions, epochs=epochs, batch_size=config.batch_size)
     return float(history.history["accuracy"][-1]) if epochs else float("nan")
 
@@ -177,12 +194,26 @@ def build_learner(
 
 
 class DynamicDemos:
-    """DQfD-BC's dynamic demonstrations (§5): D_demo grows with the agent's best greedy episodes."""
+    """DQfD-BC's dynamic demonstrations (§5): D_demo grows with the agent's best episodes.
+
+    The paper: "when the final cumulative reward for each episode reaches a new high score,
+    transition samples are … inserted into the demonstration dataset". Two readings
+    (`Config.dynamic_demos`): `episodes` inserts the agent's own training episodes since the
+    last update whose return reaches the new best moving average (no extra interaction);
+    `rollouts` plays M fresh greedy episodes on a separate env (ALGORITHM.md §5; each of their
+    steps is an interaction and is counted).
+    """
 
     def __init__(self, config: Config, data: demo_io.DemoDataset, env: gym.Env) -> None:
         self.config, self.env = config, env
         self.episodes = data.episodes()
         self.demo_average = float(np.mean(data.meta.episode_returns))
+        self.recent: list[demo_io.DemoDataset] = []
+        """`episodes` mode: the agent's training episodes since the last update (at most W)."""
+
+    def observe(self, episode: demo_io.DemoDataset) -> None:
+        """A training episode just ended (`episodes` mode)."""
+        self.recent = (self.recent + [episode])[-self.config.dynamic_window:]
 
     @property
     def dataset(self) -> demo_io.DemoDataset:
@@ -199,13 +230,26 @@ class DynamicDemos:
             return True
         return False
 
-    def update(self, agent: DQfDAgent, bc: BCModel, state: TrainingState) -> dict:
-        """Roll out M greedy episodes into D_demo (lowest returns dropped past capacity), refit π_bc."""
+    def new_episodes(self, agent: DQfDAgent, state: TrainingState) -> list[demo_io.DemoDataset]:
+        """The episodes this update inserts: M greedy roll-outs, or the recent training episodes
+        whose return reaches the new best average."""
         c = self.config
-        seeds = [episode_seed(c, state.episode * 100 + i, stream=2) for i in range(c.dynamic_rollouts)]
-        new = demo_io.rollout(self.env, GreedyPolicy.from_model(agent.q_network), seeds, task=c.task,
-                              source="agent", seed=c.seed)
-        self.episodes += new.episodes()
+        if c.dynamic_demos == "rollouts":
+            seeds = [episode_seed(c.seed, state.episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
+            return demo_io.rollout(self.env, GreedyPolicy.from_model(agent.q_network), seeds, task=c.task,
+                                   source="agent", seed=c.seed).episodes()
+        chosen = [e for e in self.recent if e.meta.episode_returns[0] >= state.best_average]
+        self.recent = []
+        return chosen
+
+    def update(self, agent: DQfDAgent, bc: BCModel, state: TrainingState) -> dict | None:
+        """Insert the new episodes into D_demo (lowest returns dropped past capacity) and refit
+        π_bc; None when there is nothing new to insert."""
+        c = self.config
+        new = self.new_episodes(agent, state)
+        if not new:
+            return None
+        self.episodes += new
         self.episodes.sort(key=lambda e: -e.meta.episode_returns[0])  # stable: older first among ties
         while sum(len(e) for e in self.episodes) > c.demo_capacity and len(self.episodes) > 1:
             self.episodes.pop()
@@ -214,8 +258,9 @@ class DynamicDemos:
         accuracy = fit_bc(c, bc, data, c.bc_refit_epochs, fit_index=state.bc_fits)
         agent.set_demos(data.obs, data.actions, data.rewards, data.next_obs, data.terminated, data.truncated)
         agent.refresh_expert_targets()
-        return {"episode": state.episode, "env_step": 0, "moving_average": state.best_average,
-                "new_returns": new.meta.episode_returns, "demo_transitions": len(data),
+        return {"episode": state.episode, "env_step": 0, "interactions": 0, "moving_average": state.best_average,
+                "mode": c.dynamic_demos, "new_returns": [e.meta.episode_returns[0] for e in new],
+                "new_transitions": sum(len(e) for e in new), "demo_transitions": len(data),
                 "demo_episodes": len(self.episodes), "bc_accuracy": accuracy}
 
 
@@ -234,13 +279,21 @@ def early_stop(config: Config, returns: list[float]) -> bool:
 
 @dataclass
 class Learner:
-    """Everything a run trains: the agent, π_bc, the interaction loop and D_demo's episodes."""
+    """Everything a run trains: the agent, π_bc, the interaction loop, D_demo's episodes and
+    the tally of interactions its data came from."""
 
     config: Config
     agent: DQfDAgent
     bc: BCModel | None
     interaction: Interaction
     dynamic: DynamicDemos | None
+    tally: Tally
+    demos: demo_io.DemoDataset | None
+    """D_demo as given, before any interaction (None for plain DQN)."""
+
+    @property
+    def interactions(self) -> int:
+        return self.tally.count
 
     def checkpoint(self) -> tf.train.Checkpoint:
         extra = {"bc_optimizer": self.bc.optimizer} if self.bc is not None else {}
@@ -251,54 +304,83 @@ class Learner:
 def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: bool = True) -> tuple[Learner, dict]:
     """Steps 1–2: demonstrations, π_bc, the pre-trained agent; returns the learner and
     pre-training's losses. `fresh=False` skips the fits: a resume restores their results."""
-    env = make_task(config.task, timeout=config.timeout, max_steps=config.max_steps)
+    tally = Tally()
+    env = CountInteractions(make_task(config.task, timeout=config.timeout, max_steps=config.max_steps), tally)
     data = demonstrations(config, dataset)
     agent, bc = build_learner(config, data, env, fit=fresh)
     pretrain = fresh and data is not None and config.pretrain_steps > 0
     losses = agent.pretrain(config.pretrain_steps) if pretrain else {}
     agent.reset_metrics()
-    rollout_env = make_task(config.task, timeout=config.timeout, max_steps=config.max_steps)
-    dynamic = DynamicDemos(config, data, rollout_env) if bc is not None and config.dynamic_demos else None
-    return Learner(config, agent, bc, Interaction(agent, env, config), dynamic), losses
+    dynamic = None
+    if bc is not None and config.dynamic_demos != "off":
+        rollout_env = CountInteractions(make_task(config.task, timeout=config.timeout, max_steps=config.max_steps),
+                                        tally)
+        dynamic = DynamicDemos(config, data, rollout_env)
+    record = dynamic is not None and config.dynamic_demos == "episodes"
+    return Learner(config, agent, bc, Interaction(agent, env, config, record), dynamic, tally, data), losses
+
+
+Evaluate = Callable[[list[int]], None]
+"""Evaluates the current Q-network once and logs it at each of the given grid points."""
+
+
+def evaluate_due(learner: Learner, state: TrainingState, on_eval: Evaluate) -> None:
+    """Evaluations at every grid point k·E the tally has reached. The network is the one that
+    acted at each of them: it learns only inside `Interaction.play`, which stops at the next
+    point, so several points crossed at once (demo roll-outs) share one evaluation."""
+    due = []
+    while state.next_eval <= learner.interactions:
+        due.append(state.next_eval)
+        state.next_eval += learner.config.eval_every
+    if due:
+        on_eval(due)
 
 
 def train_episodes(
-    learner: Learner, state: TrainingState, on_episode: Callable[[Learner, TrainingState, dict], None]
+    learner: Learner, state: TrainingState, on_episode: Callable[[Learner, TrainingState, dict], None],
+    on_eval: Evaluate,
 ) -> TrainingState:
-    """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs, evaluates and saves."""
+    """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs and saves,
+    `on_eval` evaluates at exactly every `eval_every` interactions."""
     c, agent, interaction = learner.config, learner.agent, learner.interaction
-    env = interaction.env
-    while int(interaction.env_steps.numpy()) < c.total_steps and not state.stopped_early:
+    steps = lambda: int(interaction.env_steps.numpy())  # noqa: E731
+    while steps() < c.total_steps and not state.stopped_early:
         started = time.perf_counter()
-        obs, _ = env.reset(seed=episode_seed(c, state.episode))
-        interaction.episode = EpisodeStats()
-        budget = c.total_steps - int(interaction.env_steps.numpy())
-        interaction.play(tf.constant(obs, tf.float32), tf.constant(budget, tf.int64))
+        obs, done = interaction.reset(episode_seed(c.seed, state.episode)), False
+        while not done and steps() < c.total_steps:
+            evaluate_due(learner, state, on_eval)
+            budget = min(c.total_steps - steps(), state.next_eval - learner.interactions)
+            obs, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(budget, tf.int64))
+            obs, done = obs.numpy(), bool(done)
         stats = interaction.episode
         losses = {name: float(t.result()) for name, t in agent.trackers.items()}
         agent.reset_metrics()
         state.returns.append(stats.ret)
         state.episode += 1
         state.wall_time += time.perf_counter() - started
-        row = {"episode": state.episode, "env_step": int(interaction.env_steps.numpy()), "return": stats.ret,
-               "plain_return": stats.plain, "length": stats.length, "goals": stats.goals,
+        row = {"episode": state.episode, "env_step": steps(), "interactions": learner.interactions,
+               "return": stats.ret, "plain_return": stats.plain, "length": stats.length, "goals": stats.goals,
                "epsilon": float(interaction.epsilon()), **losses,
                "demo_size": int(agent.replay.demo_size.numpy()), "wall_time": state.wall_time}
         state.metrics.append(row)
-        if learner.dynamic is not None and learner.dynamic.due(state):
-            started = time.perf_counter()
-            update = learner.dynamic.update(agent, learner.bc, state)
-            update["env_step"] = row["env_step"]
-            state.demo_updates.append(update)
-            state.wall_time += time.perf_counter() - started
+        if learner.dynamic is not None:
+            if interaction.recorder is not None and done:
+                learner.dynamic.observe(interaction.recorder.dataset())
+            if learner.dynamic.due(state):
+                started = time.perf_counter()
+                update = learner.dynamic.update(agent, learner.bc, state)
+                if update is not None:
+                    update["env_step"], update["interactions"] = row["env_step"], learner.interactions
+                    state.demo_updates.append(update)
+                state.wall_time += time.perf_counter() - started
         state.stopped_early = early_stop(c, state.returns)
         on_episode(learner, state, row)
+    evaluate_due(learner, state, on_eval)
+    if state.stopped_early and state.evals[-1]["interactions"] <= learner.interactions:
+        # It learns nothing after the stop: the next grid point sees the final network.
+        point, state.next_eval = state.next_eval, state.next_eval + c.eval_every
+        on_eval([point])
     return state
-
-
-def eval_seed(config: Config) -> int:
-    """Evaluation episodes use their own seeds, apart from training's."""
-    return 10_000 + config.seed * 1000
 
 
 def state_from_dict(fields: dict) -> TrainingState:

@@ -27,7 +27,7 @@ def bc_models(demos) -> dict:
     keras.utils.set_random_seed(0)
     models = {}
     for loss in ("bayes", "ce"):
-        config = Config(expert_loss=loss)
+        config = Config.for_task("cartpole", expert_loss=loss)
         models[loss] = build_bc_model(config, 4, 2, demos.obs_scale())
         models[loss].fit_demos(demos.obs, demos.actions, epochs=config.bc_epochs)
     models["bc_margin"] = models["ce"]

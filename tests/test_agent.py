@@ -18,7 +18,7 @@ EXPERT_LOSSES = ("margin", "bc_margin", "ce", "bayes")
 
 def agent_for(loss, demos, bc_models, **overrides):
     keras.utils.set_random_seed(0)
-    config = Config(expert_loss=loss, **overrides).validate()
+    config = Config.for_task("cartpole", expert_loss=loss, **overrides)
     return make_agent(config, demos, bc_models.get(loss))
 
 
@@ -31,14 +31,14 @@ def test_pretraining_imitates_the_expert_on_held_out_states(loss, demos, held_ou
     """Within the default pre-training budget k = 1,000 (≈ 0.5 s); measured: ≥ 0.90 already
     after 200–600 updates, depending on the loss and the seed."""
     agent = agent_for(loss, demos, bc_models)
-    agent.pretrain(Config().pretrain_steps)
+    agent.pretrain(Config.for_task("cartpole").pretrain_steps)
     assert agreement(agent, held_out) >= 0.90
 
 
 def test_without_an_expert_loss_pretraining_does_not_imitate(demos, held_out, bc_models):
     """The control: TD alone on expert-only data cannot tell the actions apart."""
     agent = agent_for("none", demos, bc_models)
-    agent.pretrain(Config().pretrain_steps)
+    agent.pretrain(Config.for_task("cartpole").pretrain_steps)
     assert agreement(agent, held_out) < 0.85
 
 
@@ -180,7 +180,7 @@ def test_checkpoint_restores_optimizer_and_replay_for_an_identical_continuation(
 ])
 def test_incompatible_settings_fail_early_naming_the_value(change, match):
     with pytest.raises(ConfigError, match=match):
-        dataclasses.replace(Config(), **change).validate()
+        dataclasses.replace(Config.for_task("cartpole"), **change)
 
 
 def test_batch_larger_than_the_demonstrations_is_refused(demos, bc_models):
@@ -191,5 +191,5 @@ def test_batch_larger_than_the_demonstrations_is_refused(demos, bc_models):
 
 def test_a_bc_loss_without_a_bc_model_is_refused(demos):
     with pytest.raises(ConfigError, match="expert_loss='ce' needs a fitted BC model"):
-        make_agent(Config(expert_loss="ce"), demos, None)
-    assert isinstance(make_agent(Config(expert_loss="margin"), demos, None), DQfDAgent)
+        make_agent(Config.for_task("cartpole", expert_loss="ce"), demos, None)
+    assert isinstance(make_agent(Config.for_task("cartpole", expert_loss="margin"), demos, None), DQfDAgent)

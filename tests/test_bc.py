@@ -12,7 +12,7 @@ from dqfd_bc_keras.config import Config
 
 def test_map_model_has_dropout_and_prior_mle_has_neither(bc_models):
     bayes, ce = bc_models["bayes"], bc_models["ce"]
-    assert bayes.map_fit and bayes.dropout == Config().bc_dropout > 0
+    assert bayes.map_fit and bayes.dropout == Config.for_task("cartpole").bc_dropout > 0
     assert not ce.map_fit and ce.dropout == 0.0
     assert float(ce.prior_loss()) == 0.0
     # ‖w‖²/(2 s² N) by hand, N = 2,500 demonstration transitions
@@ -86,7 +86,7 @@ def test_save_load_round_trip_in_safe_mode(bc_models, held_out, tmp_path, loss):
 
 
 def test_warm_started_refit_keeps_the_fit(bc_models, demos, held_out):
-    model = build_bc_model(Config(expert_loss="ce"), 4, 2, demos.obs_scale())
+    model = build_bc_model(Config.for_task("cartpole", expert_loss="ce"), 4, 2, demos.obs_scale())
     model.set_weights(bc_models["ce"].get_weights())
     history = model.fit_demos(held_out.obs, held_out.actions, epochs=1)
     assert history.history["accuracy"][0] >= 0.9

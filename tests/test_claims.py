@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats as sps
 from dqfd_bc_keras.experiments import claims as analysis, report as results
-from dqfd_bc_keras.experiments.claims import ArmRuns
+from dqfd_bc_keras.experiments.claims import ArmRuns, Setting
 from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
+from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
 from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.demos import record, save
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.runs import EVAL_FIELDS
 from dqfd_bc_keras.training import METRIC_FIELDS
@@ -94,15 +95,32 @@ def test_per_run_metrics_by_hand(tmp_path):
     assert analysis.steps_to_threshold(solver) == 10_000  # 480 ≥ 475 at the third evaluation
     unfinished = make_run(tmp_path, cartpole_rows(UNFINISHED), [20.0, 400.0], **CP)
     assert analysis.episodes_to_solve(unfinished) is None and not analysis.finished(unfinished)
-    assert analysis.PER_RUN["episodes_to_solve"](unfinished) == 21  # censored: its 20 episodes + 1
+    assert analysis.PER_RUN["episodes_to_solve"](unfinished) == np.inf  # censored
     assert analysis.PER_RUN["unfinished"](unfinished) == 1.0
-    assert analysis.collapses(unfinished) == 2
+    assert analysis.collapses(unfinished) == 2 and analysis.PER_RUN["collapsed"](unfinished) == 1.0
     assert analysis.steps_to_threshold(unfinished) is None
     goals = make_run(tmp_path, goal_rows([1] * 30 + [3] * 10), [-200.0, -110.0], **MC)
     assert analysis.PER_RUN["goals_first30"](goals) == 1.0
     assert analysis.PER_RUN["goals_all"](goals) == pytest.approx(60 / 40)
     assert analysis.steps_to_threshold(goals) == 5000  # −110 reaches MountainCar-v0's threshold
     assert analysis.episodes_to_solve(goals) is None  # no early-stopping rule on MountainCar
+
+
+def test_a_censored_run_ranks_after_every_finished_run(tmp_path):
+    """A run that never solved in 20 episodes ranks after one that solved at episode 30: its own
+    episode count + 1 (21) would have ranked it first."""
+    censored = make_run(tmp_path, cartpole_rows(UNFINISHED), expert_loss="bayes", **CP)
+    slow = make_run(tmp_path, cartpole_rows([50] * 20 + [200] * 10), expert_loss="ce", **CP)
+    values = [analysis.PER_RUN["episodes_to_solve"](r) for r in (censored, slow)]
+    assert values == [np.inf, 30.0] and list(sps.rankdata(values)) == [2.0, 1.0]
+    never = arm([make_run(tmp_path, cartpole_rows(UNFINISHED), expert_loss="bayes", seed=s, **CP) for s in range(3)])
+    slower = arm([make_run(tmp_path, cartpole_rows([50] * (20 + s) + [200] * 10), expert_loss="ce", seed=s, **CP)
+                  for s in range(3)])
+    comparison = analysis.compare("episodes_to_solve", never, slower)
+    assert comparison.diff is None and comparison.tost is None and comparison.interval() == "—"  # no mean over inf
+    assert (comparison.bayes.median, comparison.bayes.censored, comparison.ce.median) == (np.inf, 3, 31.0)
+    u, p = mann_whitney(never.values("episodes_to_solve"), slower.values("episodes_to_solve"))
+    assert u == 9.0 and comparison.p == p  # every censored run ranks after every finished one: U = 3 · 3
 
 
 def test_early_stop_rule_follows_the_config(tmp_path):
@@ -131,75 +149,208 @@ def cartpole_arm(tmp_path, loss: str, lengths: list[list[int]]) -> ArmRuns:
     return arm([make_run(tmp_path, cartpole_rows(n), expert_loss=loss, seed=s, **CP) for s, n in enumerate(lengths)])
 
 
-def test_c1_verdicts_on_clear_data(tmp_path):
+def return_arm(tmp_path, loss: str, returns, **fields) -> ArmRuns:
+    """One single-episode run per seed whose mean training return is the given value."""
+    return arm([make_run(tmp_path, [{"return": r, "plain_return": r, "length": 1, "goals": 0}], expert_loss=loss,
+                         seed=s, **fields) for s, r in enumerate(returns)])
+
+
+SPREAD = np.arange(1.0, 11.0)
+"""10 seeds 1..10: for k · SPREAD against itself the bootstrap puts Δ's 90% CI at ±2.1 k, its 95% CI at ±2.5 k."""
+
+
+@pytest.mark.parametrize("judge, fields, margin", [
+    (analysis.judge_c1, CP, 10.0), (analysis.judge_c3, {"task": "cartpole", "timeout": "bootstrap"}, 25.0)])
+@pytest.mark.parametrize("spread, shift, expected", [
+    (0.005, 0.5, "holds"),  # half a margin apart, seeds wholly separated: significant, yet inside the margin
+    (0.44, 1.0, "inconclusive"),  # Δ = margin: the CI straddles it
+    (0.005, 2.0, "does not hold"),  # twice the margin apart: wholly outside it
+    (1.0, 0.0, "inconclusive"),  # equal means and Mann–Whitney p = 1, but too spread to show sameness
+])
+def test_no_difference_is_judged_by_tost(tmp_path, judge, fields, margin, spread, shift, expected):
+    """Spread and shift in units of the margin (±5% of the limit)."""
+    ce = 100.0 + spread * margin * SPREAD
+    result = judge(return_arm(tmp_path / "b", "bayes", ce + shift * margin, **fields),
+                   return_arm(tmp_path / "c", "ce", ce, **fields))
+    assert result.verdict == expected
+    returns = result.comparisons[0]
+    assert returns.metric == "mean_train_return"
+    assert returns.tost == pytest.approx(tost_ci(ce + shift * margin, ce, analysis.ALPHA))
+    assert (returns.p < analysis.ALPHA) is (spread < 0.1)
+    assert result.sd == pytest.approx(np.std(ce, ddof=1))
+    assert result.power == pytest.approx(analysis.rule_power(result.sd, margin, 10))
+
+
+@pytest.mark.parametrize("judge, fields, margin", [
+    (analysis.judge_c1, CP, 10.0), (analysis.judge_c3, {"task": "cartpole", "timeout": "bootstrap"}, 25.0)])
+def test_tost_reads_the_90_not_the_95_percent_ci(tmp_path, judge, fields, margin):
+    """At 0.44 margins of spread Δ's 95% CI reaches ±1.1 margins, its 90% CI ±0.92: equivalent."""
+    ce = 100.0 + 0.44 * margin * SPREAD
+    result = judge(return_arm(tmp_path / "b", "bayes", ce, **fields), return_arm(tmp_path / "c", "ce", ce, **fields))
+    returns = result.comparisons[0]
+    assert returns.diff[0] < -margin < returns.tost[0] and returns.tost[1] < margin < returns.diff[1]
+    assert result.verdict == "holds"
+
+
+def test_c1_reports_episodes_to_solve_beside_the_returns(tmp_path):
     solving = [[100 + i] + [200] * 10 for i in range(4)]  # mean returns 190.9 … 191.2: within ±10
-    verdict, comparisons = analysis.judge_c1(cartpole_arm(tmp_path, "bayes", solving),
-                                             cartpole_arm(tmp_path, "ce", solving[::-1]))
-    assert verdict == "holds"
-    assert [c.metric for c in comparisons] == ["episodes_to_solve", "mean_train_return"]
+    result = analysis.judge_c1(cartpole_arm(tmp_path, "bayes", solving), cartpole_arm(tmp_path, "ce", solving[::-1]))
+    assert result.verdict == "holds"
+    assert [c.metric for c in result.comparisons] == ["mean_train_return", "episodes_to_solve"]
+    assert result.comparisons[1].bayes.median == 11.0
     failing = [[50] * 20] * 4
-    verdict, comparisons = analysis.judge_c1(cartpole_arm(tmp_path, "bayes", solving),
-                                             cartpole_arm(tmp_path, "ce", failing))
-    assert verdict == "does not hold"
-    assert comparisons[1].diff[0] > 100 and comparisons[0].p < analysis.ALPHA  # 11 episodes against 21
-    mixed = analysis.judge_c1(cartpole_arm(tmp_path, "bayes", [solving[0], failing[0], solving[1]]),
-                              cartpole_arm(tmp_path, "ce", [failing[0], solving[2], failing[0]]))[0]
-    assert mixed == "inconclusive"
+    result = analysis.judge_c1(cartpole_arm(tmp_path, "bayes", solving), cartpole_arm(tmp_path, "ce", failing))
+    assert result.verdict == "does not hold" and result.comparisons[0].tost[0] > 100
+    assert result.comparisons[1].p < analysis.ALPHA  # 11 episodes against never (∞)
+    # fewer episodes to solve, significantly, yet the same returns: C1 is judged on returns alone
+    quick = [[200] * 10 + [100] * 10 + [200] * 3] * 4
+    late = [[100] * 10 + [200] * 13] * 4
+    result = analysis.judge_c1(cartpole_arm(tmp_path, "bayes", quick), cartpole_arm(tmp_path, "ce", late))
+    assert result.verdict == "holds" and result.comparisons[1].bayes.median < result.comparisons[1].ce.median
 
 
-def goals_arm(tmp_path, loss: str, first30: list[float]) -> ArmRuns:
+def goals_arm(tmp_path, loss: str, first30) -> ArmRuns:
     return arm([make_run(tmp_path, goal_rows([g] * 30), expert_loss=loss, seed=s, **MC)
                 for s, g in enumerate(first30)])
 
 
-def test_c4_verdicts_on_clear_data(tmp_path):
-    high, low = goals_arm(tmp_path, "bayes", [5, 6, 7, 8]), goals_arm(tmp_path, "ce", [1, 2, 2, 3])
-    assert analysis.judge_c4(high, low)[0] == "holds"
-    assert analysis.judge_c4(goals_arm(tmp_path, "bayes", [1, 2, 2, 3]), goals_arm(tmp_path, "ce", [5, 6, 7, 8]))[0] \
-        == "does not hold"
-    same = analysis.judge_c4(goals_arm(tmp_path, "bayes", [2, 2, 2, 2]), goals_arm(tmp_path, "ce", [2, 2, 2, 2]))
-    assert same[0] == "does not hold" and same[1][0].diff == (0.0, 0.0)
+@pytest.mark.parametrize("bayes, ce, significant, expected", [
+    (1.5 + 0.01 * SPREAD, 1.0 + 0.01 * SPREAD, True, "holds"),  # Δ = 0.5: its 90% CI wholly above +0.25
+    (1.06 + 0.005 * SPREAD, 1.0 + 0.005 * SPREAD, True, "does not hold"),  # +0.06: significant, shown < +0.25
+    (1.0 + 0.1 * SPREAD, 0.75 + 0.1 * SPREAD, False, "inconclusive"),  # Δ = 0.25: the CI straddles the margin
+    (1.0 + 0.01 * SPREAD, 1.5 + 0.01 * SPREAD, True, "does not hold"),  # ce reaches the flag more often
+    (np.full(4, 2.0), np.full(4, 2.0), False, "does not hold"),
+])
+def test_markedly_more_has_to_clear_the_margin(tmp_path, bayes, ce, significant, expected):
+    result = analysis.judge_c4(goals_arm(tmp_path / "b", "bayes", bayes), goals_arm(tmp_path / "c", "ce", ce))
+    assert result.verdict == expected
+    early = result.comparisons[0]
+    assert [c.metric for c in result.comparisons] == ["goals_first30", "goals_all"]
+    assert (early.p < analysis.ALPHA) is significant
+    assert result.power == pytest.approx(analysis.rule_power(result.sd, analysis.GOALS_MARGIN, len(bayes), True))
+
+
+PAPER_FIELDS = {**CP, "early_stop_window": 0, "total_steps": analysis.PAPER_READING_STEPS}
+
+
+def c2_arm(tmp_path, loss: str, lengths: list[list[int]], **fields) -> ArmRuns:
+    return arm([make_run(tmp_path / f"{loss}{s}", cartpole_rows(n), expert_loss=loss, seed=s, **{**CP, **fields})
+                for s, n in enumerate(lengths)])
+
+
+@pytest.mark.parametrize("fields", [{}, PAPER_FIELDS], ids=["today", "paper"])
+def test_c2_without_perturbations_is_not_reproduced(tmp_path, fields):
+    steady = [[50] * 5 + [200] * 15] * 4  # peaks and never falls back
+    result = analysis.judge_c2(c2_arm(tmp_path, "bayes", steady, **fields), c2_arm(tmp_path, "ce", steady, **fields))
+    assert result.verdict == "not reproduced"
+    assert result.comparisons[0].metric == ("collapsed" if fields else "unfinished")
+
+
+def test_c2_today_holds_on_equal_unfinished_shares_with_collapses_in_both(tmp_path):
+    result = analysis.judge_c2(c2_arm(tmp_path, "bayes", [SOLVER] * 4), c2_arm(tmp_path, "ce", [SOLVER] * 4))
+    assert result.verdict == "holds"  # every run finished after one collapse: shares 0 and 0
+    unfinished, falls = result.comparisons
+    assert (unfinished.metric, unfinished.tost, unfinished.p) == ("unfinished", (0.0, 0.0), 1.0)
+    assert falls.bayes.mean == 1.0
+
+
+def test_c2_paper_reading_is_selected_and_judged_on_collapses(tmp_path):
+    """Without early stop every run is unfinished: C2 compares the share of runs with a collapse."""
+    falling, steady = [[200] * 5 + [60] + [200] * 300] * 4, [[200] * 306] * 4
+    runs = [r for a in (c2_arm(tmp_path / "p", "bayes", falling, **PAPER_FIELDS),
+                        c2_arm(tmp_path / "p", "ce", falling, **PAPER_FIELDS),
+                        c2_arm(tmp_path / "t", "bayes", [SOLVER] * 2), c2_arm(tmp_path / "t", "ce", [SOLVER] * 2))
+            for r in a.runs]
+    arms = analysis.group_arms(runs)
+    c1_200, today, paper = analysis.CLAIMS[0].settings[1], *analysis.CLAIMS[1].settings
+    assert paper.reading.startswith("the paper's reading") and today.reading.startswith("today's reading")
+    [(bayes, ce)] = paper.pairs(arms)
+    assert (bayes.config["early_stop_window"], bayes.config["total_steps"]) == (0, 60_000)
+    assert ce.config["expert_loss"] == "ce"
+    [(bayes_today, _)] = today.pairs(arms)
+    assert bayes_today.config["early_stop_window"] == 10
+    assert [p[0] for p in c1_200.pairs(arms)] == [bayes_today, bayes]  # the preset pair is C1's reference
+    result = analysis.judge(analysis.CLAIMS[1], bayes, ce)
+    collapsed, falls = result.comparisons
+    assert result.verdict == "holds" and collapsed.metric == "collapsed" and collapsed.tost == (0.0, 0.0)
+    assert bayes.values("unfinished").tolist() == [1.0] * 4  # unfinished by construction
+    assert falls.bayes.mean == 1.0
+    never = c2_arm(tmp_path / "n", "ce", steady, **PAPER_FIELDS)
+    assert analysis.judge_c2(bayes, never).verdict == "does not hold"  # shares 1 against 0
+    assert analysis.judge_c2(c2_arm(tmp_path / "m", "bayes", falling[:2] + steady[:2], **PAPER_FIELDS),
+                             never).verdict == "inconclusive"  # one arm never collapses, shares ½ and 0
 
 
 def test_c2_and_n_below_two(suite):
     arms = analysis.group_arms(load_runs(suite))
     bayes, ce = analysis.bayes_ce_pairs(arms, "cartpole-200", "naive")[0]
-    verdict, (unfinished, falls) = analysis.judge_c2(bayes, ce)
-    assert verdict == "holds"  # 1 of 3 unfinished in each arm, collapses in both
+    result = analysis.judge_c2(bayes, ce)
+    unfinished, falls = result.comparisons
+    assert result.verdict == "inconclusive"  # 1 of 3 unfinished in each arm: too few seeds to show equal shares
     assert unfinished.bayes.mean == pytest.approx(1 / 3) and unfinished.p == 1.0
+    assert not analysis.equivalent(unfinished.tost, analysis.SHARE_MARGIN)
     assert falls.bayes.mean == pytest.approx((1 + 2 + 1) / 3)
     lone = ArmRuns(bayes.config, bayes.runs[:1], "bayes")
-    assert analysis.judge(analysis.CLAIMS[1], lone, ce)[0] == "inconclusive (n < 2)"
+    assert analysis.judge(analysis.CLAIMS[1], lone, ce).verdict == "inconclusive (n < 2)"
+    assert analysis.judge(analysis.CLAIMS[1], bayes, None).verdict == "not run (no ce arm)"
 
 
-def test_demonstrator_return(tmp_path):
-    run = make_run(tmp_path / "run", cartpole_rows(SOLVER), expert_loss="bayes", seed=1, **CP)
-    recorded = record("cartpole-200", "imperfect", 5, seed=1000, timeout="naive")
-    assert analysis.demonstrator_return(run) == pytest.approx(np.mean(recorded.meta.plain_returns))
-    strong = record("cartpole-200", "strong", 2, timeout="naive")
-    save(strong, tmp_path / "run" / "demos.npz")
-    assert analysis.demonstrator_return(run) == pytest.approx(200.0)  # D_demo as saved
-    (tmp_path / "run" / "dynamic_demos.json").write_text("[]")  # D_demo grew with the agent's own episodes
-    assert analysis.demonstrator_return(run) == pytest.approx(np.mean(recorded.meta.plain_returns))
-    assert analysis.demonstrator_return(make_run(tmp_path, cartpole_rows([30]), expert_loss="none", **CP)) is None
+def test_rules_state_the_constants():
+    rules = {c.id: c.rule for c in analysis.CLAIMS}
+    assert all("90% CI" in rule and "TOST_LEVEL" not in rule and "_MARGIN" not in rule for rule in rules.values())
+    assert "±0.05 × limit" in rules["C1"] and "episodes_to_solve is reported, not judged" in rules["C1"]
+    assert "not reproduced: no run of either arm collapses" in rules["C2"] and "±0.2" in rules["C2"]
+    assert "above +0.25 and Mann–Whitney p < 0.05" in rules["C4"] and "below +0.25" in rules["C4"]
+
+
+def test_planned_seeds():
+    """Seeds per arm n = ⌈2 (z_0.95 + z_0.90)² sd² / margin²⌉ (z_0.80 for C4's one bound), at least 10."""
+    settings = {(c.id, s.name) for c in analysis.CLAIMS for s in c.settings}
+    assert set(analysis.PLANNED_SEEDS) == settings
+    plans = {key: (plan.sd, plan.margin, plan.seeds) for key, plan in analysis.PLANNED_SEEDS.items()}
+    today, paper = (s.name for s in analysis.CLAIMS[1].settings)
+    assert plans[("C1", "cartpole/naive")] == (pytest.approx(36.13, abs=0.01), 25.0, 36)  # 17.128 · 36.13² / 25²
+    assert plans[("C1", "cartpole-200/naive")] == (pytest.approx(11.73, abs=0.01), 10.0, 24)  # 17.128 · 1.3755
+    assert plans[("C2", today)] == (pytest.approx(0.4), 0.2, 69)  # 17.128 · 4 = 68.51
+    assert plans[("C2", paper)] == (0.5, 0.2, 108)  # 17.128 · 6.25 = 107.05
+    assert plans[("C3", "cartpole/bootstrap")] == (pytest.approx(30.21, abs=0.01), 25.0, 26)  # 25.01
+    assert plans[("C4", "mountaincar-goals/*")] == (pytest.approx(0.0767, abs=1e-4), 0.25, 10)  # 12.37 · 0.094 → 2
+    assert analysis.planned_seeds("C2", analysis.CLAIMS[1].settings[1]) == analysis.planned_seeds("C2", paper) == 108
+    with pytest.raises(analysis.ConfigError, match="no planned seeds for claim 'C2' on setting 'cartpole/naive'"):
+        analysis.planned_seeds("C2", Setting("cartpole", "naive"))
+
+
+def claim_rows(text: str) -> list[list[str]]:
+    """The claims table's rows as cells (the sensitivity table has 6 columns, this one 8)."""
+    rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| C")]
+    return [[cell.strip() for cell in row] for row in rows if len(row) == 8]
 
 
 def test_report_writes_markdown_and_figures(suite, tmp_path):
     out = tmp_path / "docs" / "RESULTS.md"
     text = results.report(suite, out, tmp_path / "docs" / "figures")
     assert out.read_text() == text
+    claims = claim_rows(text)
+    assert [(r[0], r[1].split("<br>")[0]) for r in claims] == [
+        ("C1", "cartpole/naive"), ("C1", "cartpole-200/naive"), ("C2", "cartpole-200/naive early_stop_window=10"),
+        ("C2", "cartpole-200/naive early_stop_window=0 total_steps=60000"), ("C3", "cartpole/bootstrap"),
+        ("C4", "mountaincar-goals/*")]
+    assert [r[-1] for r in claims] == ["not run", "**inconclusive**", "**inconclusive**", "not run", "not run",
+                                       "**holds**"]
+    assert "today's reading" in claims[2][1] and "the paper's reading" in claims[3][1]
+    assert "Fisher exact p = 1" in claims[2][5] and claims[2][6].startswith("3, 3 · sd ")
+    assert "p = 0.0286" in claims[5][5]  # 4 vs 4 separated: exact p = 2/70
+    assert "(90%: " in claims[5][4] and claims[5][6].startswith("4, 4 · sd ") and "power 1.00" in claims[5][6]
+    assert "episodes_to_solve: bayes median 17.00 [17.00, ∞] (1 of 3 censored)" in claims[1][3]
+    assert "Seeds planned for C1 on cartpole/naive: sd 36.1 of `mean_train_return`" in text
+    assert ("- C2 (cartpole-200/naive early_stop_window=10; cartpole-200/naive early_stop_window=0 "
+            f"total_steps=60000): {analysis.CLAIMS[1].rule}") in text
     rows = [line for line in text.splitlines() if line.startswith("| C")]
-    claims = [r for r in rows if r.split("|")[2].strip() in ("cartpole/naive", "cartpole/bootstrap")
-              or "(n = " in r]
-    assert [r.split("|")[1].strip() for r in claims] == ["C1", "C1", "C2", "C3", "C4"]
-    assert "not run" in claims[0] and "not run" in claims[3]  # no cartpole runs
-    assert "**holds**" in claims[2] and "Fisher exact p = 1" in claims[2]
-    assert "**holds**" in claims[4] and "p = 0.0286" in claims[4]  # 4 vs 4 separated: exact p = 2/70
     sensitivity = [r for r in rows if "sigma0_sq=0.05" in r]
     assert len(sensitivity) == 1 and sensitivity[0].endswith("| does not hold | yes |")
     assert "total training wall time 20.0 min" in text
     assert analysis.REGENERATE in text
-    assert "| cartpole-200/naive | none | 2 | — | 25.0 [25.0, 25.0] (IQM 25.0) |" in text
+    assert "| cartpole-200/naive | none | 2 | — | 0 | — | 25.0 [25.0, 25.0] (IQM 25.0) |" in text
     assert "| 500.0 [500.0, 500.0] (IQM 500.0) | " in text and "10,000 (3/3)" in text
     for setting in ("cartpole-200-naive", "mountaincar-goals-bootstrap"):
         for kind in ("curves", "cases"):
@@ -210,9 +361,9 @@ def test_report_writes_markdown_and_figures(suite, tmp_path):
 
 def test_report_on_an_empty_suite_says_not_run(tmp_path):
     text = results.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
-    rows = [line for line in text.splitlines() if line.startswith("| C")]
-    assert [r.split("|")[1].strip() for r in rows] == ["C1", "C1", "C2", "C3", "C4"]
-    assert all(r.endswith("| not run |") for r in rows)
+    rows = claim_rows(text)
+    assert [r[0] for r in rows] == ["C1", "C1", "C2", "C2", "C3", "C4"]
+    assert all(r[-1] == "not run" for r in rows)
     assert "0 complete runs" in text and not (tmp_path / "figures").exists()
 
 

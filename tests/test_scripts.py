@@ -50,8 +50,10 @@ def quick_runs(tmp_path_factory):
 def test_quick_training_writes_a_complete_run(quick_runs, loss):
     code, out, err, run_dir = quick_runs[loss]
     assert code == 0, err
-    assert "greedy evaluation on CartPole-v1, 2 episodes:" in out
+    assert "cartpole (CartPole-v1), q policy, 2 greedy episodes" in out and "interactions in all" in out
     expected = {"config.json", "metrics.csv", "evals.csv", "q_network.keras", "eval.json", "learning_curve.png", "tb"}
+    if loss != "none":
+        expected.add("demonstrations.json")
     if loss != "margin" and loss != "none":
         expected |= {"bc_model.keras", "demos.npz"}
     assert expected <= {p.name for p in run_dir.iterdir()}

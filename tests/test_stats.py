@@ -4,10 +4,16 @@ import math
 
 import numpy as np
 import pytest
-from dqfd_bc_keras.experiments.stats import (Summary, bootstrap_ci, bootstrap_diff_ci, equivalent, excludes_zero, fisher_exact,
-                                 iqm, mann_whitney)
+from dqfd_bc_keras.experiments.stats import (CensoredSummary, Summary, beyond, bootstrap_ci, bootstrap_diff_ci,
+                                            bound_power, equivalence_power, equivalent, fisher_exact, iqm, mann_whitney,
+                                            pooled_sd, sd_from_ci, seeds_for_bound, seeds_for_equivalence, tost_ci)
 
 SAMPLE = np.arange(1.0, 11.0)  # 1..10: mean 5.5, population std √8.25
+Z95, Z90, Z80 = 1.6448536, 1.2815516, 0.8416212  # z_0.95, z_0.90, z_0.80 from a normal table
+
+
+def phi(x: float) -> float:
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
 
 
 def test_iqm_is_the_mean_of_the_middle_half():
@@ -109,9 +115,83 @@ def test_equivalent_means_the_whole_ci_is_inside_the_margin(ci, margin, expected
     assert equivalent(ci, margin) is expected
 
 
-def test_excludes_zero():
-    assert excludes_zero((0.1, 2.0)) and excludes_zero((-2.0, -0.1))
-    assert not excludes_zero((-0.1, 2.0)) and not excludes_zero((0.0, 1.0))
+@pytest.mark.parametrize("ci, expected", [
+    ((2.5, 3.0), True), ((-3.0, -2.5), True), ((1.0, 3.0), False), ((-1.0, 1.0), False), ((-3.0, 3.0), False),
+    ((2.0, 3.0), False),  # touching the margin: a difference larger than it is not shown
+])
+def test_beyond_means_the_whole_ci_is_outside_the_margin(ci, expected):
+    assert beyond(ci, 2.0) is expected
+
+
+def test_tost_reads_the_90_percent_interval():
+    """TOST at α = 0.05 is the 90% CI inside ±margin: here the 95% CI crosses ±2.3, the 90% CI does not."""
+    assert tost_ci(SAMPLE, SAMPLE) == bootstrap_diff_ci(SAMPLE, SAMPLE, level=0.9)
+    assert tost_ci(SAMPLE, SAMPLE, alpha=0.025) == bootstrap_diff_ci(SAMPLE, SAMPLE, level=0.95)
+    assert equivalent(tost_ci(SAMPLE, SAMPLE), 2.3) and not equivalent(bootstrap_diff_ci(SAMPLE, SAMPLE), 2.3)
+    with pytest.raises(ValueError, match="alpha"):
+        tost_ci(SAMPLE, SAMPLE, alpha=0.5)
+
+
+def test_spreads_by_hand():
+    # [1, 3]: squares 2; [2, 4, 6]: squares 8; pooled √((2 + 8)/(2 + 3 − 2))
+    assert pooled_sd([1.0, 3.0], [2.0, 4.0, 6.0]) == pytest.approx(math.sqrt(10 / 3))
+    assert pooled_sd([5.0, 5.0], [5.0, 5.0]) == 0.0
+    # a 95% CI of ±1.96 around the mean of 4 seeds: sd = 1.96 · √4 / 1.96 = 2
+    assert sd_from_ci((-1.96, 1.96), 4) == pytest.approx(2.0, rel=1e-4)
+    assert sd_from_ci((10.0, 10.0 + 2 * Z95), 9, level=0.9) == pytest.approx(3.0)
+    with pytest.raises(ValueError, match="3 values"):
+        pooled_sd([1.0], [2.0])
+
+
+def test_seeds_for_equivalence_by_hand():
+    # n = 2 (z_0.95 + z_0.90)² sd² / margin²: 2 · 2.9264052² = 17.128 → 18 for sd = margin
+    assert seeds_for_equivalence(1.0, 1.0) == math.ceil(2 * (Z95 + Z90) ** 2) == 18
+    assert seeds_for_equivalence(2.0, 1.0) == math.ceil(8 * (Z95 + Z90) ** 2) == 69  # 68.51: √(0.2·0.8)/0.2 = 2
+    assert seeds_for_equivalence(30.0, 25.0) == math.ceil(2 * (Z95 + Z90) ** 2 * 1.44) == 25  # 24.66
+    assert seeds_for_equivalence(1.0, 1.0, power=0.9) == math.ceil(2 * (Z95 + 1.6448536) ** 2) == 22
+    assert seeds_for_equivalence(0.01, 1.0) == 1
+
+
+def test_equivalence_power_by_hand():
+    # n = 18, sd = margin = 1: the SE of Δ is √(2/18) = 1/3, power = 2Φ(3 − z_0.95) − 1
+    assert equivalence_power(1.0, 1.0, 18) == pytest.approx(2 * phi(3 - Z95) - 1, abs=1e-6)
+    assert equivalence_power(1.0, 1.0, 18) == pytest.approx(0.8246, abs=1e-4)
+    assert equivalence_power(1.0, 1.0, 8) == pytest.approx(2 * phi(2 - Z95) - 1, abs=1e-6)  # 0.2775
+    assert equivalence_power(1.0, 1.0, 4) == 0.0  # √2 < z_0.95: the 90% CI cannot fit inside ±1 on average
+    assert equivalence_power(0.0, 1.0, 2) == 1.0
+    for sd, margin in ((1.0, 1.0), (36.1, 25.0), (0.4, 0.2)):  # the seeds it plans reach the power, one fewer not
+        n = seeds_for_equivalence(sd, margin)
+        assert equivalence_power(sd, margin, n) >= 0.8 > equivalence_power(sd, margin, n - 1)
+
+
+def test_one_sided_bound_by_hand():
+    # n = 2 (z_0.95 + z_0.80)² sd² / distance² = 12.37 → 13; power Φ(√(13/2) − z_0.95)
+    assert seeds_for_bound(1.0, 1.0) == math.ceil(2 * (Z95 + Z80) ** 2) == 13
+    assert bound_power(1.0, 1.0, 13) == pytest.approx(phi(math.sqrt(6.5) - Z95), abs=1e-6)
+    assert bound_power(0.08, 0.25, 10) == pytest.approx(1.0, abs=1e-6)  # C4's spread: 10 seeds are plenty
+    with pytest.raises(ValueError, match="margin > 0"):
+        bound_power(1.0, 0.0, 10)
+    with pytest.raises(ValueError, match="sd ≥ 0"):
+        seeds_for_equivalence(-1.0, 1.0)
+    with pytest.raises(ValueError, match="power"):
+        seeds_for_equivalence(1.0, 1.0, power=1.0)
+
+
+def _simulated_power(n: int, experiments: int = 300) -> float:
+    """How often the TOST decision the claims use (bootstrap 90% CI inside ±1) says "equivalent"
+    for two arms of n normal(0, 1) seeds: the truth is no difference."""
+    rng = np.random.default_rng(7)
+    return float(np.mean([equivalent(tost_ci(rng.normal(size=n), rng.normal(size=n), resamples=1000, seed=i), 1.0)
+                          for i in range(experiments)]))
+
+
+def test_equivalence_power_matches_a_simulation():
+    """At the planned n the normal approximation matches the real decision; with few seeds the
+    percentile bootstrap's interval is narrower than the normal one (plug-in spread), so the
+    formula underestimates the power: plans err on the safe side."""
+    n = seeds_for_equivalence(1.0, 1.0)
+    assert _simulated_power(n) == pytest.approx(equivalence_power(1.0, 1.0, n), abs=0.07)
+    assert equivalence_power(1.0, 1.0, 8) - 0.03 <= _simulated_power(8) <= equivalence_power(1.0, 1.0, 8) + 0.15
 
 
 def test_summary():
@@ -130,3 +210,10 @@ def test_bootstrap_ci_of_a_censored_median_uses_order_statistics():
     assert low == 1000.0 and high == np.inf
     low, high = bootstrap_ci([1000.0, 2000.0, 3000.0, 4000.0] * 3 + [np.inf], np.median)
     assert {low, high} <= {1000.0, 2000.0, 3000.0, 4000.0} and low < high  # one inf in 13: order statistics
+
+
+def test_censored_summary_uses_medians_and_order_statistics():
+    s = CensoredSummary.of([3.0, 5.0, np.inf])
+    assert (s.n, s.median, s.censored, s.ci_low, s.ci_high) == (3, 5.0, 1, 3.0, np.inf)
+    assert s.format() == "median 5.0 [3.0, ∞] (1 of 3 censored)"
+    assert CensoredSummary.of([np.inf, np.inf]).format(0) == "median ∞ [∞, ∞] (2 of 2 censored)"

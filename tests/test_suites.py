@@ -7,18 +7,39 @@ import pytest
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
-from dqfd_bc_keras.experiments.suites import ALL, SEEDS, SUITES, run_suite, suite_arms
+from dqfd_bc_keras.experiments.suites import ALL, PLANNED_SEEDS, SUITES, run_suite, suite_arms
 
 
-def test_paper_suite_pits_ce_against_bayes_in_the_four_settings():
-    names = [arm.name for arm in SUITES["paper"]]
-    assert names == [f"{setting}-{loss}" for setting in ("cartpole-naive", "cartpole-200-naive",
-                     "cartpole-bootstrap", "mountaincar-goals-bootstrap") for loss in ("ce", "bayes")]
+def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
+    arms = SUITES["paper"]
+    names = [arm.name for arm in arms]
+    assert names[:8] == [f"{setting}-{loss}" for setting in ("cartpole-naive", "cartpole-200-naive",
+                         "cartpole-bootstrap", "mountaincar-goals-bootstrap") for loss in ("ce", "bayes")]
+    assert [arm.seeds for arm in arms[:8:2]] == [PLANNED_SEEDS[k] for k in PLANNED_SEEDS]
+    paper_reading = [arm.config(0) for arm in arms[8:]]
+    assert [(c.task, c.timeout, c.expert_loss, c.early_stop_window, c.total_steps // c.limit)
+            for c in paper_reading] == [("cartpole-200", "naive", loss, 0, 300) for loss in ("ce", "bayes")]
     baselines = {arm.expert_loss for arm in SUITES["baselines"]}
     assert baselines == {"none", "margin", "bc_margin"}
-    config = SUITES["paper"][2].config(seed=7)
+    config = arms[2].config(seed=7)
     assert (config.task, config.timeout, config.expert_loss, config.seed, config.max_steps) == (
         "cartpole-200", "naive", "ce", 7, None)
+
+
+def test_dynamic_efficiency_and_ablation_suites_share_the_protocol_and_their_arms():
+    for suite in ("dynamic", "efficiency"):
+        for a in SUITES[suite]:
+            c = a.config(0)
+            assert (c.eval_every, c.eval_episodes, c.timeout) == (1000, 10, "bootstrap")
+    modes = {(a.task, a.expert_loss, a.config(0).dynamic_demos) for a in SUITES["dynamic"]}
+    assert len(modes) == 8 == len(SUITES["dynamic"])
+    default = {a.name for a in SUITES["dynamic"] if a.config(0).dynamic_demos == "episodes"}
+    assert default <= {a.name for a in SUITES["efficiency"]}  # the preset's mode is the efficiency arm
+    ablations = {(a.task, a.expert_loss, c.dynamic_demos, c.bayes_prior, c.mc_dropout)
+                 for a in SUITES["ablations"] for c in [a.config(0)]}
+    for task in ("cartpole", "mountaincar-goals"):
+        assert {(task, "bayes", "off", True, True), (task, "ce", "off", True, True),
+                (task, "bayes", "episodes", False, True), (task, "bayes", "episodes", True, False)} <= ablations
 
 
 def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
@@ -29,7 +50,7 @@ def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
             assert {(task, "bayes", s, expert) for s in (0.05, 0.5, 2.0)} <= cells
             assert (task, "ce", None, expert) in cells
     assert len(cells) == len(configs) == 16
-    assert set(SEEDS) == set(SUITES) and SEEDS["sensitivity"] >= 5 and set(ALL) <= set(SUITES)
+    assert all(a.seeds >= 5 for a in SUITES["sensitivity"]) and set(ALL) <= set(SUITES)
 
 
 def test_arms_equal_in_config_share_a_name_across_suites():
@@ -66,6 +87,9 @@ def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_pat
     [logged] = [json.loads(line) for line in (tmp_path / "sweeps.jsonl").read_text().splitlines()]
     assert (logged["suite"], logged["runs"], logged["workers"], logged["backend"]) == ("quick", 2, 2, backend)
     assert logged["seconds"] > 0  # the second call ran nothing and logged nothing
+    assert set(logged) >= {"code_commit", "rules_commit", "dirty", "versions"}
+    assert json.loads((tmp_path / "cartpole-bootstrap-bayes-quick" / "seed0" / "provenance.json").read_text()
+                      )["code_commit"] == logged["code_commit"]
 
 
 def test_cli_rejects_bad_arguments_in_one_line(capsys):
@@ -90,4 +114,8 @@ def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     assert "C1" in text and "C4" in text and "not run" in text  # the quick suite covers no paper setting
     assert sorted(p.suffix for p in (tmp_path / "figures").iterdir()) and all(
         p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in (tmp_path / "figures").iterdir())
-    assert report(tmp_path / "suite", tmp_path / "again.md", tmp_path / "figures") == (tmp_path / "again.md").read_text()
+    assert len((tmp_path / "per_seed.csv").read_text().splitlines()) == 1 + 2 * 2  # a row per run
+    # Real run directories (models, checkpoints, TensorBoard) exported: the archive holds all the report reads.
+    assert main(["export", str(tmp_path / "suite"), "--out", str(tmp_path / "suite.tar.xz")]) == 0
+    again = report(tmp_path / "suite.tar.xz", tmp_path / "again.md", tmp_path / "figures")
+    assert again == (tmp_path / "again.md").read_text() and again.replace("suite.tar.xz", "suite") == text

@@ -22,6 +22,7 @@ from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.envs import make_task
 from dqfd_bc_keras.errors import ConfigError, OutputExistsError
 from dqfd_bc_keras.evaluation import GreedyPolicy, load_model
+from dqfd_bc_keras.seeds import ROLLOUT, episode_seed
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -65,16 +66,6 @@ def test_early_stop_threshold_follows_the_step_limit():
 
 
 # --- episode seeds -------------------------------------------------------------------------------
-
-def test_episode_seed_is_deterministic_and_distinct_per_episode_and_stream():
-    config = tiny()
-    seed = training.episode_seed(config, 3)
-    assert isinstance(seed, int) and 0 <= seed < 2**32
-    assert training.episode_seed(config, 3) == seed == training.episode_seed(config, 3, stream=0)
-    assert len({training.episode_seed(config, e) for e in range(200)}) == 200
-    assert len({training.episode_seed(config, 3, stream=s) for s in range(4)}) == 4
-    assert training.episode_seed(dataclasses.replace(config, seed=1), 3) != seed
-
 
 def test_run_state_round_trips_through_json():
     state = training.TrainingState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[{"episode": 1}], bc_fits=2)
@@ -166,8 +157,7 @@ def test_one_episode_acts_stores_and_learns_every_step(built):
     agent, interaction, env = learner.agent, learner.interaction, learner.interaction.env
     replay = agent.replay
     assert int(replay.size.numpy()) >= learner.config.batch_size  # the demos alone fill a batch
-    obs, _ = env.reset(seed=training.episode_seed(learner.config, 0))
-    interaction.episode = training.EpisodeStats()
+    obs = interaction.reset(episode_seed(learner.config.seed, 0))
     env0, size0, train0 = (int(v.numpy()) for v in (interaction.env_steps, replay.agent_size, agent.train_steps))
 
     last_obs, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(10_000, tf.int64))
@@ -197,8 +187,7 @@ def test_one_episode_acts_stores_and_learns_every_step(built):
 def test_play_stops_at_the_step_budget_and_the_episode_continues(built):
     learner = built[0]
     interaction, env = learner.interaction, learner.interaction.env
-    obs, _ = env.reset(seed=training.episode_seed(learner.config, 1))
-    interaction.episode = training.EpisodeStats()
+    obs = interaction.reset(episode_seed(learner.config.seed, 1))
     env0 = int(interaction.env_steps.numpy())
     obs3, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(3, tf.int64))
     assert not bool(done)
@@ -266,14 +255,14 @@ def test_dynamic_demos_are_due_at_a_new_best_moving_average_at_least_the_demos(d
 @pytest.fixture(scope="module")
 def capped():
     """A bayes learner whose episodes last at most 50 steps, M = 3 rollouts per update."""
-    learner, _ = training.build(tiny(max_steps=50, dynamic_rollouts=3, dynamic_window=3))
+    learner, _ = training.build(tiny(max_steps=50, dynamic_demos="rollouts", dynamic_rollouts=3, dynamic_window=3))
     return learner
 
 
 def greedy_rollouts(learner, episode: int) -> demo_io.DemoDataset:
     """What `update` should add at `state.episode = episode`: M greedy episodes on stream 2."""
     c = learner.config
-    seeds = [training.episode_seed(c, episode * 100 + i, stream=2) for i in range(c.dynamic_rollouts)]
+    seeds = [episode_seed(c.seed, episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
     return demo_io.rollout(make_task(c.task, timeout=c.timeout, max_steps=c.max_steps),
                            GreedyPolicy.from_model(learner.agent.q_network), seeds, task=c.task, source="agent")
 
@@ -331,6 +320,78 @@ def test_dynamic_update_past_capacity_drops_the_lowest_returns_first(capped):
     assert total + len(best_dropped) > capacity  # nothing was dropped that would have fit
 
 
+def test_dynamic_update_from_training_episodes_inserts_those_reaching_the_new_best(demos):
+    """`episodes` mode: no roll-out, no interaction; the recent episodes at or above the new best
+    average go into D_demo and the window is emptied."""
+    learner, _ = training.build(tiny(max_steps=50, dynamic_window=3))
+    dynamic, agent = learner.dynamic, learner.agent
+    recorder = demo_io.EpisodeRecorder(learner.interaction.env, task="cartpole", source="agent")
+    for length in (10, 40, 30):  # returns 10 − 1 − 100 (falls) or a full … : build episodes by hand
+        recorder.clear()
+        recorder.reset(np.zeros(4, np.float32))
+        for t in range(length):
+            recorder.step(0, np.full(4, t, np.float32), 1.0, False, t == length - 1, {"plain_reward": 1.0})
+        dynamic.observe(recorder.dataset())
+    episodes0, size0, tally0 = len(dynamic.episodes), int(agent.replay.demo_size.numpy()), learner.interactions
+    state = training.TrainingState(episode=3, best_average=30.0)
+    update = dynamic.update(agent, learner.bc, state)
+    assert sorted(update["new_returns"]) == [30.0, 40.0] and update["new_transitions"] == 70
+    assert update["mode"] == "episodes" and len(dynamic.episodes) == episodes0 + 2
+    assert int(agent.replay.demo_size.numpy()) == size0 + 70 and learner.interactions == tally0
+    assert dynamic.recent == [] and dynamic.update(agent, learner.bc, state) is None  # nothing new
+
+
+class CountSteps:
+    """An independent count of env.step calls on every env `training` builds."""
+
+    def __init__(self, monkeypatch) -> None:
+        self.calls = 0
+        monkeypatch.setattr(training, "make_task", self.make)
+
+    def make(self, *args, **kwargs):
+        env = make_task(*args, **kwargs)
+        step, counter = env.step, self
+
+        def counted(action):
+            counter.calls += 1
+            return step(action)
+
+        env.step = counted
+        return env
+
+
+@pytest.mark.parametrize("mode", ["rollouts", "episodes"])
+def test_every_interaction_is_counted_and_evaluations_sit_on_the_exact_grid(tmp_path, monkeypatch, mode):
+    """20-step episodes, W = 2, M = 3 roll-outs: D_demo grows many times within 300 steps, and
+    roll-outs (60 interactions each) jump over several 25-interaction grid points at once."""
+    counter = CountSteps(monkeypatch)
+    config = tiny(max_steps=20, demo_episodes=4, dynamic_window=2, dynamic_rollouts=3, dynamic_demos=mode,
+                  eval_every=25)
+    result = runs.train(config, tmp_path / "run", quiet=True)
+    updates = json.loads((tmp_path / "run" / "dynamic_demos.json").read_text())
+    assert updates and all(u["mode"] == mode for u in updates)
+    assert result.interactions == counter.calls  # the training env's and the roll-out env's steps
+    extra = sum(u["new_transitions"] for u in updates) if mode == "rollouts" else 0
+    assert result.interactions == result.env_steps + extra and (extra > 0) == (mode == "rollouts")
+    _, rows = read_csv(tmp_path / "run" / "metrics.csv")
+    assert int(rows[-1]["interactions"]) <= result.interactions
+    _, evals = read_csv(tmp_path / "run" / "evals.csv")
+    points = [int(e["interactions"]) for e in evals]
+    grid = list(range(0, result.interactions + 1, 25))
+    # an early stop adds the next grid point, where the final network (it learns no more) acts
+    assert points == grid + [grid[-1] + 25] * result.stopped_early
+    assert result.stopped_early  # the 20-step episodes reach 0.98 × 20 ten times in a row
+
+
+def test_plain_dqns_random_scaling_play_counts_as_interactions(tmp_path, monkeypatch):
+    counter = CountSteps(monkeypatch)
+    result = runs.train(tiny("none", eval_every=1000), tmp_path / "run", quiet=True)
+    assert result.interactions == counter.calls == result.env_steps + 2000  # training.random_obs_scale
+    _, evals = read_csv(tmp_path / "run" / "evals.csv")
+    assert [int(e["interactions"]) for e in evals] == [0, 1000, 2000]
+    assert len({e["mean_return"] for e in evals}) == 1  # one network (no learning yet) at all three
+
+
 # --- runs.train end to end -----------------------------------------------------------------------
 
 def read_csv(path):
@@ -377,20 +438,17 @@ def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
     assert int(rows[0]["demo_size"]) == len(recorded)  # no dynamic update before W = 10 episodes
 
 
-def test_train_evaluates_before_interacting_and_every_eval_every_steps(bayes_run):
-    config, out, _ = bayes_run
+def test_train_evaluates_at_exactly_every_eval_every_interactions(bayes_run):
+    config, out, result = bayes_run
     fields, evals = read_csv(out / "evals.csv")
     assert fields == list(runs.EVAL_FIELDS)
-    assert (evals[0]["env_step"], evals[0]["episode"]) == ("0", "0")
-    _, rows = read_csv(out / "metrics.csv")
-    expected, due = [0], config.eval_every
-    for row in rows:  # evaluations happen at the first episode end ≥ the next due step
-        if int(row["env_step"]) >= due:
-            expected.append(int(row["env_step"]))
-            due = int(row["env_step"]) + config.eval_every
-    assert [int(e["env_step"]) for e in evals] == expected
-    assert {"train/return", "train/epsilon", "train/expert", "train/demo_size", "eval/plain_return"} <= tb_tags(
-        out / "tb")
+    assert (evals[0]["env_step"], evals[0]["interactions"], evals[0]["episode"]) == ("0", "0", "0")
+    # 300 steps, E = 150, no roll-outs (no new best within W = 10 episodes): 0, 150, 300, whatever
+    # the episode boundaries; an episode running across 150 was paused there and went on.
+    assert [int(e["interactions"]) for e in evals] == [0, 150, 300] and result.interactions == 300
+    assert [int(e["env_step"]) for e in evals] == [0, 150, 300]
+    assert {"train/return", "train/epsilon", "train/expert", "train/demo_size", "train/env_step",
+            "eval/plain_return", "eval/env_step"} <= tb_tags(out / "tb")
 
 
 def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
@@ -399,7 +457,7 @@ def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
     config, out, _ = bayes_run
     often = dataclasses.replace(config, eval_every=50)
     runs.train(often, tmp_path / "often", quiet=True)
-    columns = [f for f in training.METRIC_FIELDS if f != "wall_time"]
+    columns = [f for f in training.METRIC_FIELDS if f != "wall_time"]  # interactions included
     rows = [[[r[f] for f in columns] for r in read_csv(d / "metrics.csv")[1]] for d in (out, tmp_path / "often")]
     assert rows[0] == rows[1]
     assert len(read_csv(tmp_path / "often" / "evals.csv")[1]) > len(read_csv(out / "evals.csv")[1])
@@ -420,7 +478,7 @@ def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
         assert saved.meta.episode_returns == recorded.meta.episode_returns
     evaluation = json.loads((out / "eval.json").read_text())
     assert {"task", "policy", "episodes", "returns", "mean_return", "std_return"} <= set(evaluation)
-    assert evaluation == result.evaluation
+    assert evaluation == result.evaluation.to_dict()
     assert (evaluation["task"], evaluation["policy"], evaluation["episodes"]) == ("cartpole", "q", 1)
     assert len(evaluation["returns"]) == 1 and evaluation["mean_return"] == evaluation["returns"][0]
     assert evaluation["std_return"] == 0.0
@@ -466,9 +524,9 @@ def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path)
 # --- Config --------------------------------------------------------------------------------------
 
 def test_with_overrides_types_each_value():
-    config = tiny().with_overrides(["hidden=32,32", "max_steps=none", "dynamic_demos=false", "gamma=0.9",
+    config = tiny().with_overrides(["hidden=32,32", "max_steps=none", "dynamic_demos=off", "mc_dropout=false", "gamma=0.9",
                                     "n-step=3", "epsilon_start=0.2", "expert_loss=ce"])
-    assert config.hidden == (32, 32) and config.max_steps is None and config.dynamic_demos is False
+    assert config.hidden == (32, 32) and config.max_steps is None and config.dynamic_demos == "off" and config.mc_dropout is False
     assert config.gamma == 0.9 and config.n_step == 3 and config.epsilon_start == 0.2
     assert config.expert_loss == "ce" and config.total_steps == 300  # the rest is kept
     assert tiny(max_steps=50).with_overrides(["max_steps=none"]).max_steps is None
@@ -480,7 +538,8 @@ def test_with_overrides_types_each_value():
     ("nope=1", "key=value with a key among"),
     ("hidden", "key=value"),
     ("batch_size=abc", "batch_size='abc': expected int"),
-    ("dynamic_demos=maybe", "expected bool"),
+    ("mc_dropout=maybe", "expected bool"),
+    ("dynamic_demos=maybe", "dynamic_demos='maybe' is not one of"),
     ("hidden=a,b", "expected tuple"),
     ("gamma=2", "gamma must be in"),
     ("expert_loss=magic", "expert_loss='magic' is not one of"),

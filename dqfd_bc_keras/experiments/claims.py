@@ -1,4 +1,4 @@
-"""The paper's claims (ALGORITHM.md §7, C1–C4) judged over seeds; `results.py` writes them up.
+"""The paper's claims (ALGORITHM.md §7, C1–C4) judged over seeds; `report.py` writes them up.
 
 Every metric, margin and verdict rule is a constant or docstring here, fixed before any result
 is looked at, so RESULTS.md can quote them. Runs are read from their files (never from their
@@ -7,35 +7,44 @@ directory names) and grouped into arms by config.json: every field except `seed`
 
 from __future__ import annotations
 
-import functools
 import json
+import re
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..config import Config
-from ..demos import record
 from ..envs import get_task
 from ..errors import ConfigError
 from .data import FinishedRun
-from .stats import Summary, bootstrap_diff_ci, equivalent, excludes_zero, fisher_exact, mann_whitney
+from .stats import (CensoredSummary, Summary, beyond, bootstrap_diff_ci, bound_power, equivalence_power, equivalent,
+                    fisher_exact, mann_whitney, pooled_sd, sd_from_ci, seeds_for_bound, seeds_for_equivalence,
+                    tost_ci)
 
 ALPHA = 0.05
-"""Significance level of every two-sided test."""
+"""Significance level of every test: two-sided tests at ALPHA, and TOST at ALPHA."""
+TOST_LEVEL = 1.0 - 2.0 * ALPHA
+"""The CI whose two ends are one-sided bounds at ALPHA: every margin rule reads it (TOST at 0.05: the 90% CI)."""
 RETURN_MARGIN = 0.05
-"""C1, C3: "no difference" in mean training return: the 95% CI of bayes − ce lies within ±5% of the limit."""
+"""C1, C3: "no difference" in mean training return means |bayes − ce| within 5% of the episode limit."""
 SHARE_MARGIN = 0.2
-"""C2: "about equally frequent" unfinished runs means a difference of shares within ±0.2."""
+"""C2: "about equally frequent" means shares of runs within ±0.2 of each other."""
 GOALS_MARGIN = 0.25
-"""C4: goals per episode within ±0.25 count as no difference."""
+"""C4: flags per episode within ±0.25 are no difference; "markedly more" has to clear +0.25."""
 EARLY_EPISODES = 30
 """C4's "early in training": the first 30 training episodes."""
-BAYES_ONLY = ("sigma0_sq", "mc_passes", "prior_scale", "prior_center", "bc_dropout", "bc_prior_scale")
+BAYES_ONLY = ("sigma0_sq", "mc_passes", "prior_scale", "prior_center", "bc_dropout", "bc_prior_scale", "bayes_prior",
+              "mc_dropout")
 """Config fields only the bayes loss reads: a bayes arm pairs with the ce arm equal in every other field."""
 PEAK_FRACTION, COLLAPSE_FRACTION = 0.98, 0.5
 """A collapse (the paper's perturbation): plain return < 0.5 × limit after the first episode ≥ 0.98 × limit."""
+POWER = 0.8
+"""Every rule is planned to reach its verdict with this power when bayes and ce truly do not differ."""
+MIN_SEEDS = 10
+"""Seeds per arm at least, whatever the power calculation says: a spread has to be seen to be trusted."""
+PAPER_READING_STEPS = 60_000
+"""C2's paper reading runs without early stop for this budget: ≥ 300 episodes of at most 200 steps."""
 REGENERATE = ("python -m dqfd_bc_keras.experiments run all --out results && "
               "python benchmarks/bench_sample_efficiency.py --out results && "
               "python -m dqfd_bc_keras.experiments report results")
@@ -43,12 +52,13 @@ REGENERATE = ("python -m dqfd_bc_keras.experiments run all --out results && "
 
 METRICS = {
     "episodes_to_solve": "training episodes until the early-stopping rule fired (the last `early_stop_window` "
-                         "task returns all ≥ `early_stop_fraction` × limit); a run that never fired counts as "
-                         "its episode count + 1 (censored, ranked after every finished run)",
+                         "task returns all ≥ `early_stop_fraction` × limit); a run in which it never fired is "
+                         "censored as ∞, so it ranks after every finished run (medians and rank tests, never a mean)",
     "unfinished": "1 if the early-stopping rule never fired within the step budget, else 0",
     "mean_train_return": "mean plain-env return over all training episodes",
     "collapses": f"episodes with plain return < {COLLAPSE_FRACTION} × limit after the first episode whose task "
                  f"return ≥ {PEAK_FRACTION} × limit",
+    "collapsed": "1 if the run has at least one collapse, else 0",
     "goals_first30": f"mean flags reached per episode over the first {EARLY_EPISODES} training episodes "
                      "(all, if fewer)",
     "goals_all": "mean flags reached per episode over all training episodes",
@@ -75,6 +85,13 @@ def finished(run: FinishedRun) -> bool:
     return episodes_to_solve(run) is not None
 
 
+def censored_episodes_to_solve(run: FinishedRun) -> float:
+    """`episodes_to_solve`, inf for a run that never solved: it ranks after every finished run by
+    construction (its own episode count + 1 would rank before a slower run that did finish)."""
+    solved = episodes_to_solve(run)
+    return np.inf if solved is None else float(solved)
+
+
 def collapses(run: FinishedRun) -> int:
     """The paper's perturbations: episodes whose plain return falls below COLLAPSE_FRACTION × limit
     after the first whose task return reached PEAK_FRACTION × limit."""
@@ -95,15 +112,20 @@ def steps_to_threshold(run: FinishedRun) -> float | None:
 
 
 PER_RUN: dict[str, Callable[[FinishedRun], float]] = {
-    "episodes_to_solve": lambda r: len(r.metrics) + 1 if episodes_to_solve(r) is None else episodes_to_solve(r),
+    "episodes_to_solve": censored_episodes_to_solve,
     "unfinished": lambda r: float(not finished(r)),
     "mean_train_return": lambda r: float(r.column("plain_return").mean()),
     "collapses": collapses,
+    "collapsed": lambda r: float(collapses(r) > 0),
     "goals_first30": lambda r: float(r.column("goals")[:EARLY_EPISODES].mean()),
     "goals_all": lambda r: float(r.column("goals").mean()),
     "final_eval": lambda r: float(r.final["mean_return"]),
 }
-"""Each metric as one number per run, for statistics over seeds (censoring resolved)."""
+"""Each metric as one number per run, for statistics over seeds."""
+CENSORED = ("episodes_to_solve",)
+"""Metrics with inf for "never": summarised by medians, compared by ranks only."""
+SHARES = ("unfinished", "collapsed")
+"""0/1 metrics: their mean is a share of runs, compared with Fisher's exact test."""
 
 
 # --- arms and settings ----------------------------------------------------------------------
@@ -146,155 +168,289 @@ def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
     return sorted(arms.values(), key=lambda a: a.label)
 
 
-def preset_distance(arm: ArmRuns) -> int:
-    """How many config fields besides the loss (and the timeout) differ from the task preset:
-    0 for the paper's and the baselines' arms, more for a sensitivity or benchmark variant."""
-    preset = Config.for_task(arm.config["task"]).to_dict()
+def preset_distance(arm: ArmRuns, overrides: tuple[tuple[str, object], ...] = ()) -> int:
+    """How many config fields besides the loss (and the timeout) differ from the task preset with
+    `overrides`: 0 for the paper's and the baselines' arms, more for a sensitivity or benchmark variant."""
+    preset = Config.for_task(arm.config["task"], **dict(overrides)).to_dict()
     return sum(v != preset[k] for k, v in arm.config.items() if k not in ("expert_loss", "timeout"))
 
 
-def bayes_ce_pairs(arms: list[ArmRuns], task: str, timeout: str | None) -> list[tuple[ArmRuns, ArmRuns | None]]:
-    """Each bayes arm of the setting with its ce arm (equal in every field but the Bayes-only
-    ones and the loss), the reference pair first: the one closest to the task preset."""
+def bayes_ce_pairs(arms: list[ArmRuns], task: str, timeout: str | None,
+                   overrides: tuple[tuple[str, object], ...] = ()) -> list[tuple[ArmRuns, ArmRuns | None]]:
+    """Each bayes arm of the setting (`task`, `timeout` or any if None, and the config fields of
+    `overrides`) with its ce arm (equal in every field but the Bayes-only ones and the loss), the
+    reference pair first: the one closest to the task preset with `overrides`."""
     def strip(arm: ArmRuns) -> dict:
         return {k: v for k, v in arm.config.items() if k not in ("expert_loss", *BAYES_ONLY)}
 
+    def selected(arm: ArmRuns) -> bool:
+        return (arm.config["task"] == task and timeout in (None, arm.config["timeout"])
+                and all(arm.config[k] == v for k, v in overrides))
+
     pairs = [(b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
-             for b in arms if b.config["expert_loss"] == "bayes" and b.config["task"] == task
-             and timeout in (None, b.config["timeout"])]
-    return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0]), -len(p[0].runs), p[0].label))
+             for b in arms if b.config["expert_loss"] == "bayes" and selected(b)]
+    return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0], overrides), -len(p[0].runs),
+                                        p[0].label))
+
+
+@dataclass(frozen=True)
+class Setting:
+    """Where a claim is tested: the arms of `task` under `timeout` (None: any) whose config has the
+    fields of `overrides`, so one task can carry several readings of a claim (C2)."""
+
+    task: str
+    timeout: str | None
+    overrides: tuple[tuple[str, object], ...] = ()
+    reading: str = ""
+    """Which reading of the claim this setting is, when it has several."""
+
+    @property
+    def name(self) -> str:
+        return " ".join([f"{self.task}/{self.timeout or '*'}", *(f"{k}={v}" for k, v in self.overrides)])
+
+    def pairs(self, arms: list[ArmRuns]) -> list[tuple[ArmRuns, ArmRuns | None]]:
+        return bayes_ce_pairs(arms, self.task, self.timeout, self.overrides)
 
 
 # --- the claims -----------------------------------------------------------------------------
 @dataclass
 class Comparison:
-    """One metric, bayes against ce: each arm's summary, the CI of the difference of means, a test."""
+    """One metric, bayes against ce: each arm's summary, the 95% and the TOST (1 − 2α) bootstrap CI
+    of the difference of means (None for a censored metric), and a two-sided test."""
 
     metric: str
-    bayes: Summary
-    ce: Summary
-    diff: tuple[float, float]
+    bayes: Summary | CensoredSummary
+    ce: Summary | CensoredSummary
+    diff: tuple[float, float] | None
+    tost: tuple[float, float] | None
     test: str
     p: float
 
+    def interval(self, digits: int = 2) -> str:
+        """`low … high (90%: low … high)` for a table cell; — when a mean is undefined."""
+        if self.diff is None or self.tost is None:
+            return "—"
+        return (f"{self.diff[0]:.{digits}f} … {self.diff[1]:.{digits}f} "
+                f"({TOST_LEVEL:.0%}: {self.tost[0]:.{digits}f} … {self.tost[1]:.{digits}f})")
+
 
 def compare(metric: str, bayes: ArmRuns, ce: ArmRuns) -> Comparison:
-    """Mann–Whitney U on the per-run values; Fisher's exact test for the 0/1 `unfinished`."""
+    """Fisher's exact test for a share, Mann–Whitney U otherwise (inf ranks last); a censored
+    metric gets medians and no interval of a difference of means."""
     x, y = bayes.values(metric), ce.values(metric)
-    if metric == "unfinished":
+    if metric in SHARES:
         test, p = "Fisher exact", fisher_exact(int(x.sum()), len(x), int(y.sum()), len(y))[1]
     else:
         test, p = "Mann–Whitney U", mann_whitney(x, y)[1]
-    return Comparison(metric, Summary.of(x), Summary.of(y), bootstrap_diff_ci(x, y), test, p)
+    if metric in CENSORED:
+        return Comparison(metric, CensoredSummary.of(x), CensoredSummary.of(y), None, None, test, p)
+    return Comparison(metric, Summary.of(x), Summary.of(y), bootstrap_diff_ci(x, y), tost_ci(x, y, ALPHA), test, p)
 
 
-def _same_return(bayes: ArmRuns, ce: ArmRuns, episodes: bool) -> tuple[str, list[Comparison]]:
-    ret = compare("mean_train_return", bayes, ce)
-    comparisons = [compare("episodes_to_solve", bayes, ce), ret] if episodes else [ret]
-    differ = episodes and comparisons[0].p < ALPHA
-    if equivalent(ret.diff, RETURN_MARGIN * bayes.runs[0].config.limit) and not differ:
-        return "holds", comparisons
-    return ("does not hold" if excludes_zero(ret.diff) or differ else "inconclusive"), comparisons
+def rule_power(sd: float, margin: float, n: int, one_sided: bool = False) -> float:
+    """The power of a margin rule with n seeds per arm and spread sd when bayes and ce truly do not
+    differ: TOST at ALPHA inside ±margin, or (`one_sided`, C4) the upper bound below +margin.
+    With a planned sd it plans the seeds; with the observed sd it is the power the runs achieved."""
+    return bound_power(sd, margin, n, ALPHA) if one_sided else equivalence_power(sd, margin, n, ALPHA)
 
 
-def judge_c1(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
-    """holds: the CI of the difference of mean training returns lies within ±RETURN_MARGIN × limit
-    and Mann–Whitney p ≥ ALPHA on episodes_to_solve; does not hold: that CI excludes 0 or p < ALPHA;
-    else inconclusive. Equivalence is checked first: a significant difference of returns inside
-    the margin is no difference that matters."""
-    return _same_return(bayes, ce, episodes=True)
+@dataclass
+class Verdict:
+    """A claim judged on one bayes–ce pair: the verdict, the comparisons (the judged metric first),
+    and that metric's pooled sd over seeds with the power it gives the rule (`rule_power`)."""
+
+    verdict: str
+    comparisons: list[Comparison] = field(default_factory=list)
+    sd: float | None = None
+    power: float | None = None
 
 
-def judge_c3(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
-    """holds: the CI of the difference of mean training returns lies within ±RETURN_MARGIN × limit;
-    does not hold: it excludes 0 (and is not within the margin); else inconclusive."""
-    return _same_return(bayes, ce, episodes=False)
+def _verdict(verdict: str, comparisons: list[Comparison], bayes: ArmRuns, ce: ArmRuns, margin: float,
+             one_sided: bool = False) -> Verdict:
+    metric = comparisons[0].metric
+    sd = pooled_sd(bayes.values(metric), ce.values(metric))
+    return Verdict(verdict, comparisons, sd, rule_power(sd, margin, min(len(bayes.runs), len(ce.runs)), one_sided))
 
 
-def judge_c2(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
-    """holds: both arms show perturbations (an unfinished run or a collapse), Fisher's p ≥ ALPHA
-    on unfinished runs and their shares differ by ≤ SHARE_MARGIN; does not hold: Fisher's
-    p < ALPHA; else inconclusive. Collapses are compared with Mann–Whitney U (reported)."""
-    unfinished, falls = compare("unfinished", bayes, ce), compare("collapses", bayes, ce)
-    perturbed = all(arm.values("unfinished").sum() + arm.values("collapses").sum() > 0 for arm in (bayes, ce))
-    if perturbed and unfinished.p >= ALPHA and abs(unfinished.bayes.mean - unfinished.ce.mean) <= SHARE_MARGIN:
-        return "holds", [unfinished, falls]
-    return ("does not hold" if unfinished.p < ALPHA else "inconclusive"), [unfinished, falls]
+def _equivalence(comparison: Comparison, margin: float) -> str:
+    """TOST by the interval: holds inside ±margin, does not hold wholly outside it."""
+    if equivalent(comparison.tost, margin):
+        return "holds"
+    return "does not hold" if beyond(comparison.tost, margin) else "inconclusive"
 
 
-def judge_c4(bayes: ArmRuns, ce: ArmRuns) -> tuple[str, list[Comparison]]:
-    """holds: the CI of bayes − ce in goals_first30 lies above 0 and Mann–Whitney p < ALPHA;
-    does not hold: that CI lies at or below 0, or p ≥ ALPHA with the CI within ±GOALS_MARGIN; else
-    inconclusive. goals_all is reported beside it."""
+def judge_c1(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
+    """holds: TOST at ALPHA on mean_train_return, i.e. the TOST_LEVEL CI of bayes − ce lies within
+    ±RETURN_MARGIN × limit; does not hold: that CI lies wholly outside ±RETURN_MARGIN × limit; else
+    inconclusive. A significant difference inside the margin holds (it is none that matters); a
+    large p never does. episodes_to_solve is reported, not judged (medians, runs that never solved
+    ranked last, Mann–Whitney U): an episode count has no scale on which a margin could be fixed in
+    advance, and its censored runs leave a difference of means undefined."""
+    margin = RETURN_MARGIN * bayes.runs[0].config.limit
+    returns = compare("mean_train_return", bayes, ce)
+    return _verdict(_equivalence(returns, margin), [returns, compare("episodes_to_solve", bayes, ce)],
+                    bayes, ce, margin)
+
+
+def judge_c2(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
+    """Judged on a share of runs: unfinished runs under today's reading (training stops once the
+    early-stopping rule fires), runs with a collapse under the paper's (no early stop: every run is
+    unfinished by construction). not reproduced: no run of either arm collapses (the claim's
+    perturbations never occur); holds: both arms have a run that collapses and TOST at ALPHA finds
+    the shares equal, i.e. the TOST_LEVEL CI of bayes − ce lies within ±SHARE_MARGIN; does not hold:
+    that CI lies wholly outside ±SHARE_MARGIN; else inconclusive. Fisher's exact test on the share
+    and collapses per run (Mann–Whitney U) are reported beside it."""
+    share = compare("unfinished" if bayes.config["early_stop_window"] else "collapsed", bayes, ce)
+    comparisons = [share, compare("collapses", bayes, ce)]
+    struck = [bool(arm.values("collapsed").any()) for arm in (bayes, ce)]
+    if not any(struck):
+        verdict = "not reproduced"
+    elif equivalent(share.tost, SHARE_MARGIN):
+        verdict = "holds" if all(struck) else "inconclusive"
+    else:
+        verdict = "does not hold" if beyond(share.tost, SHARE_MARGIN) else "inconclusive"
+    return _verdict(verdict, comparisons, bayes, ce, SHARE_MARGIN)
+
+
+def judge_c3(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
+    """holds: TOST at ALPHA on mean_train_return, i.e. the TOST_LEVEL CI of bayes − ce lies within
+    ±RETURN_MARGIN × limit; does not hold: that CI lies wholly outside ±RETURN_MARGIN × limit; else
+    inconclusive."""
+    margin = RETURN_MARGIN * bayes.runs[0].config.limit
+    returns = compare("mean_train_return", bayes, ce)
+    return _verdict(_equivalence(returns, margin), [returns], bayes, ce, margin)
+
+
+def judge_c4(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
+    """A claim of "markedly more" has to clear the no-difference margin, not just 0. holds: the lower end of the
+    TOST_LEVEL CI of bayes − ce in goals_first30 (its one-sided bound at ALPHA) lies above
+    +GOALS_MARGIN and Mann–Whitney p < ALPHA; does not hold: the upper end lies below +GOALS_MARGIN
+    (a gain shown smaller than the margin, a significant one included); else inconclusive. goals_all
+    is reported beside it."""
     early, whole = compare("goals_first30", bayes, ce), compare("goals_all", bayes, ce)
-    if early.diff[0] > 0 and early.p < ALPHA:
-        return "holds", [early, whole]
-    if early.diff[1] <= 0 or (early.p >= ALPHA and equivalent(early.diff, GOALS_MARGIN)):
-        return "does not hold", [early, whole]
-    return "inconclusive", [early, whole]
+    low, high = early.tost
+    if low > GOALS_MARGIN and early.p < ALPHA:
+        verdict = "holds"
+    else:
+        verdict = "does not hold" if high < GOALS_MARGIN else "inconclusive"
+    return _verdict(verdict, [early, whole], bayes, ce, GOALS_MARGIN, one_sided=True)
+
+
+RULE_CONSTANTS = {"ALPHA": f"{ALPHA:g}", "TOST_LEVEL": f"{TOST_LEVEL:.0%}", "RETURN_MARGIN": f"{RETURN_MARGIN:g}",
+                  "SHARE_MARGIN": f"{SHARE_MARGIN:g}", "GOALS_MARGIN": f"{GOALS_MARGIN:g}"}
+"""How each constant named in a rule's docstring reads in RESULTS.md."""
 
 
 @dataclass(frozen=True)
 class Claim:
+    """A claim of the paper (ALGORITHM.md §7): where it is tested and the rule that judges it."""
+
     id: str
     statement: str
-    settings: tuple[tuple[str, str | None], ...]
-    """(task, timeout) pairs it is tested on; timeout None: any."""
-    judge: Callable[[ArmRuns, ArmRuns], tuple[str, list[Comparison]]]
+    settings: tuple[Setting, ...]
+    judge: Callable[[ArmRuns, ArmRuns], Verdict]
 
     @property
     def rule(self) -> str:
         """The verdict rule, from the judge's docstring, with the constants filled in."""
         text = " ".join(self.judge.__doc__.split())
-        for name in ("ALPHA", "RETURN_MARGIN", "SHARE_MARGIN", "GOALS_MARGIN"):
-            text = text.replace(name, f"{globals()[name]:g}")
-        return text
+        return re.sub(r"\b[A-Z][A-Z_]+\b", lambda m: RULE_CONSTANTS.get(m.group(), m.group()), text)
 
 
+_WINDOW = Config.for_task("cartpole-200").early_stop_window
+TODAY = Setting("cartpole-200", "naive", (("early_stop_window", _WINDOW),),
+                "today's reading: training stops once the early-stopping rule fires")
+PAPER = Setting("cartpole-200", "naive", (("early_stop_window", 0), ("total_steps", PAPER_READING_STEPS)),
+                "the paper's reading: its rule (average ≥ 490, 10 times in a row), kept with 200-step episodes, "
+                "never fires: no early stop, a fixed budget")
 CLAIMS = (
     Claim("C1", "bayes and ce do not differ significantly in best or average case",
-          (("cartpole", "naive"), ("cartpole-200", "naive")), judge_c1),
+          (Setting("cartpole", "naive"), Setting("cartpole-200", "naive")), judge_c1),
     Claim("C2", "with the 200-step limit both suffer perturbations; unfinished runs about equally frequent",
-          (("cartpole-200", "naive"),), judge_c2),
+          (TODAY, PAPER), judge_c2),
     Claim("C3", "with the time-limit bootstrap fix bayes and ce give the same average reward",
-          (("cartpole", "bootstrap"),), judge_c3),
+          (Setting("cartpole", "bootstrap"),), judge_c3),
     Claim("C4", "bayes reaches the flag markedly more often per episode than ce, especially early",
-          (("mountaincar-goals", None),), judge_c4),
+          (Setting("mountaincar-goals", None),), judge_c4),
 )
 
 
-def setting_name(task: str, timeout: str | None) -> str:
-    return f"{task}/{timeout or '*'}"
-
-
-def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> tuple[str, list[Comparison]]:
+def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> Verdict:
     if ce is None:
-        return "not run (no ce arm)", []
+        return Verdict("not run (no ce arm)")
     if min(len(bayes.runs), len(ce.runs)) < 2:
-        return "inconclusive (n < 2)", []
+        return Verdict("inconclusive (n < 2)")
     return claim.judge(bayes, ce)
 
 
-# --- the report -----------------------------------------------------------------------------
-@functools.cache
-def _recorded_plain_return(task: str, expert: str, episodes: int, seed: int, timeout: str,
-                           max_steps: int | None) -> float:
-    return float(np.mean(record(task, expert, episodes, seed=seed, timeout=timeout,
-                                max_steps=max_steps).meta.plain_returns))
+# --- planned seeds --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Plan:
+    """The seeds one claim setting needs: the spread of its judged metric over seeds assumed, where
+    that spread comes from, the rule's margin and whether the rule is TOST or (C4) one bound."""
+
+    metric: str
+    sd: float
+    source: str
+    margin: float
+    one_sided: bool = False
+
+    def power(self, n: int) -> float:
+        return rule_power(self.sd, self.margin, n, self.one_sided)
+
+    @property
+    def seeds(self) -> int:
+        """Seeds per arm for POWER (at least MIN_SEEDS)."""
+        needed = seeds_for_bound if self.one_sided else seeds_for_equivalence
+        return max(MIN_SEEDS, needed(self.sd, self.margin, POWER, ALPHA))
+
+    def describe(self) -> str:
+        """The plan in one line of RESULTS.md: spread, source, rule, seeds and their power."""
+        rule = f"the upper bound below +{self.margin:g}" if self.one_sided else f"TOST within ±{self.margin:g}"
+        return (f"sd {self.sd:.3g} of `{self.metric}` ({self.source}); {rule} → {self.seeds} seeds per arm "
+                f"(power {self.power(self.seeds):.2f}; with {MIN_SEEDS}: {self.power(MIN_SEEDS):.2f})")
 
 
-def demonstrator_return(run: FinishedRun) -> float | None:
-    """The mean plain return of the demonstrations the run started from (None for plain DQN).
+PREVIOUS_SEEDS = 10
+PREVIOUS_ROUND = (f"the previous round's {PREVIOUS_SEEDS} seeds per arm, docs/RESULTS.md of 2026-11-26: each arm's "
+                  "sd from the 95% bootstrap CI of its mean as half-width · √n / 1.96, pooled over bayes and ce")
 
-    demos.npz holds D_demo at the end, which dynamic demonstrations enlarge with the agent's
-    own episodes; it is the demonstrator's only when dynamic_demos.json (the log of such
-    updates) is absent. Otherwise the recording is replayed: the scripted experts are
-    deterministic and seeded (training.demonstrations), so it is the same data.
-    """
-    c = run.config
-    if not c.uses_demos:
-        return None
-    if (run.path / "demos.npz").is_file() and not (run.path / "dynamic_demos.json").exists():
-        with np.load(run.path / "demos.npz", allow_pickle=False) as data:
-            return float(np.mean(json.loads(str(data["meta"]))["plain_returns"]))
-    return _recorded_plain_return(c.task, c.expert, c.demo_episodes, c.seed * 1000, c.timeout, c.max_steps)
+
+def _previous(bayes_ci: tuple[float, float], ce_ci: tuple[float, float]) -> float:
+    """The pooled sd of two arms of the previous round from their CIs (equal n)."""
+    return float(np.sqrt(np.mean([sd_from_ci(ci, PREVIOUS_SEEDS) ** 2 for ci in (bayes_ci, ce_ci)])))
+
+
+def _limit(task: str) -> int:
+    return Config.for_task(task).limit
+
+
+PLANNED_SEEDS: dict[tuple[str, str], Plan] = {
+    ("C1", "cartpole/naive"): Plan("mean_train_return", _previous((384.2, 422.3), (357.0, 407.6)), PREVIOUS_ROUND,
+                                   RETURN_MARGIN * _limit("cartpole")),
+    ("C1", "cartpole-200/naive"): Plan("mean_train_return", _previous((166.7, 183.1), (171.8, 184.2)),
+                                       PREVIOUS_ROUND, RETURN_MARGIN * _limit("cartpole-200")),
+    # A share's sd is √(p(1 − p)); the paper says unfinished runs "do not happen often": 1 in 5 assumed.
+    ("C2", TODAY.name): Plan("unfinished", float(np.sqrt(0.2 * 0.8)),
+                             "assumed: unfinished runs uncommon, as the paper says (§4); the previous round had "
+                             "none in either arm, which leaves no spread to measure", SHARE_MARGIN),
+    ("C2", PAPER.name): Plan("collapsed", 0.5, "assumed: the largest spread a share can have (p = ½); no round has "
+                             "run this reading", SHARE_MARGIN),
+    ("C3", "cartpole/bootstrap"): Plan("mean_train_return", _previous((365.1, 402.3), (363.1, 400.8)),
+                                       PREVIOUS_ROUND, RETURN_MARGIN * _limit("cartpole")),
+    # The previous round put Δ near 0, so the decisive question is showing it below +margin.
+    ("C4", "mountaincar-goals/*"): Plan("goals_first30", _previous((0.86, 0.96), (0.90, 0.99)), PREVIOUS_ROUND,
+                                        GOALS_MARGIN, one_sided=True),
+}
+"""Per (claim, setting name): the spread assumed, its source, the margin and the seeds it needs."""
+
+
+def planned_seeds(claim_id: str, setting: Setting | str) -> int:
+    """Seeds per arm for `claim_id` on `setting` (one of its Settings, or that setting's name):
+    POWER to reach the claim's verdict when bayes and ce truly do not differ, at least MIN_SEEDS."""
+    name = setting if isinstance(setting, str) else setting.name
+    if (claim_id, name) not in PLANNED_SEEDS:
+        raise ConfigError(f"no planned seeds for claim {claim_id!r} on setting {name!r}; "
+                          f"planned: {sorted(PLANNED_SEEDS)}")
+    return PLANNED_SEEDS[(claim_id, name)].seeds
+

@@ -1,20 +1,22 @@
-"""Suites of training runs (issue D): declared arms × seeds, run on a local process pool or Ray.
+"""Suites of training runs: declared arms × seeds, run on a local process pool or Ray.
 
-    python -m dqfd_bc_keras.experiments run paper --seeds 10 --workers 2 --out results
-    python -m dqfd_bc_keras.experiments run all --out results     # paper, baselines, sensitivity
+    python -m dqfd_bc_keras.experiments run paper --out results          # each arm its planned seeds
+    python -m dqfd_bc_keras.experiments run all --out results            # every suite of RESULTS.md
     python -m dqfd_bc_keras.experiments run quick --seeds 2 --backend ray --out /tmp/quick
-    python -m dqfd_bc_keras.experiments report results
 
-A suite is a list of `Arm`s (task, time-limit mode, expert loss and any other Config field);
-each (arm, seed) is one `train.py`-equivalent run in `OUT/<arm>/seed<N>/`. A run is complete
-when its `eval.json` exists: running a suite again skips complete runs and resumes a run that
-was cut off from its last checkpoint, so a sweep killed halfway picks up where it stopped.
+A suite is a list of `Arm`s (task, time-limit mode, expert loss, any other Config field, and
+how many seeds it gets); each (arm, seed) is one `train.py`-equivalent run in
+`OUT/<arm>/seed<N>/`. A run is complete when its `eval.json` exists: running a suite again
+skips complete runs and resumes a run that was cut off from its last checkpoint, so a sweep
+killed halfway picks up where it stopped. Every finished run gets a `provenance.json` (the
+code and rules commits it ran under), and every sweep a line in `OUT/sweeps.jsonl`.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -35,15 +37,16 @@ SWEEP_LOG = "sweeps.jsonl"
 
 @dataclass(frozen=True)
 class Arm:
-    """One configuration of a suite; its seeds are the runs."""
+    """One configuration of a suite; its seeds 0 … seeds − 1 are the runs."""
 
     task: str
     timeout: str
     expert_loss: str
     overrides: tuple[tuple[str, object], ...] = ()
-    """Further Config fields (sensitivity: sigma0_sq, expert; quick: a tiny budget)."""
+    """Further Config fields, only those that differ from the task preset."""
     label: str = ""
     """Suffix of the arm's name that says what the overrides change."""
+    seeds: int = 10
 
     @property
     def name(self) -> str:
@@ -54,23 +57,66 @@ class Arm:
                                **dict(self.overrides))
 
 
-# The paper's four settings (ALGORITHM.md §7): C1 on cartpole and cartpole-200 with the naive
-# time limit (the paper's Figs. 3–6), C3 with the bootstrap fix (Fig. 7), C4 on the goal count.
-PAPER_SETTINGS = (("cartpole", "naive"), ("cartpole-200", "naive"), ("cartpole", "bootstrap"),
-                  ("mountaincar-goals", "bootstrap"))
+_SHORT = {"sigma0_sq": "sigma", "expert": "", "eval_every": "eval", "dynamic_demos": "dyn",
+          "early_stop_window": "stopwindow", "total_steps": "steps", "bayes_prior": "prior",
+          "mc_dropout": "mcdropout"}
 
 
-_SHORT = {"sigma0_sq": "sigma", "expert": "", "eval_every": "eval"}
-
-
-def arm(task: str, timeout: str, expert_loss: str, **overrides: object) -> Arm:
+def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides: object) -> Arm:
     """An arm that keeps only the overrides differing from the task preset, labelled by them:
     arms equal in config get one name, so suites sharing an `--out` share their runs."""
     preset = Config.for_task(task).to_dict()
     changed = {k: v for k, v in overrides.items() if preset[k] != v}
     label = "-".join(f"{_SHORT.get(k, k)}{v:g}" if isinstance(v, float) else f"{_SHORT.get(k, k)}{v}"
                      for k, v in changed.items())
-    return Arm(task, timeout, expert_loss, tuple(changed.items()), label)
+    return Arm(task, timeout, expert_loss, tuple(changed.items()), label, seeds)
+
+
+PLANNED_SEEDS = {("cartpole", "naive"): 36, ("cartpole-200", "naive"): 24, ("cartpole", "bootstrap"): 26,
+                 ("mountaincar-goals", "bootstrap"): 10}
+"""Seeds per arm of each claim setting, from the power calculation in docs/PREREGISTRATION.md:
+TOST at α = 0.05 with ≥ 80% power for a true zero difference of mean training return
+(C1, C3), and the floor of 10 where the spread is far below the margin (C4)."""
+
+PROTOCOL = {"eval_every": 1_000, "eval_episodes": 10}
+"""The sample-efficiency protocol, ours and SB3's alike: 10 greedy episodes on the plain env with
+fixed seeds (`seeds.eval_seed`) at exactly every 1,000 interactions."""
+EFFICIENCY_TASKS = {"cartpole": 5, "mountaincar": 10}
+"""Sample-efficiency tasks → demonstration episodes of the imperfect expert (the presets')."""
+C2_PAPER_READING = {"early_stop_window": 0, "total_steps": 60_000}
+"""C2 as the paper runs it: "average ≥ 490, 10 times in a row" with 200-step episodes can never
+fire, so no early stop, and a budget of at least 300 episodes (300 × 200 steps)."""
+
+
+def _paper() -> list[Arm]:
+    """C1–C4 (ALGORITHM.md §7): ce vs bayes in the paper's settings, each with its planned seeds,
+    and C2 also under the paper's own reading."""
+    arms = [arm(t, m, loss, PLANNED_SEEDS[t, m]) for t, m in PLANNED_SEEDS for loss in ("ce", "bayes")]
+    return arms + [arm("cartpole-200", "naive", loss, 10, **C2_PAPER_READING) for loss in ("ce", "bayes")]
+
+
+def _dynamic() -> list[Arm]:
+    """The two readings of dynamic demonstrations, measured with every interaction counted; the
+    rule that picks `Config.dynamic_demos`'s default from them is in docs/PREREGISTRATION.md."""
+    return [arm(task, "bootstrap", loss, 10, dynamic_demos=mode, **PROTOCOL)
+            for task in EFFICIENCY_TASKS for loss in ("bayes", "ce") for mode in ("episodes", "rollouts")]
+
+
+def _efficiency() -> list[Arm]:
+    """Interactions to the plain env's threshold: bayes, ce, DQfD's margin and DQN, against SB3's
+    DQN (benchmarks/bench_sample_efficiency.py)."""
+    return [arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
+            for task, episodes in EFFICIENCY_TASKS.items() for loss in ("bayes", "ce", "margin", "none")]
+
+
+def _ablations() -> list[Arm]:
+    """What the Bayesian machinery contributes, on C3's and C4's settings: dynamic demonstrations
+    off (bayes and ce), the prior term off, σ² fixed at σ0² (no MC dropout)."""
+    arms = []
+    for task in ("cartpole", "mountaincar-goals"):
+        arms += [arm(task, "bootstrap", loss, 10, dynamic_demos="off") for loss in ("bayes", "ce")]
+        arms += [arm(task, "bootstrap", "bayes", 10, bayes_prior=False), arm(task, "bootstrap", "bayes", 10, mc_dropout=False)]
+    return arms
 
 
 def _sensitivity() -> list[Arm]:
@@ -78,20 +124,21 @@ def _sensitivity() -> list[Arm]:
     arms = []
     for task, timeout in (("cartpole", "bootstrap"), ("mountaincar-goals", "bootstrap")):
         for expert in ("imperfect", "strong"):
-            arms += [arm(task, timeout, "bayes", expert=expert, sigma0_sq=s) for s in (0.05, 0.5, 2.0)]
-            arms.append(arm(task, timeout, "ce", expert=expert))
+            arms += [arm(task, timeout, "bayes", 5, expert=expert, sigma0_sq=s) for s in (0.05, 0.5, 2.0)]
+            arms.append(arm(task, timeout, "ce", 5, expert=expert))
     return arms
 
 
 SUITES: dict[str, list[Arm]] = {
-    "paper": [Arm(t, m, loss) for t, m in PAPER_SETTINGS for loss in ("ce", "bayes")],
-    "baselines": [Arm(t, m, loss) for t, m in PAPER_SETTINGS for loss in ("none", "margin", "bc_margin")],
+    "dynamic": _dynamic(),
+    "efficiency": _efficiency(),
+    "paper": _paper(),
+    "ablations": _ablations(),
+    "baselines": [arm(t, m, loss) for t, m in PLANNED_SEEDS for loss in ("none", "margin", "bc_margin")],
     "sensitivity": _sensitivity(),
-    "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick") for loss in ("bayes", "ce")],
+    "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick", 2) for loss in ("bayes", "ce")],
 }
-SEEDS = {"paper": 10, "baselines": 10, "sensitivity": 5, "quick": 2}
-"""Seeds per arm when `--seeds` is not given (sensitivity: the issue's minimum of 5 per cell)."""
-ALL = ("paper", "baselines", "sensitivity")
+ALL = ("dynamic", "efficiency", "paper", "ablations", "baselines", "sensitivity")
 """`run all`: every suite of RESULTS.md, in this order, into one directory (shared arms run once)."""
 
 
@@ -122,6 +169,33 @@ class Outcome:
     error: str = ""
 
 
+RULES = ("dqfd_bc_keras/experiments/claims.py", "docs/PREREGISTRATION.md")
+"""Where the verdict rules live: `rules_commit` is the last commit that changed either."""
+
+
+def _git(*args: str) -> str | None:
+    root = Path(__file__).resolve().parents[2]
+    try:
+        done = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() if done.returncode == 0 else None
+
+
+def provenance() -> dict:
+    """The code a run ran and the rules that will judge it: commits (None outside a git checkout),
+    whether tracked files differed from the commit, and the library versions."""
+    import gymnasium
+    import keras
+    import numpy
+    import tensorflow
+
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    return {"code_commit": _git("rev-parse", "HEAD"), "rules_commit": _git("log", "-1", "--format=%H", "--", *RULES),
+            "dirty": bool(status) if status is not None else None,
+            "versions": {m.__name__: m.__version__ for m in (tensorflow, keras, gymnasium, numpy)}}
+
+
 def run_job(job: Job) -> Outcome:
     """One run (in a worker process): train, resuming a run cut off before, and summarise it."""
     from ..runs import train
@@ -130,9 +204,10 @@ def run_job(job: Job) -> Outcome:
     resume = (job.directory / "checkpoints" / "latest.json").is_file()
     try:
         result = train(job.arm.config(job.seed), job.directory, resume=resume, force=not resume, quiet=True)
+        write_text(job.directory / "provenance.json", json.dumps(provenance(), indent=1))
     except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
         return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}")
-    return Outcome(job, result.episodes, result.env_steps, result.evaluation["mean_return"],
+    return Outcome(job, result.episodes, result.env_steps, result.evaluation.mean_return,
                    time.perf_counter() - started)
 
 
@@ -174,16 +249,17 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
 
 
 def run_suite(
-    suite: str | Sequence[Arm], seeds: int, out: str | Path, workers: int = 2, backend: str = "local",
+    suite: str | Sequence[Arm], seeds: int | None, out: str | Path, workers: int = 2, backend: str = "local",
     address: str | None = None, progress: Callable[[str], None] = print, name: str = "arms",
 ) -> list[Outcome]:
     """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms called `name` in the
-    progress lines and the sweep log); one progress line per run."""
+    progress lines and the sweep log), seeds 0 … `seeds` − 1, or each arm's own number when
+    `seeds` is None; one progress line per run."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
     name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
     out = Path(out)
-    jobs = [Job(arm, seed, out) for arm in arms for seed in range(seeds)]
+    jobs = [Job(arm, seed, out) for arm in arms for seed in range(seeds or arm.seeds)]
     todo = [job for job in jobs if not job.complete]
     progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
              f"on {workers} {backend} worker(s)")
@@ -199,8 +275,9 @@ def run_suite(
                  f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
     if todo:
         log = out / SWEEP_LOG
-        entry = {"suite": name, "seeds": seeds, "runs": len(todo), "workers": workers, "backend": backend,
-                 "seconds": round(time.perf_counter() - started, 1), "ended": time.strftime("%Y-%m-%d %H:%M:%S")}
+        entry = {"suite": name, "seeds": seeds or max(arm.seeds for arm in arms), "runs": len(todo),
+                 "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
+                 "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **provenance()}
         write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
     failed = [o for o in outcomes if o.error]
     if failed:
