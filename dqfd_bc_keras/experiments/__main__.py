@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..cli import ArgumentParser, positive_int, run
 from ..errors import ConfigError
-from .suites import ALL, BACKENDS, SEEDS, SUITES, run_suite
+from .suites import ALL, BACKENDS, SUITES, run_suite
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -16,7 +16,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
     go = commands.add_parser("run", help="run a suite's incomplete runs")
     go.add_argument("suite", choices=[*sorted(SUITES), "all"], help=f"a suite, or all: {', '.join(ALL)}")
-    go.add_argument("--seeds", type=positive_int, help=f"seeds 0 … N−1 per arm (default: {SEEDS})")
+    go.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: each arm's planned seeds)")
     go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     go.add_argument("--out", required=True, help="suite directory")
     go.add_argument("--backend", choices=BACKENDS, default="local")
@@ -28,7 +28,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "run":
         for suite in ALL if args.suite == "all" else (args.suite,):
-            run_suite(suite, args.seeds or SEEDS[suite], args.out, args.workers, args.backend, args.address,
+            run_suite(suite, args.seeds, args.out, args.workers, args.backend, args.address,
                       progress=lambda line: print(line, flush=True))
     else:
         from .report import report
