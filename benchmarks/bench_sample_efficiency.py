@@ -1,16 +1,22 @@
-"""Sample efficiency: environment steps until the greedy policy first solves the plain env.
+"""Sample efficiency: environment interactions until the greedy policy first solves the plain env.
 
-For `bayes`, `ce`, `margin` (DQfD) and `none` (DQN), from 5 (CartPole) / 10 (MountainCar)
-episodes of the imperfect expert, each seed is one run of the experiment runner with a greedy
-evaluation of 10 episodes (fixed seeds) on the plain env every 1,000 env steps. Reported per
-arm: the median and 95% bootstrap CI over seeds of the first evaluated step whose mean return
-reaches the threshold (CartPole-v1 475, MountainCar-v0 −110; a run that never does counts as
-"not reached"), and how many seeds end the run above the threshold (final evaluation).
-When Stable-Baselines3 is installed (`benchmarks/requirements.txt`), its DQN with rl-zoo3's tuned
-hyperparameters is run under the same evaluation protocol, side by side.
+Ours: `bayes`, `ce`, `margin` (DQfD) and `none` (DQN) from 5 (CartPole) / 10 (MountainCar)
+episodes of the imperfect expert, one run of the experiment runner per seed. The baseline:
+Stable-Baselines3's DQN as rl-zoo3 runs it (its tuned hyperparameters, one `learn()` call of
+n_timesteps per seed, so ε decays over the schedule it was tuned with). Both are evaluated on
+one grid, at step 0 and every 1,000 steps: 10 greedy episodes on the plain env with the seed's
+fixed evaluation seeds (`seeds.eval_seed`). A step is an environment interaction that produced
+training data: ours count dynamic-demonstration roll-outs too (evals.csv's `interactions`), SB3
+counts its own `num_timesteps`. Per arm: median and 95% bootstrap CI over seeds of the first
+grid step whose mean reaches the threshold (CartPole-v1 475, MountainCar-v0 −110; never: ∞),
+and for ours SB3's median ÷ ours with its bootstrap CI against the 10× goal
+(dqfd_bc_keras/experiments/efficiency.py). SB3's rows show an independent check beside them.
 
     python benchmarks/bench_sample_efficiency.py [--seeds 10] [--workers 2] [--out results] [--parts ours,sb3] [--json]
     python benchmarks/bench_sample_efficiency.py --quick     # seconds: one seed, tiny budgets (tests)
+
+Writes only under --out: efficiency.json (the arms of parts not run this time are kept) and
+sb3-dqn/<task>/seed<k>.json (evaluations, hyperparameters, versions; reused while they match).
 """
 
 from __future__ import annotations
@@ -18,105 +24,157 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from concurrent.futures import ProcessPoolExecutor
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from importlib.metadata import version
+from importlib.util import find_spec
 from multiprocessing import get_context
 from pathlib import Path
+from typing import NamedTuple
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log level)
-import numpy as np  # noqa: E402
 
-from dqfd_bc_keras.experiments.claims import first_reaching
-from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.config import QUICK  # noqa: E402
 from dqfd_bc_keras.envs import get_task  # noqa: E402
 from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
-from dqfd_bc_keras.experiments.suites import Arm, arm, run_suite  # noqa: E402
+from dqfd_bc_keras.experiments.claims import first_reaching  # noqa: E402
+from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
+from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, ArmSteps,  # noqa: E402
+                                                  interaction_evals, load, rows, save, table)
+from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES, Arm, run_suite  # noqa: E402
 from dqfd_bc_keras.files import write_text  # noqa: E402
-from dqfd_bc_keras.experiments.report import EFFICIENCY_FILE, SB3_LABEL, efficiency_table  # noqa: E402
-from dqfd_bc_keras.experiments.stats import bootstrap_ci  # noqa: E402
+from dqfd_bc_keras.seeds import eval_seed  # noqa: E402
 
-LOSSES = ("bayes", "ce", "margin", "none")
-TASKS = {"cartpole": 5, "mountaincar": 10}
-"""Task → demonstration episodes of the imperfect expert."""
-PROTOCOL = {"eval_every": 1000, "eval_episodes": 10}
+QUICK_PROTOCOL, QUICK_SB3_STEPS = {**PROTOCOL, "eval_every": 300}, 1500
+"""--quick: our quick arm's evaluation interval for both sides, and SB3's budget (seconds)."""
 
-# rl-baselines3-zoo's tuned DQN hyperparameters (hyperparams/dqn.yml) for the two plain envs.
+# rl-baselines3-zoo's tuned DQN entries, verbatim: hyperparams/dqn.yml of DLR-RM/rl-baselines3-zoo
+# at 22e3ff24 (2026-04-23; these two entries unchanged since 2020). `n_timesteps` is rl-zoo3's one
+# `learn()` budget, so it also sets the length of the ε schedule (exploration_fraction × n_timesteps).
 ZOO = {
-    "cartpole": {"env": "CartPole-v1", "steps": 50_000, "kwargs": dict(
+    "cartpole": {"env": "CartPole-v1", "policy": "MlpPolicy", "n_timesteps": 50_000, "kwargs": dict(
         learning_rate=2.3e-3, batch_size=64, buffer_size=100_000, learning_starts=1000, gamma=0.99,
         target_update_interval=10, train_freq=256, gradient_steps=128, exploration_fraction=0.16,
         exploration_final_eps=0.04, policy_kwargs={"net_arch": [256, 256]})},
-    "mountaincar": {"env": "MountainCar-v0", "steps": 120_000, "kwargs": dict(
+    "mountaincar": {"env": "MountainCar-v0", "policy": "MlpPolicy", "n_timesteps": 120_000, "kwargs": dict(
         learning_rate=4e-3, batch_size=128, buffer_size=10_000, learning_starts=1000, gamma=0.98,
         target_update_interval=600, train_freq=16, gradient_steps=8, exploration_fraction=0.2,
         exploration_final_eps=0.07, policy_kwargs={"net_arch": [256, 256]})},
 }
+ANCHOR = {"cartpole": 28_000, "mountaincar": 90_000}
+"""An independent check of this baseline (one `learn()`, an evaluation callback): SB3's DQN with the
+same hyperparameters first reached 475 on CartPole-v1 at 22k/28k/36k steps (3 seeds, median 28k) and
+−110 on MountainCar-v0 at 88k/96k. Printed beside the measured median: the two should agree."""
 
 
 def arms(quick: bool) -> list[Arm]:
-    """Ours, with only what differs from the presets overridden: on CartPole these are the paper and
-    baselines suites' `cartpole/bootstrap` arms, so a shared `--out` runs them once."""
+    """Ours: the lab's `efficiency` suite (on CartPole its arms are the paper's `cartpole/bootstrap`
+    arms, so a shared `--out` runs them once), or one tiny arm."""
     if quick:
-        return [Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, **PROTOCOL, "eval_every": 300}.items()), "eff")]
-    return [arm(task, "bootstrap", loss, demo_episodes=episodes, **PROTOCOL)
-            for task, episodes in TASKS.items() for loss in LOSSES]
+        return [Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, **QUICK_PROTOCOL}.items()), "eff")]
+    return SUITES["efficiency"]
 
 
-def summarise(label: str, evals: list[list[tuple[int, float]]], final: list[float], threshold: float) -> dict:
-    """Median and 95% bootstrap CI over all seeds; a seed that never reaches the threshold is
-    censored (inf), so the median is "not reached" (None) once half the seeds never do."""
-    firsts = [first_reaching(e, threshold) for e in evals]
-    steps = np.array([np.inf if step is None else step for step in firsts])  # step 0 is a real answer
-    median, ci = float(np.median(steps)), bootstrap_ci(steps, np.median)
-    finite = lambda v: v if np.isfinite(v) else None  # noqa: E731  (JSON has no inf)
-    return {"arm": label, "seeds": len(steps), "reached": int(np.isfinite(steps).sum()),
-            "median_steps": finite(median), "ci": [finite(ci[0]), finite(ci[1])],
-            "above_at_end": int(sum(f >= threshold for f in final))}
+def ours(suite: list[Arm], seeds: int, out: Path) -> list[ArmSteps]:
+    """Each arm's seeds (complete runs under `out`), stepped by `interactions`."""
+    steps = []
+    for a in suite:
+        runs = [r for seed in range(seeds) for r in load_runs(out / a.name / f"seed{seed}")]
+        steps.append(ArmSteps.of(a.task, a.expert_loss, map(interaction_evals, runs),
+                                 [r.final["mean_return"] for r in runs], get_task(a.task).solved_return))
+    return steps
 
 
-def ours(run_dirs: list[Path]) -> tuple[list[list[tuple[int, float]]], list[float]]:
-    """Each run's (env step, mean return) evaluations and its final evaluation's mean return."""
-    runs = [record for run_dir in run_dirs for record in load_runs(run_dir)]
-    return ([[(e["env_step"], e["mean_return"]) for e in r.evals] for r in runs],
-            [r.final["mean_return"] for r in runs])
-
-
-def sb3_run(task: str, seed: int, budget: int, path: Path) -> None:
-    """One SB3 DQN run (rl-zoo3 hyperparameters), evaluated like ours: 10 greedy episodes on the
-    plain env with fixed seeds every 1,000 steps; its evaluations are saved to `path`."""
-    import gymnasium as gym
+def sb3_run(task: str, seed: int, budget: int, every: int, path: Path) -> None:
+    """One SB3 DQN run as rl-zoo3 runs it (one `learn()` of `budget` steps), its greedy policy
+    evaluated like ours at step 0 and every `every` steps of its own counter, saved to `path`."""
     import torch
     from stable_baselines3 import DQN
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.env_util import make_vec_env
+
+    class Grid(BaseCallback):
+        """10 greedy episodes (the seed's evaluation seeds) at step 0 and at every multiple of
+        `every` up to `budget`: a rollout of `train_freq` steps may run past the budget."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.evals: list[tuple[int, float]] = []
+
+        def _evaluate(self) -> None:
+            policy = lambda obs: int(self.model.predict(obs, deterministic=True)[0])  # noqa: E731
+            result = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=eval_seed(seed))
+            self.evals.append((self.num_timesteps, result.mean_return))
+
+        def _on_training_start(self) -> None:
+            self._evaluate()
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps % every == 0 and self.num_timesteps <= budget:
+                self._evaluate()
+            return True
 
     torch.set_num_threads(1)
+    spec, grid, started = ZOO[task], Grid(), time.perf_counter()
+    env = make_vec_env(spec["env"], n_envs=1, seed=seed)  # as rl-zoo3: DummyVecEnv of a Monitor
+    model = DQN(spec["policy"], env, seed=seed, verbose=0, **spec["kwargs"])
+    model.learn(total_timesteps=budget, callback=grid)
+    write_text(path, json.dumps({
+        **sb3_settings(task, seed, budget, every), "evals": grid.evals, "seconds": time.perf_counter() - started,
+        "versions": {name: version(name) for name in ("stable-baselines3", "torch", "gymnasium")}}))
+
+
+def sb3_settings(task: str, seed: int, budget: int, every: int) -> dict:
+    """What an SB3 run's file records of how it was run, and must match for it to be reused."""
     spec = ZOO[task]
-    model = DQN("MlpPolicy", gym.make(spec["env"]), seed=seed, verbose=0, **spec["kwargs"])
-    policy = lambda obs: int(model.predict(obs, deterministic=True)[0])  # noqa: E731
-    evals = []
-    for done in range(PROTOCOL["eval_every"], budget + 1, PROTOCOL["eval_every"]):
-        model.learn(PROTOCOL["eval_every"], reset_num_timesteps=False)
-        result = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=10_000 + seed * 1000)
-        evals.append((done, result.mean_return))
-    write_text(path, json.dumps({"task": task, "seed": seed, "budget": budget, "evals": evals}))
+    return {"task": task, "env": spec["env"], "seed": seed, "n_timesteps": budget, "eval_every": every,
+            "eval_episodes": PROTOCOL["eval_episodes"], "eval_seed": eval_seed(seed),
+            "hyperparameters": {"policy": spec["policy"], **spec["kwargs"]}}
 
 
-def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool) -> dict[str, list] | None:
-    """Every (task, seed) of SB3's DQN not yet in `out/sb3-dqn/`, on a process pool; None without SB3."""
-    try:
-        import stable_baselines3  # noqa: F401
-    except ImportError:
-        return None
-    jobs = {(task, seed): out / "sb3-dqn" / task / f"seed{seed}{'-quick' if quick else ''}.json"
+class SB3Job(NamedTuple):
+    task: str
+    seed: int
+    budget: int
+    every: int
+    path: Path
+
+    @property
+    def current(self) -> bool:
+        """Its file exists and records the settings asked for (a changed setting reruns it)."""
+        wanted = sb3_settings(self.task, self.seed, self.budget, self.every)
+        return self.path.is_file() and wanted.items() <= json.loads(self.path.read_text()).items()
+
+
+def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool,
+        progress: Callable[[str], None] = print) -> list[ArmSteps]:
+    """Every (task, seed) of SB3's DQN whose file under `out/sb3-dqn/` is missing or stale, on a
+    process pool; then each task's seeds."""
+    every = (QUICK_PROTOCOL if quick else PROTOCOL)["eval_every"]
+    jobs = {(task, seed): SB3Job(task, seed, QUICK_SB3_STEPS if quick else ZOO[task]["n_timesteps"], every,
+                                 out / "sb3-dqn" / task / f"seed{seed}{'-quick' if quick else ''}.json")
             for task in tasks for seed in range(seeds)}
-    todo = [(task, seed, 3000 if quick else ZOO[task]["steps"], path)
-            for (task, seed), path in jobs.items() if not path.is_file()]
+    todo = [job for job in jobs.values() if not job.current]
+    progress(f"SB3 DQN: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
+             f"on {workers} worker(s)")
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        for future in [pool.submit(sb3_run, *job) for job in todo]:
+        futures = {pool.submit(sb3_run, *job): job for job in todo}
+        for done, future in enumerate(as_completed(futures), start=1):
             future.result()
-    runs = {task: [json.loads(jobs[task, seed].read_text())["evals"] for seed in range(seeds)] for task in tasks}
-    return {task: (evals, [e[-1][1] for e in evals]) for task, evals in runs.items()}
+            job = futures[future]
+            run = json.loads(job.path.read_text())
+            first = first_reaching(run["evals"], get_task(job.task).solved_return)
+            progress(f"[{done}/{len(todo)}] sb3 {job.task} seed{job.seed}: threshold first reached at "
+                     f"{'never' if first is None else f'{first:,.0f}'} ({run['seconds']:.0f} s)")
+    steps = []
+    for task in tasks:
+        evals = [json.loads(jobs[task, seed].path.read_text())["evals"] for seed in range(seeds)]
+        steps.append(ArmSteps.of(task, SB3_METHOD, evals, [e[-1][1] for e in evals], get_task(task).solved_return,
+                                 anchor=ANCHOR[task]))
+    return steps
 
 
 def main(argv=None) -> int:
@@ -126,24 +184,32 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="results", help="suite directory (runs are reused; the table is "
                         f"written there as {EFFICIENCY_FILE})")
     parser.add_argument("--parts", default="ours,sb3", help="what to run: ours, sb3 or both (default)")
-    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the script runs")
-    parser.add_argument("--json", action="store_true", help="one JSON object with every row")
+    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the script runs "
+                        f"(writes no {EFFICIENCY_FILE})")
+    parser.add_argument("--json", action="store_true", help="one JSON list with every arm's row (∞ as Infinity)")
     args = parser.parse_args(argv)
-    seeds, out, parts = 1 if args.quick else args.seeds, Path(args.out), set(args.parts.split(","))
+    parts = set(args.parts.split(","))
+    if parts - {"ours", "sb3"}:
+        parser.error(f"--parts must be ours, sb3 or ours,sb3, got {args.parts!r}")
+    if "sb3" in parts and find_spec("stable_baselines3") is None:
+        parser.error("--parts sb3 needs Stable-Baselines3: pip install -r benchmarks/requirements.txt")
+    seeds, out = 1 if args.quick else args.seeds, Path(args.out)
+    progress = (lambda line: None) if args.json else print
     suite = arms(args.quick)
-    rows = []
+    steps = []
     if "ours" in parts:
-        run_suite(suite, seeds, out, workers=args.workers, progress=lambda line: None if args.json else print(line),
-                  name="sample efficiency")
-        for a in suite:
-            dirs = [out / a.name / f"seed{seed}" for seed in range(seeds)]
-            rows.append(summarise(f"{a.task} {a.expert_loss}", *ours(dirs), get_task(a.task).solved_return))
-    baseline = sb3(sorted({a.task for a in suite}), seeds, args.workers, out, args.quick) if "sb3" in parts else None
-    for task, (evals, final) in (baseline or {}).items():
-        rows.append(summarise(f"{task} {SB3_LABEL}", evals, final, get_task(task).solved_return))
-    if not args.quick:
-        write_text(out / EFFICIENCY_FILE, json.dumps(rows, indent=1))
-    print(json.dumps(rows) if args.json else "\n".join(efficiency_table(rows)))
+        run_suite(suite, seeds, out, workers=args.workers, progress=progress, name="sample efficiency")
+        steps += ours(suite, seeds, out)
+    if "sb3" in parts:
+        steps += sb3(sorted({a.task for a in suite}), seeds, args.workers, out, args.quick, progress)
+    if not args.quick:  # keep the arms of a part not run this time (`--parts sb3` leaves ours as they were)
+        protocol, kept = load(out / EFFICIENCY_FILE) or (PROTOCOL, [])
+        fresh = {(s.task, s.method) for s in steps}
+        if protocol == PROTOCOL:
+            steps += [s for s in kept if (s.task, s.method) not in fresh]
+        steps.sort(key=lambda s: (s.task, s.method == SB3_METHOD))  # stable: ours in the suite's order, then SB3
+        save(out / EFFICIENCY_FILE, PROTOCOL, steps)
+    print(json.dumps(rows(steps)) if args.json else "\n".join(table(steps)))
     return 0
 
 

@@ -33,12 +33,14 @@ def goal_rows(goals: list[int]) -> list[dict]:
 
 
 def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: float = 0.0, **fields) -> FinishedRun:
-    """A run of `rows` (episode, env_step, wall_time and losses filled in); evals every 5k steps."""
+    """A run of `rows` (episode, env_step, wall_time and losses filled in); evals every 5k interactions
+    (at 4k loop steps each: roll-outs played the rest)."""
     config = Config.for_task(**fields)
     steps = np.cumsum([r["length"] for r in rows])
     metrics = [{**{f: 0.0 for f in METRIC_FIELDS}, **r, "episode": i + 1, "env_step": int(steps[i]),
+                "interactions": int(steps[i]),
                 "wall_time": 60.0 * (i + 1) / len(rows)} for i, r in enumerate(rows)]
-    evaluations = [{"env_step": 5000 * i, "episode": 0, "mean_return": m, "std_return": 0.0, "mean_goals": None}
+    evaluations = [{"env_step": 4000 * i, "interactions": 5000 * i, "episode": 0, "mean_return": m, "std_return": 0.0, "mean_goals": None}
                    for i, m in enumerate(evals)]
     return FinishedRun(path, config, metrics, evaluations, {"task": config.task, "mean_return": final})
 
@@ -92,17 +94,17 @@ def test_per_run_metrics_by_hand(tmp_path):
     assert analysis.episodes_to_solve(solver) == 17 and analysis.finished(solver)
     assert analysis.collapses(solver) == 1
     assert analysis.PER_RUN["mean_train_return"](solver) == pytest.approx(SOLVER_MEAN)
-    assert analysis.steps_to_threshold(solver) == 10_000  # 480 ≥ 475 at the third evaluation
+    assert analysis.interactions_to_threshold(solver) == 10_000  # 480 ≥ 475 at the third evaluation
     unfinished = make_run(tmp_path, cartpole_rows(UNFINISHED), [20.0, 400.0], **CP)
     assert analysis.episodes_to_solve(unfinished) is None and not analysis.finished(unfinished)
     assert analysis.PER_RUN["episodes_to_solve"](unfinished) == np.inf  # censored
     assert analysis.PER_RUN["unfinished"](unfinished) == 1.0
     assert analysis.collapses(unfinished) == 2 and analysis.PER_RUN["collapsed"](unfinished) == 1.0
-    assert analysis.steps_to_threshold(unfinished) is None
+    assert analysis.interactions_to_threshold(unfinished) == np.inf
     goals = make_run(tmp_path, goal_rows([1] * 30 + [3] * 10), [-200.0, -110.0], **MC)
     assert analysis.PER_RUN["goals_first30"](goals) == 1.0
     assert analysis.PER_RUN["goals_all"](goals) == pytest.approx(60 / 40)
-    assert analysis.steps_to_threshold(goals) == 5000  # −110 reaches MountainCar-v0's threshold
+    assert analysis.interactions_to_threshold(goals) == 5000  # −110 reaches MountainCar-v0's threshold
     assert analysis.episodes_to_solve(goals) is None  # no early-stopping rule on MountainCar
 
 
@@ -396,24 +398,13 @@ def test_the_reference_pair_is_the_one_at_the_preset(tmp_path):
     assert (bayes.config["total_steps"], ce.config["total_steps"], len(bayes.runs)) == (100_000, 100_000, 1)
 
 
-def test_report_quotes_the_sweep_log_and_the_efficiency_table(tmp_path):
+def test_report_quotes_the_sweep_log(tmp_path):
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(
         {"suite": suite, "seeds": 10, "runs": runs, "workers": 2, "backend": "local", "seconds": seconds,
          "ended": "2026-11-26 08:00:00"}) + "\n" for suite, runs, seconds in (("paper", 80, 600.0), ("baselines", 9, 300.0))))
-    (tmp_path / results.EFFICIENCY_FILE).write_text(json.dumps([
-        {"arm": "cartpole bayes", "seeds": 10, "reached": 9, "median_steps": 3000.0, "ci": [2000.0, None],
-         "above_at_end": 9},
-        {"arm": "mountaincar none", "seeds": 10, "reached": 2, "median_steps": None, "ci": [None, None],
-         "above_at_end": 0},
-        {"arm": f"cartpole {results.SB3_LABEL}", "seeds": 10, "reached": 10, "median_steps": 22500.0,
-         "ci": [16000.0, 27000.0], "above_at_end": 7}]))
     text = results.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
     assert "| paper | 10 | 80 | 2 × local | 10.0 min | 2026-11-26 08:00:00 |" in text
     assert "| baselines | 10 | 9 | 2 × local | 5.0 min |" in text and "Sum: 15.0 min" in text
-    assert "| cartpole bayes | 3,000 | [2,000, ∞] | 9/10 | 9/10 | 7.5× |" in text  # 22,500 / 3,000
-    assert "| mountaincar none | not reached | [∞, ∞] | 2/10 | 0/10 | — |" in text  # no SB3 row, no median
-    assert f"| cartpole {results.SB3_LABEL} | 22,500 | [16,000, 27,000] | 10/10 | 7/10 | 1.0× |" in text
-    assert "5 episodes of the imperfect scripted expert on CartPole" in text
 
 
 def test_regenerating_the_report_keeps_the_hand_written_notes(tmp_path):
@@ -431,3 +422,47 @@ def test_trailing_mean_by_hand():
 
     np.testing.assert_allclose(trailing_mean(np.array([2.0, 4.0, 0.0, 8.0]), 2), [2.0, 3.0, 2.0, 4.0])
     np.testing.assert_allclose(trailing_mean(np.array([1.0, 2.0]), 1), [1.0, 2.0])
+
+
+def _arm_of(tmp_path, name: str, values: list[list[int]], **fields) -> ArmRuns:
+    """cartpole/bootstrap runs whose plain returns per episode are `values` (one list per seed)."""
+    runs = [make_run(tmp_path / name / str(seed), cartpole_rows(lengths), seed=seed, task="cartpole", **fields)
+            for seed, lengths in enumerate(values)]
+    return ArmRuns(runs[0].config.to_dict(), runs, name)
+
+
+def test_ablations_pair_with_the_full_arm_and_are_judged_against_the_margin(tmp_path):
+    """Mean training returns by hand: full 400 every seed; the prior-off arm 400 ± 2 (within ±25:
+    no measurable contribution), dynamic demos off 300 (contributes: 100 beyond +25), MC dropout
+    off 480 (hurts)."""
+    full = _arm_of(tmp_path, "full", [[400] * 5] * 4)
+    prior = _arm_of(tmp_path, "prior", [[398] * 5, [402] * 5] * 2, bayes_prior=False)
+    dynamic = _arm_of(tmp_path, "dyn", [[300] * 5] * 4, dynamic_demos="off")
+    dropout = _arm_of(tmp_path, "mc", [[480] * 5] * 4, mc_dropout=False)
+    rollouts = _arm_of(tmp_path, "roll", [[420] * 5] * 4, dynamic_demos="rollouts")  # not the preset's mode
+    pairs = analysis.ablation_pairs([full, prior, dynamic, dropout, rollouts])
+    assert sorted((key, a.name, f.name) for key, a, f in pairs) == [
+        ("bayes_prior", "prior", "full"), ("dynamic_demos", "dyn", "full"), ("mc_dropout", "mc", "full")]
+    verdicts = {a.name: analysis.judge_ablation(a, f).verdict for _, a, f in pairs}
+    assert verdicts == {"prior": "no measurable contribution", "dyn": "contributes", "mc": "hurts"}
+
+
+def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_path):
+    """Evaluations every 5k interactions: a seed reaching 500 at the second evaluation solves at 5,000,
+    one never reaching it at ∞."""
+    def arm(name, mode, loss, evals):
+        runs = [make_run(tmp_path / name / str(seed), cartpole_rows([500] * 3), e, seed=seed, task="cartpole",
+                         expert_loss=loss, dynamic_demos=mode, max_steps=400 + i)
+                for seed, e in enumerate(evals) for i in [int(name[-1])]]
+        return ArmRuns(runs[0].config.to_dict(), runs, name)
+
+    fast, slow = [[0.0, 500.0]] * 3, [[0.0, 0.0, 500.0]] * 3
+    arms = [arm("e1", "episodes", "bayes", slow), arm("r1", "rollouts", "bayes", fast),
+            arm("e2", "episodes", "ce", slow), arm("r2", "rollouts", "ce", fast),
+            arm("e3", "episodes", "bayes", fast), arm("r3", "rollouts", "bayes", slow)]
+    assert analysis.dynamic_default(arms)[0] is None  # 3 of the 4 pairs have run
+    four = arms + [arm("e4", "episodes", "ce", slow), arm("r4", "rollouts", "ce", fast)]
+    choice, pairs = analysis.dynamic_default(four)
+    assert choice == "rollouts" and [w for *_, w in pairs].count("rollouts") == 3
+    tie = arms + [arm("e4", "episodes", "ce", fast), arm("r4", "rollouts", "ce", slow)]
+    assert analysis.dynamic_default(tie)[0] == "episodes"  # 2–2

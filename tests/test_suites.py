@@ -7,7 +7,8 @@ import pytest
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
-from dqfd_bc_keras.experiments.suites import ALL, PLANNED_SEEDS, SUITES, run_suite, suite_arms
+from dqfd_bc_keras.experiments.claims import planned_seeds
+from dqfd_bc_keras.experiments.suites import ALL, SUITES, run_suite, suite_arms
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -15,7 +16,9 @@ def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readi
     names = [arm.name for arm in arms]
     assert names[:8] == [f"{setting}-{loss}" for setting in ("cartpole-naive", "cartpole-200-naive",
                          "cartpole-bootstrap", "mountaincar-goals-bootstrap") for loss in ("ce", "bayes")]
-    assert [arm.seeds for arm in arms[:8:2]] == [PLANNED_SEEDS[k] for k in PLANNED_SEEDS]
+    assert [arm.seeds for arm in arms[:8:2]] == [planned_seeds(claim, setting) for claim, setting in (
+        ("C1", "cartpole/naive"), ("C1", "cartpole-200/naive"), ("C3", "cartpole/bootstrap"),
+        ("C4", "mountaincar-goals/*"))] == [36, 24, 26, 10]
     paper_reading = [arm.config(0) for arm in arms[8:]]
     assert [(c.task, c.timeout, c.expert_loss, c.early_stop_window, c.total_steps // c.limit)
             for c in paper_reading] == [("cartpole-200", "naive", loss, 0, 300) for loss in ("ce", "bayes")]

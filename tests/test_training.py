@@ -154,7 +154,7 @@ def episode_rows(agent, length: int) -> np.ndarray:
 
 def test_one_episode_acts_stores_and_learns_every_step(built):
     learner = built[0]
-    agent, interaction, env = learner.agent, learner.interaction, learner.interaction.env
+    agent, interaction = learner.agent, learner.interaction
     replay = agent.replay
     assert int(replay.size.numpy()) >= learner.config.batch_size  # the demos alone fill a batch
     obs = interaction.reset(episode_seed(learner.config.seed, 0))
@@ -186,7 +186,7 @@ def test_one_episode_acts_stores_and_learns_every_step(built):
 
 def test_play_stops_at_the_step_budget_and_the_episode_continues(built):
     learner = built[0]
-    interaction, env = learner.interaction, learner.interaction.env
+    interaction = learner.interaction
     obs = interaction.reset(episode_seed(learner.config.seed, 1))
     env0 = int(interaction.env_steps.numpy())
     obs3, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(3, tf.int64))

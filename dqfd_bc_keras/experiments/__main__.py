@@ -1,4 +1,4 @@
-"""The lab's command line: `python -m dqfd_bc_keras.experiments run|report …`."""
+"""The lab's command line: `python -m dqfd_bc_keras.experiments run|export|report …`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..cli import ArgumentParser, positive_int, run
-from ..errors import ConfigError
 from .suites import ALL, BACKENDS, SUITES, run_suite
 
 
@@ -21,23 +20,42 @@ def main(argv: Sequence[str] | None = None) -> int:
     go.add_argument("--out", required=True, help="suite directory")
     go.add_argument("--backend", choices=BACKENDS, default="local")
     go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
-    rep = commands.add_parser("report", help="statistics, figures and a RESULTS-style markdown of a suite dir")
-    rep.add_argument("directory")
-    rep.add_argument("--results", default="docs/RESULTS.md", help="markdown file to write")
-    rep.add_argument("--figures", default="docs/figures", help="directory for the PNG figures")
+    exp = commands.add_parser(
+        "export", help="one archive of exactly the files the report reads",
+        description="Writes the suite's config.json, metrics.csv, evals.csv, eval.json, demonstrations.json, "
+                    "dynamic_demos.json and provenance.json of every complete run, its sweep logs and the sample-"
+                    "efficiency benchmark's files into one .tar.xz; the same data give the same bytes.")
+    exp.add_argument("directory", help="suite directory")
+    exp.add_argument("--out", required=True, help="archive to write, e.g. results.tar.xz")
+    rep = commands.add_parser(
+        "report", help="statistics, figures, RESULTS.md and per_seed.csv of a suite directory or archive",
+        description="Writes RESULTS.md, per_seed.csv and figures/ into SOURCE if it is a suite directory, or into "
+                    "<name>-report/ beside it if it is an archive (results.tar.xz: results-report/); into the "
+                    "project's docs/ only with --docs. The hand-written block between the notes markers of an "
+                    "existing RESULTS.md is kept.")
+    rep.add_argument("source", help="a suite directory, or an archive written by `export`")
+    rep.add_argument("--docs", action="store_true",
+                     help="write docs/RESULTS.md, docs/per_seed.csv and docs/figures/ of the current directory")
+    rep.add_argument("--results", help="markdown file to write, per_seed.csv beside it (overrides the default "
+                     "and --docs)")
+    rep.add_argument("--figures", help="directory for the PNG figures (default: figures/ beside the markdown)")
     args = parser.parse_args(argv)
     if args.command == "run":
         for suite in ALL if args.suite == "all" else (args.suite,):
             run_suite(suite, args.seeds, args.out, args.workers, args.backend, args.address,
                       progress=lambda line: print(line, flush=True))
-    else:
-        from .report import report
+    elif args.command == "export":
+        from .data import export_archive
 
-        directory = Path(args.directory)
-        if not directory.is_dir():
-            raise ConfigError(f"{directory}: no such suite directory")
-        report(directory, Path(args.results), Path(args.figures))
-        print(f"wrote {args.results} and figures in {args.figures}")
+        names = export_archive(args.directory, args.out)
+        print(f"wrote {args.out}: {len(names)} files")
+    else:
+        from .report import PER_SEED, default_location, report
+
+        results = Path(args.results or (Path("docs") if args.docs else default_location(args.source)) / "RESULTS.md")
+        figures = Path(args.figures or results.parent / "figures")
+        report(args.source, results, figures)
+        print(f"wrote {results}, {results.with_name(PER_SEED)} and figures in {figures}")
     return 0
 
 

@@ -63,7 +63,9 @@ METRICS = {
                      "(all, if fewer)",
     "goals_all": "mean flags reached per episode over all training episodes",
     "final_eval": "mean return of the final greedy evaluation (eval.json) on the plain env",
-    "steps_to_threshold": "first evaluation env step whose mean return ≥ the plain env's solved threshold",
+    "interactions_to_threshold": "interactions (every env step the learner's data came from, roll-outs included) "
+                                 "at the first grid evaluation whose mean return ≥ the plain env's solved "
+                                 "threshold; ∞ if none did (medians and rank tests)",
 }
 
 
@@ -102,13 +104,16 @@ def collapses(run: FinishedRun) -> int:
 
 
 def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> float | None:
-    """The first evaluated env step of (env step, mean return) pairs whose mean reaches `threshold`."""
+    """The first evaluated step of (step, mean return) pairs whose mean reaches `threshold`."""
     return next((float(step) for step, mean in evals if mean >= threshold), None)
 
 
-def steps_to_threshold(run: FinishedRun) -> float | None:
-    return first_reaching(((e["env_step"], e["mean_return"]) for e in run.evals),
+def interactions_to_threshold(run: FinishedRun) -> float:
+    """Counted interactions at the first evaluation that reaches the plain env's threshold; inf if
+    none did."""
+    step = first_reaching(((e["interactions"], e["mean_return"]) for e in run.evals),
                           get_task(run.config.task).solved_return)
+    return np.inf if step is None else step
 
 
 PER_RUN: dict[str, Callable[[FinishedRun], float]] = {
@@ -120,9 +125,10 @@ PER_RUN: dict[str, Callable[[FinishedRun], float]] = {
     "goals_first30": lambda r: float(r.column("goals")[:EARLY_EPISODES].mean()),
     "goals_all": lambda r: float(r.column("goals").mean()),
     "final_eval": lambda r: float(r.final["mean_return"]),
+    "interactions_to_threshold": interactions_to_threshold,
 }
 """Each metric as one number per run, for statistics over seeds."""
-CENSORED = ("episodes_to_solve",)
+CENSORED = ("episodes_to_solve", "interactions_to_threshold")
 """Metrics with inf for "never": summarised by medians, compared by ranks only."""
 SHARES = ("unfinished", "collapsed")
 """0/1 metrics: their mean is a share of runs, compared with Fisher's exact test."""
@@ -337,7 +343,8 @@ def judge_c4(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
 
 
 RULE_CONSTANTS = {"ALPHA": f"{ALPHA:g}", "TOST_LEVEL": f"{TOST_LEVEL:.0%}", "RETURN_MARGIN": f"{RETURN_MARGIN:g}",
-                  "SHARE_MARGIN": f"{SHARE_MARGIN:g}", "GOALS_MARGIN": f"{GOALS_MARGIN:g}"}
+                  "SHARE_MARGIN": f"{SHARE_MARGIN:g}", "GOALS_MARGIN": f"{GOALS_MARGIN:g}",
+                  "ABLATION_METRIC": "metric", "DYNAMIC_TIE": "`episodes`"}
 """How each constant named in a rule's docstring reads in RESULTS.md."""
 
 
@@ -352,9 +359,13 @@ class Claim:
 
     @property
     def rule(self) -> str:
-        """The verdict rule, from the judge's docstring, with the constants filled in."""
-        text = " ".join(self.judge.__doc__.split())
-        return re.sub(r"\b[A-Z][A-Z_]+\b", lambda m: RULE_CONSTANTS.get(m.group(), m.group()), text)
+        return rule_text(self.judge)
+
+
+def rule_text(judge: Callable) -> str:
+    """A verdict rule as RESULTS.md prints it: the judge's docstring with the constants filled in."""
+    text = " ".join(judge.__doc__.split())
+    return re.sub(r"\b[A-Z][A-Z_]+\b", lambda m: RULE_CONSTANTS.get(m.group(), m.group()), text)
 
 
 _WINDOW = Config.for_task("cartpole-200").early_stop_window
@@ -381,6 +392,73 @@ def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> Verdict:
     if min(len(bayes.runs), len(ce.runs)) < 2:
         return Verdict("inconclusive (n < 2)")
     return claim.judge(bayes, ce)
+
+
+# --- ablations and the dynamic-demonstration default (docs/PREREGISTRATION.md §2, §6) -------
+ABLATED = {"dynamic_demos": "off", "bayes_prior": False, "mc_dropout": False}
+"""The part each ablation switches off, and its value when off."""
+ABLATION_METRIC = {"cartpole": ("mean_train_return", RETURN_MARGIN), "mountaincar-goals": ("goals_first30", None)}
+"""Per task: the metric an ablation is judged on and its margin (a fraction of the limit, or GOALS_MARGIN)."""
+
+
+def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
+    """(switched-off part, ablated arm, full arm): arms equal in every field but one part of ABLATED,
+    which the ablated arm switches off and the full arm has as the preset does."""
+    def without(arm: ArmRuns, key: str) -> dict:
+        return {k: v for k, v in arm.config.items() if k != key}
+
+    return [(key, ablated, full) for key, off in ABLATED.items() for ablated in arms
+            if ablated.config[key] == off and ablated.config["task"] in ABLATION_METRIC
+            for full in arms if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)]
+
+
+def _preset(arm: ArmRuns, key: str) -> object:
+    return Config.for_task(arm.config["task"]).to_dict()[key]
+
+
+def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
+    """On the task's ABLATION_METRIC (mean training return within ±RETURN_MARGIN × limit; goals over
+    the first 30 episodes within ±GOALS_MARGIN), the TOST_LEVEL CI of full − ablated: no measurable
+    contribution if it lies within ±margin; contributes if it lies wholly above +margin; hurts if
+    wholly below −margin; else inconclusive."""
+    metric, fraction = ABLATION_METRIC[full.config["task"]]
+    margin = GOALS_MARGIN if fraction is None else fraction * full.runs[0].config.limit
+    comparison = compare(metric, full, ablated)
+    low, high = comparison.tost
+    if equivalent(comparison.tost, margin):
+        verdict = "no measurable contribution"
+    else:
+        verdict = "contributes" if low > margin else "hurts" if high < -margin else "inconclusive"
+    return _verdict(verdict, [comparison], full, ablated, margin)
+
+
+DYNAMIC_MODES = ("episodes", "rollouts")
+DYNAMIC_TIE = "episodes"
+"""At a tie, the reading that costs no interaction (and is the paper's literal wording)."""
+
+
+def dynamic_default(arms: list[ArmRuns]) -> tuple[str | None, list[tuple[ArmRuns, ArmRuns, str]]]:
+    """The default of `Config.dynamic_demos` by the pre-registered rule: per (task, loss) pair of
+    arms equal but for the mode, the mode with the lower median interactions_to_threshold (∞ for
+    never) wins (a tie wins for neither); the mode winning ≥ 3 of the 4 pairs is the default, else
+    DYNAMIC_TIE."""
+    # Returns the default (None until all 4 pairs have run) and each pair with its winner.
+    def rest(arm: ArmRuns) -> dict:
+        return {k: v for k, v in arm.config.items() if k != "dynamic_demos"}
+
+    pairs = []
+    for first in arms:
+        if first.config["dynamic_demos"] != DYNAMIC_MODES[0]:
+            continue
+        for second in arms:
+            if second.config["dynamic_demos"] == DYNAMIC_MODES[1] and rest(second) == rest(first):
+                medians = [np.median(a.values("interactions_to_threshold")) for a in (first, second)]
+                winner = "tie" if medians[0] == medians[1] else DYNAMIC_MODES[int(medians[1] < medians[0])]
+                pairs.append((first, second, winner))
+    if len(pairs) < 4:
+        return None, pairs
+    wins = {mode: sum(w == mode for *_, w in pairs) for mode in DYNAMIC_MODES}
+    return next((m for m, n in wins.items() if n >= 3), DYNAMIC_TIE), pairs
 
 
 # --- planned seeds --------------------------------------------------------------------------

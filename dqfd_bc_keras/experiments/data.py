@@ -1,17 +1,85 @@
-"""Run directories as the lab reads them: each complete run parsed into a `FinishedRun`."""
+"""Suites as the lab reads them: each complete run parsed into a `FinishedRun`, and the suite as
+one archive of exactly the files the report reads, so results can be re-derived elsewhere.
+
+A source is a suite directory or such an archive (`export_archive`); `open_suite` gives either
+as a directory, so every reader of the lab reads files from one place.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
+import lzma
 import os
-from dataclasses import dataclass
-from pathlib import Path
+import tarfile
+import tempfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
 from ..config import Config
 from ..errors import ConfigError
+from ..files import atomic_path
+
+SWEEP_LOG = "sweeps.jsonl"
+"""One line per sweep in the suite directory: what ran, on how many workers, in how many seconds, from
+which commits."""
+
+RUN_FILES = ("config.json", "metrics.csv", "evals.csv", "eval.json", "dynamic_demos.json", "demonstrations.json",
+             "provenance.json")
+"""What the lab reads of a run directory; the first four are in every complete run (eval.json,
+written last, marks a run complete), the others only where they apply."""
+REQUIRED = RUN_FILES[:4]
+COLUMNS = {"metrics.csv": ("episode", "env_step", "return", "plain_return", "length", "goals", "wall_time"),
+           "evals.csv": ("env_step", "interactions", "mean_return")}
+"""The columns the lab reads by name; further ones are kept and may be read by name too."""
+BENCHMARK_FILES = ("efficiency.json", "sb3-dqn")
+"""What benchmarks/bench_sample_efficiency.py writes into the suite directory: its table and SB3's runs."""
+ARCHIVE_SUFFIX = ".tar.xz"
+
+
+@dataclass(frozen=True)
+class Demonstrations:
+    """demonstrations.json: the D_demo a run started from, before any dynamic demonstration."""
+
+    transitions: int
+    plain_returns: list[float]
+    """Return of each episode under the plain env's rewards."""
+    expert: str | None = None
+    source: str | None = None
+    """"recorded" (from `expert`) or "file" (a dataset given to the run)."""
+
+    @classmethod
+    def of(cls, fields: dict) -> Demonstrations:
+        transitions, returns = int(fields["transitions"]), [float(r) for r in fields["plain_returns"]]
+        if not returns:
+            raise ValueError("no episode in plain_returns")
+        return cls(transitions, returns, fields.get("expert"), fields.get("source"))
+
+    @property
+    def episodes(self) -> int:
+        return len(self.plain_returns)
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """provenance.json: the code and the claims rules a run was trained with."""
+
+    code_commit: str | None = None
+    rules_commit: str | None = None
+    dirty: bool = False
+    """Trained from a working tree with uncommitted changes: the commit alone does not reproduce it."""
+    versions: dict = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, fields: dict) -> Provenance:
+        """Keys it lacks are unknown (None), or clean."""
+        return cls(fields.get("code_commit"), fields.get("rules_commit"), bool(fields.get("dirty", False)),
+                   dict(fields.get("versions") or {}))
 
 
 @dataclass
@@ -19,32 +87,196 @@ class FinishedRun:
     """One complete run directory, parsed: what every table and figure of the lab reads."""
 
     path: Path
+    """Where it was read from (inside an archive: the archive's path / the run's directory)."""
     config: Config
     metrics: list[dict]
     evals: list[dict]
     final: dict
+    demonstrations: Demonstrations | None = None
+    """None for plain DQN, and for a run from before demonstrations.json was written."""
+    dynamic_demos: list[dict] = field(default_factory=list)
+    """dynamic_demos.json: one entry per dynamic-demonstration update."""
+    provenance: Provenance | None = None
 
     def column(self, name: str) -> np.ndarray:
         return np.array([row[name] for row in self.metrics], dtype=float)
 
+    @property
+    def demo_transitions(self) -> int | None:
+        """Demonstration transitions the run started from: 0 for plain DQN, None if not recorded."""
+        if not self.config.uses_demos:
+            return 0
+        return None if self.demonstrations is None else self.demonstrations.transitions
 
-def _read_csv(path: Path) -> list[dict]:
-    if not path.is_file():
-        return []
-    with path.open(newline="") as f:
-        return [{k: float(v) if v != "" else None for k, v in row.items()} for row in csv.DictReader(f)]
+    @property
+    def demonstrator_return(self) -> float | None:
+        """Mean plain return of those demonstrations: None for plain DQN or if not recorded."""
+        return None if self.demonstrations is None else float(np.mean(self.demonstrations.plain_returns))
 
 
-def load_runs(suite_dir: str | os.PathLike) -> list[FinishedRun]:
-    """Every complete run (one with eval.json) below `suite_dir`, in path order."""
+class RunFileError(ConfigError):
+    """A file of a complete run is missing or unreadable; `file` is relative to the suite."""
+
+    def __init__(self, file: PurePosixPath, problem: str) -> None:
+        super().__init__(f"{file}: {problem}")
+        self.file, self.problem = file, problem
+
+
+def _text(path: Path, file: PurePosixPath) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise RunFileError(file, "not UTF-8 text") from None
+
+
+def _read_csv(path: Path, file: PurePosixPath) -> list[dict]:
+    """Rows of numbers by column name (empty cells None); a truncated or garbled file is refused."""
+    text = _text(path, file)
+    if text and not text.endswith("\n"):
+        raise RunFileError(file, "ends in the middle of a line (truncated?)")
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header, *lines = list(reader) or [[]]
+    except csv.Error as error:
+        raise RunFileError(file, f"line {reader.line_num}: {error}") from None
+    missing = [c for c in COLUMNS[path.name] if c not in header]
+    if missing:
+        raise RunFileError(file, f"no column(s) {missing} in the header")
+    rows = []
+    for line, values in enumerate(lines, start=2):  # one row per line: no field holds a newline
+        if len(values) != len(header):
+            raise RunFileError(file, f"line {line} has {len(values)} of {len(header)} fields (truncated?)")
+        try:
+            rows.append({k: float(v) if v != "" else None for k, v in zip(header, values)})
+        except ValueError as error:
+            raise RunFileError(file, f"line {line}: {error}") from None
+    return rows
+
+
+def _read_json(path: Path, file: PurePosixPath, kind: type) -> dict | list:
+    """The JSON object (`kind` dict) or array (`kind` list) in `path`."""
+    try:
+        value = json.loads(_text(path, file))
+    except json.JSONDecodeError as error:
+        raise RunFileError(file, f"not valid JSON ({error})") from None
+    if not isinstance(value, kind):
+        raise RunFileError(file, f"expected a JSON {'object' if kind is dict else 'array'}")
+    return value
+
+
+def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> FinishedRun:
+    """The complete run in `directory` (`relative` to its suite); RunFileError names a bad file."""
+    def read(name: str, kind: type, parse: Callable = lambda value: value):
+        if not (directory / name).is_file():
+            return None
+        value = _read_json(directory / name, relative / name, kind)
+        try:
+            return parse(value)
+        except KeyError as error:
+            raise RunFileError(relative / name, f"no {error}") from None
+        except (TypeError, ValueError) as error:
+            raise RunFileError(relative / name, str(error)) from None
+
+    for name in REQUIRED:
+        if not (directory / name).is_file():
+            raise RunFileError(relative / name, "missing (the run has eval.json, so it should be complete)")
+    metrics = _read_csv(directory / "metrics.csv", relative / "metrics.csv")
+    if not metrics:
+        raise RunFileError(relative / "metrics.csv", "no episodes")
+    final = read("eval.json", dict)
+    if "mean_return" not in final:
+        raise RunFileError(relative / "eval.json", "no mean_return")
+    return FinishedRun(shown, read("config.json", dict, Config.from_dict), metrics,
+                       _read_csv(directory / "evals.csv", relative / "evals.csv"), final,
+                       read("demonstrations.json", dict, Demonstrations.of), read("dynamic_demos.json", list) or [],
+                       read("provenance.json", dict, Provenance.of))
+
+
+def _run_dirs(directory: Path) -> list[Path]:
+    """Every complete run (a directory with eval.json) below `directory`, in path order."""
+    return sorted(final.parent for final in directory.rglob("eval.json"))
+
+
+def _load(directory: Path, shown: Path, skipped: list[RunFileError] | None) -> list[FinishedRun]:
     runs = []
-    for final in sorted(Path(suite_dir).rglob("eval.json")):
-        path = final.parent
-        if (path / "config.json").is_file() and (path / "metrics.csv").is_file():
-            try:
-                config = Config.from_dict(json.loads((path / "config.json").read_text()))
-            except (ConfigError, json.JSONDecodeError) as error:
-                raise ConfigError(f"{path / 'config.json'}: {error}") from None
-            runs.append(FinishedRun(path, config, _read_csv(path / "metrics.csv"), _read_csv(path / "evals.csv"),
-                                  json.loads(final.read_text())))
+    for run_dir in _run_dirs(directory):
+        relative = PurePosixPath(run_dir.relative_to(directory).as_posix())
+        try:
+            runs.append(_read_run(run_dir, relative, shown / relative))
+        except RunFileError as error:
+            if skipped is None:
+                raise ConfigError(f"{shown / error.file}: {error.problem}") from None
+            skipped.append(error)
     return runs
+
+
+@contextlib.contextmanager
+def open_suite(source: str | os.PathLike) -> Iterator[Path]:
+    """`source` itself if it is a suite directory; an archive of one extracted into a temporary
+    directory, removed on exit. Anything else is a ConfigError naming it."""
+    source = Path(source)
+    if source.is_dir():
+        yield source
+        return
+    if not source.is_file():
+        raise ConfigError(f"{source}: no such suite directory or archive")
+    with tempfile.TemporaryDirectory(prefix="dqfd-suite-") as tmp:
+        _extract(source, Path(tmp))
+        yield Path(tmp)
+
+
+def _extract(archive: Path, root: Path) -> None:
+    """The archive's regular files into `root`; a member naming a place outside it is refused."""
+    try:
+        with tarfile.open(archive, "r:xz") as tar:
+            for member in tar:
+                name = PurePosixPath(member.name)
+                if name.is_absolute() or ".." in name.parts:
+                    raise ConfigError(f"{archive}: member {member.name!r} points outside the suite")
+                if member.isfile():
+                    target = root.joinpath(*name.parts)
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    target.write_bytes(tar.extractfile(member).read())
+    except (tarfile.TarError, lzma.LZMAError, EOFError) as error:
+        problem = f"not a suite directory or a readable {ARCHIVE_SUFFIX} archive ({error})"
+        raise ConfigError(f"{archive}: {problem}") from None
+
+
+def load_runs(source: str | os.PathLike, skipped: list[RunFileError] | None = None) -> list[FinishedRun]:
+    """Every complete run of `source` (a suite directory, an archive of one, or a run directory),
+    in path order. A run with a missing or unreadable file raises a ConfigError naming the file;
+    given a `skipped` list, it is left out and its error appended there instead."""
+    with open_suite(source) as directory:
+        return _load(directory, Path(source), skipped)
+
+
+def lab_files(directory: Path) -> list[str]:
+    """The files of the suite in `directory` that the report reads, relative and sorted: the
+    RUN_FILES of every complete run, every sweep log and the benchmark's files."""
+    files = {run_dir / name for run_dir in _run_dirs(directory) for name in RUN_FILES if (run_dir / name).is_file()}
+    files |= set(directory.rglob(SWEEP_LOG))
+    for name in BENCHMARK_FILES:
+        files |= {p for p in [directory / name, *(directory / name).rglob("*")] if p.is_file()}
+    return sorted(p.relative_to(directory).as_posix() for p in files)
+
+
+def export_archive(source: str | os.PathLike, path: str | os.PathLike) -> list[str]:
+    """Write the `lab_files` of the suite `source` into one xz-compressed tar at `path`; return
+    their names. Every run must be readable (a ConfigError names the first bad file).
+
+    The bytes depend on the files' contents only: members sorted, no directories, mtime 0,
+    owner 0 without names, mode 0644. Exporting the same data twice gives the same archive.
+    """
+    with open_suite(source) as directory:
+        if not _load(directory, Path(source), None):
+            raise ConfigError(f"{source}: no complete run (a directory with eval.json) to export")
+        names = lab_files(directory)
+        with atomic_path(path) as tmp, tarfile.open(tmp, "w:xz", format=tarfile.PAX_FORMAT) as tar:
+            for name in names:
+                data = (directory / name).read_bytes()
+                info = tarfile.TarInfo(name)
+                info.size, info.mtime, info.mode = len(data), 0, 0o644
+                info.uid = info.gid = 0
+                info.uname = info.gname = ""
+                tar.addfile(info, io.BytesIO(data))
+    return names

@@ -1,42 +1,59 @@
-"""The RESULTS.md report of a suite directory: claims table, figures, baselines, sensitivity."""
+"""The RESULTS.md report of a suite (a directory or its archive): claims table, figures, baselines,
+sensitivity, and per_seed.csv beside it.
+
+The same data give the same bytes: the suite is named by its basename, every time comes from the
+data, and the figures are drawn deterministically (figures.py).
+"""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
+import sys
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from . import figures
-from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, REGENERATE, ArmRuns, Comparison, setting_name, bayes_ce_pairs,
-                       demonstrator_return, group_arms, judge, preset_distance, steps_to_threshold)
+from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, PLANNED_SEEDS, REGENERATE, ArmRuns, Comparison, EARLY_EPISODES,
+                     ablation_pairs, bayes_ce_pairs, dynamic_default, finished, group_arms, judge, judge_ablation,
+                     preset_distance, rule_text)
+from ..config import Config
 from ..envs import get_task
 from ..files import write_text
-from .data import load_runs
-from .stats import Summary
+from .data import ARCHIVE_SUFFIX, Demonstrations, RunFileError, load_runs, open_suite
+from .efficiency import efficiency_section
+from .stats import CensoredSummary, Summary
 
 
-SB3_LABEL = "SB3 DQN (rl-zoo3)"
-"""The method name of the benchmark's Stable-Baselines3 rows."""
-EFFICIENCY_FILE = "efficiency.json"
-"""Written into the suite directory by benchmarks/bench_sample_efficiency.py; quoted by the report."""
-DEMOS = (
-    "Which demonstrations the paper's experiments get is not stated in the paper. Every arm that uses "
-    "them starts from the same choice: **5 episodes of the imperfect scripted expert on CartPole** (push "
-    "with the pole's angular velocity, ignoring its angle: 198 ± 37 over 100 episodes of CartPole-v1, against "
-    "500 for the strong expert) and **10 episodes of the imperfect expert on MountainCar** (follows the velocity, "
-    "always starting rightwards: −120.0 ± 3.3 against −106.4). Why: an imperfect teacher is the case the paper's Bayesian loss is built for (an uncertain "
-    "π_bc should weigh less), a handful of episodes is the paper's \"few demonstrations\" regime, and a "
-    "weak teacher leaves room to show that a method beats its demonstrator. Seed k of every arm records "
-    "the same episodes (reset seed 1000 k), so bayes and ce differ in the loss only and the spread over "
-    "seeds includes the draw of the demonstrations. The sensitivity suite swaps in the strong experts.")
+PER_SEED = "per_seed.csv"
+"""Written beside RESULTS.md: one row per run with every per-run metric."""
+
+
+def _demos_text() -> str:
+    """Which demonstrations the arms get and why; how they return is read from the runs (baselines)."""
+    cartpole, mountaincar = Config.for_task("cartpole"), Config.for_task("mountaincar")
+    return ("Which demonstrations the paper's experiments get is not stated in the paper. Every arm that uses "
+            f"them starts from the same choice: **{cartpole.demo_episodes} episodes of the {cartpole.expert} "
+            "scripted expert on CartPole** (push with the pole's angular velocity, ignoring its angle) and "
+            f"**{mountaincar.demo_episodes} episodes of the {mountaincar.expert} expert on MountainCar** (follows "
+            "the velocity, always starting rightwards); how they return is the *demonstrator* column of the "
+            "baselines table, read from each run's demonstrations.json. Why: an imperfect teacher is the case the "
+            "paper's Bayesian loss is built for (an uncertain π_bc should weigh less), a handful of episodes is the "
+            "paper's \"few demonstrations\" regime, and a weak teacher leaves room to show that a method beats its "
+            "demonstrator. Seed k of every arm records the same episodes (reset seeds from `seeds.demo_seed(k)`), "
+            "so bayes and ce differ in the loss only and the spread over seeds includes the draw of the "
+            "demonstrations. The sensitivity suite swaps in the strong experts.")
 
 
 SMOOTH_ABOVE, SMOOTH_WINDOW = 150, 10
-"""Settings whose runs are longer than 150 episodes (MountainCar's 500–1,000) are drawn as trailing
-means of 10 episodes: a flag count of 0–2 per episode is unreadable raw."""
+"""The mean curves of settings whose runs are longer than 150 episodes (MountainCar's hundreds) are
+drawn as trailing means of 10 episodes, said on the axis: a few flags per episode, over hundreds of
+episodes, are unreadable raw. Single runs and the early-episode zoom are drawn raw."""
 
 
 def _cell(comparisons: list[Comparison], part: Callable[[Comparison], str]) -> str:
@@ -54,47 +71,82 @@ def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
     table's rows (every other bayes arm of that setting, against its ce arm)."""
     claims, sensitivity = [], []
     for claim in CLAIMS:
-        for task, timeout in claim.settings:
-            pairs = bayes_ce_pairs(arms, task, timeout)
+        for setting in claim.settings:
+            where = f"{setting.name}<br>{setting.reading}" if setting.reading else setting.name
+            pairs = setting.pairs(arms)
             if not pairs or pairs[0][1] is None:
-                claims.append(f"| {claim.id} | {setting_name(task, timeout)} | {claim.statement} | — | — | — "
-                              "| not run |")
+                claims.append(f"| {claim.id} | {where} | {claim.statement} | — | — | — | — | not run |")
                 continue
-            reference = judge(claim, *pairs[0])[0]
+            reference = judge(claim, *pairs[0]).verdict
             for i, (bayes, ce) in enumerate(pairs):
-                verdict, comparisons = judge(claim, bayes, ce)
-                per_arm = _cell(comparisons, lambda c: f"{c.metric}: bayes {c.bayes.format(2)} · ce {c.ce.format(2)}")
+                result = judge(claim, bayes, ce)
+                per_arm = _cell(result.comparisons,
+                                lambda c: f"{c.metric}: bayes {c.bayes.format(2)} · ce {c.ce.format(2)}")
                 if i == 0:
-                    diff = _cell(comparisons, lambda c: f"{c.diff[0]:.2f} … {c.diff[1]:.2f}")
-                    test = _cell(comparisons, lambda c: f"{c.test} p = {c.p:.3g}")
-                    claims.append(f"| {claim.id} | {bayes.setting} (n = {len(bayes.runs)}, {len(ce.runs)}) | "
-                                  f"{claim.statement} | {per_arm} | {diff} | {test} | **{verdict}** |")
+                    diff = _cell(result.comparisons, lambda c: c.interval())
+                    test = _cell(result.comparisons, lambda c: f"{c.test} p = {c.p:.3g}")
+                    power = "—" if result.power is None else f"sd {result.sd:.3g} · power {result.power:.2f}"
+                    claims.append(f"| {claim.id} | {where} | {claim.statement} | {per_arm} | {diff} | {test} | "
+                                  f"{len(bayes.runs)}, {len(ce.runs)} · {power} | **{result.verdict}** |")
                 else:
                     sensitivity.append(f"| {claim.id} | {bayes.label} | {ce.name if ce else '—'} | {per_arm} | "
-                                       f"{verdict} | {_flips(verdict, reference)} |")
+                                       f"{result.verdict} | {_flips(result.verdict, reference)} |")
     return claims, sensitivity
 
 
+def _span(values: list[int]) -> str:
+    low, high = min(values), max(values)
+    return f"{low:,}" if low == high else f"{low:,}–{high:,}"
+
+
+def _demo_source(demos: Demonstrations) -> str:
+    if demos.source == "file":
+        return f"{demos.episodes} episodes from a file"
+    return f"{demos.episodes} × {demos.expert or 'unknown expert'}"
+
+
 def _baseline_row(arm: ArmRuns) -> str:
-    steps = [steps_to_threshold(r) for r in arm.runs]
-    reached = sum(s is not None for s in steps)  # the median is finite once more than half reached it
-    median = f"{np.median([np.inf if s is None else s for s in steps]):,.0f}" if 2 * reached > len(steps) else "—"
+    """One arm: its demonstrations (as the runs record them), pre-training, outcome and demonstrator."""
+    steps = arm.values("interactions_to_threshold")
+    reached = int(np.isfinite(steps).sum())  # the median is finite once more than half reached it
+    median = f"{np.median(steps):,.0f}" if 2 * reached > len(steps) else "—"
     final = Summary.of(arm.values("final_eval"))
-    source, teacher, beats = "—", "none", "—"
+    source, transitions, pretrain, teacher, beats = "—", "0", "—", "none", "—"
     if arm.config["expert_loss"] != "none":
-        demonstrator = np.mean([demonstrator_return(r) for r in arm.runs])
-        source = f"{arm.config['demo_episodes']} × {arm.config['expert']}"
-        teacher, beats = f"{demonstrator:.1f}", f"{final.mean - demonstrator:+.1f}"
-    return (f"| {arm.setting} | {arm.name} | {len(arm.runs)} | {source} | {final.format()} | "
-            f"{Summary.of(arm.values('mean_train_return')).format()} | {median} ({reached}/{len(steps)}) | "
-            f"{teacher} | {beats} |")
+        pretrain = f"{arm.config['pretrain_steps']:,}"
+        records = [r.demonstrations for r in arm.runs]
+        if None in records:
+            source = transitions = teacher = "unknown"
+        else:
+            demonstrator = float(np.mean([r.demonstrator_return for r in arm.runs]))
+            source = " · ".join(sorted({_demo_source(d) for d in records}))
+            transitions = _span([d.transitions for d in records])
+            teacher, beats = f"{demonstrator:.1f}", f"{final.mean - demonstrator:+.1f}"
+    return (f"| {arm.setting} | {arm.name} | {len(arm.runs)} | {source} | {transitions} | {pretrain} | "
+            f"{final.format()} | {Summary.of(arm.values('mean_train_return')).format()} | "
+            f"{median} ({reached}/{len(steps)}) | {teacher} | {beats} |")
+
+
+def _per_seed(arms: list[ArmRuns]) -> str:
+    """PER_SEED's text: per run its arm, setting and seed, every metric of claims.PER_RUN (inf: never),
+    the demonstration transitions it started from (empty if not recorded) and its dynamic updates."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["arm", "setting", "seed", *PER_RUN, "demo_transitions", "dynamic_demo_updates"])
+    for arm in arms:
+        for run in arm.runs:
+            transitions = run.demo_transitions
+            writer.writerow([arm.name, arm.setting, run.config.seed, *(f"{PER_RUN[m](run):.10g}" for m in PER_RUN),
+                             "" if transitions is None else transitions, len(run.dynamic_demos)])
+    return buffer.getvalue()
 
 
 def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list[str]:
     """Per setting: learning curves of the preset arms (the paper's and the baselines'); the best,
     average and worst run of each arm of its reference bayes–ce pair (of every arm if it has
     none); and, where a setting has variants (sensitivity), their curves beside the reference
-    pair. Returns the markdown links."""
+    pair. A goal-count setting adds the first EARLY_EPISODES episodes (C4's "early") zoomed in.
+    Returns the markdown links."""
     links = []
     for setting in sorted({a.setting for a in arms}):
         members = [a for a in arms if a.setting == setting]
@@ -103,67 +155,67 @@ def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list
         column, score = ("goals", "goals_all") if goals else ("plain_return", "mean_train_return")
         ylabel = "flags reached per episode" if goals else "plain-env return per episode"
         window = SMOOTH_WINDOW if max(len(r.metrics) for a in members for r in a.runs) > SMOOTH_ABOVE else 1
-        if window > 1:
-            ylabel += f"\n(trailing mean of {window} episodes)"
-        runs = {a.name: [(f"seed {r.config.seed}", figures.trailing_mean(r.column(column), window), PER_RUN[score](r))
+        zoom = EARLY_EPISODES if goals else None
+        runs = {a.name: [figures.Trace(f"seed {r.config.seed}", r.column(column), PER_RUN[score](r), finished(r))
                          for r in a.runs] for a in members}
         pair = next((p for p in bayes_ce_pairs(members, task, timeout) if p[1] is not None), members)
         main = [a.name for a in members if preset_distance(a) == 0] or list(runs)
         stem = figures_dir / setting.replace("/", "-")
         paths = figures.setting_figures(setting, {n: runs[n] for n in main}, [a.name for a in pair], score,
-                                        ylabel, stem)
+                                        ylabel, stem, window, zoom)
         variants = [a.name for a in members if a.name not in main]
         if variants:
             path = stem.with_name(f"{stem.name}-variants.png")
             shown = [a.name for a in pair if a.name in main] + variants
-            figures.learning_curves(f"{setting}, variants",
-                                    {n: [curve for _, curve, _ in runs[n]] for n in shown}, ylabel, path)
+            figures.learning_curves(f"{setting}, variants", {n: runs[n] for n in shown}, ylabel, path, window, zoom)
             paths.append(path)
         links += [f"![{setting} {p.stem}]({Path(os.path.relpath(p, markdown_dir)).as_posix()})" for p in paths]
     return links
 
 
-def efficiency_table(rows: list[dict]) -> list[str]:
-    """The sample-efficiency rows (bench_sample_efficiency.py, arms named "<task> <method>") as a
-    markdown table, with how many times fewer steps than SB3's median each median is."""
-    def steps(value: float | None, missing: str) -> str:
-        return missing if value is None else f"{value:,.0f}"
-
-    sb3 = {row["arm"].removesuffix(f" {SB3_LABEL}"): row["median_steps"] for row in rows
-           if row["arm"].endswith(SB3_LABEL)}
-    lines = ["| arm | median env steps to threshold | 95% CI | seeds that reached it | above it at the end "
-             "| SB3's median ÷ this median |", "| --- | --- | --- | --- | --- | --- |"]
-    for row in rows:
-        ci = f"[{steps(row['ci'][0], '∞')}, {steps(row['ci'][1], '∞')}]"
-        theirs, ours = sb3.get(row["arm"].split()[0]), row["median_steps"]
-        ratio = f"{theirs / ours:.1f}×" if theirs and ours else "—"
-        lines.append(f"| {row['arm']} | {steps(ours, 'not reached')} | {ci} | {row['reached']}/{row['seeds']} | "
-                     f"{row['above_at_end']}/{row['seeds']} | {ratio} |")
-    return lines
-
-
-def _efficiency(suite_dir: Path) -> list[str]:
-    path = suite_dir / EFFICIENCY_FILE
-    if not path.is_file():
-        return [f"Not run: `python benchmarks/bench_sample_efficiency.py --out {suite_dir}` writes {EFFICIENCY_FILE}."]
-    return ["Env steps until the mean of a 10-episode greedy evaluation on the plain env (fixed seeds, every "
-            "1,000 steps) first reaches the threshold (CartPole-v1 475, MountainCar-v0 −110); median and 95% "
-            "bootstrap CI over seeds, a seed that never reaches it counted as ∞. *Above it at the end*: the "
-            "final evaluation (ours: 20 episodes after the run; SB3: the last 10-episode evaluation).", "",
-            *efficiency_table(json.loads(path.read_text()))]
+def _commit(commit: str | None, dirty: bool = False) -> str:
+    return ("unknown" if commit is None else f"`{commit[:12]}`") + (" (dirty)" if dirty else "")
 
 
 def _sweeps(suite_dir: Path) -> list[str]:
-    """The sweeps that produced the runs (experiments.SWEEP_LOG): suite, runs, workers, wall time."""
+    """The sweeps that produced the runs (experiments.SWEEP_LOG): suite, runs, workers, wall time, code."""
     entries = [json.loads(line) for log in sorted(suite_dir.rglob("sweeps.jsonl"))
                for line in log.read_text().splitlines() if line.strip()]
     if not entries:
         return ["No sweep log (sweeps.jsonl) under the suite directory."]
     rows = [f"| {e['suite']} | {e['seeds']} | {e['runs']} | {e['workers']} × {e['backend']} | "
-            f"{e['seconds'] / 60:.1f} min | {e['ended']} |" for e in entries]
+            f"{e['seconds'] / 60:.1f} min | {e['ended']} | {_commit(e.get('code_commit'), e.get('dirty', False))} |"
+            for e in entries]
     return ["Each sweep as logged by the runner (runs it ran, not those it found complete).", "",
-            "| suite | seeds | runs | workers | wall time | ended |", "| --- | --- | --- | --- | --- | --- |", *rows,
-            "", f"Sum: {sum(e['seconds'] for e in entries) / 60:.1f} min of wall time on this 2-core machine."]
+            "| suite | seeds | runs | workers | wall time | ended | code commit |",
+            "| --- | --- | --- | --- | --- | --- | --- |", *rows,
+            "", f"Sum: {sum(e['seconds'] for e in entries) / 60:.1f} min of wall time."]
+
+
+def _provenance(arms: list[ArmRuns]) -> str:
+    """Which commits of the code and of the claims rules the runs came from (provenance.json);
+    runs trained from uncommitted changes are named: their commit does not reproduce them."""
+    runs = [r for a in arms for r in a.runs]
+    if not runs:
+        return "Provenance: no runs."
+
+    def commits(key: str) -> str:
+        counts = Counter(getattr(r.provenance, key) if r.provenance else None for r in runs)
+        return ", ".join(f"{_commit(c)} ({n} run{'s' * (n > 1)})"
+                         for c, n in sorted(counts.items(), key=lambda item: (item[0] is None, item[0] or "")))
+
+    dirty = [f"{a.label} seed {r.config.seed}" for a in arms for r in a.runs if r.provenance and r.provenance.dirty]
+    flag = (f" **{len(dirty)} run(s) trained from uncommitted changes** (their commit does not reproduce them): "
+            f"{', '.join(dirty)}." if dirty else "")
+    return f"Provenance (provenance.json of each run): code {commits('code_commit')}; claims rules " \
+           f"{commits('rules_commit')}.{flag}"
+
+
+def _skipped(errors: list[RunFileError]) -> list[str]:
+    if not errors:
+        return []
+    return [f"**{len(errors)} run(s) skipped**, a file missing or unreadable:", "",
+            *(f"- `{e.file}`: {e.problem}" for e in errors), ""]
 
 
 NOTES = ("<!-- notes: hand-written, kept when the report is regenerated -->", "<!-- /notes -->")
@@ -176,30 +228,102 @@ def _notes(out_markdown: Path) -> list[str]:
     return [text[start:end + len(NOTES[1])], ""] if 0 <= start < end else []
 
 
-def report(suite_dir: str | os.PathLike, out_markdown: str | os.PathLike, figures_dir: str | os.PathLike) -> str:
-    """Write the RESULTS-style markdown for every complete run under `suite_dir` (and its figures
-    into `figures_dir`, linked relative to `out_markdown`); return the markdown."""
+def default_location(source: str | os.PathLike) -> Path:
+    """Where `report SOURCE` writes unless told otherwise: into a suite directory itself; for an
+    archive, into `<its name without .tar.xz>-report/` beside it. Never into the project's docs/."""
+    source = Path(source)
+    return source if source.is_dir() else source.with_name(f"{source.name.removesuffix(ARCHIVE_SUFFIX)}-report")
+
+
+def _warn(line: str) -> None:
+    print(f"warning: {line}", file=sys.stderr)
+
+
+def _dynamic(arms: list[ArmRuns]) -> list[str]:
+    """The two readings of dynamic demonstrations side by side, and the default the rule picks."""
+    choice, pairs = dynamic_default(arms)
+    if not pairs:
+        return ["Not run: `python -m dqfd_bc_keras.experiments run dynamic` measures both readings."]
+    rows = []
+    for episodes, rollouts, winner in pairs:
+        cells = []
+        for arm in (episodes, rollouts):
+            steps = CensoredSummary.of(arm.values("interactions_to_threshold"))
+            extra = np.mean([sum(u.get("new_transitions", 0) for u in r.demo_updates) for r in arm.runs]
+                            ) if arm.config["dynamic_demos"] == "rollouts" else 0.0
+            cells.append(f"{steps.format(0)} · {extra:,.0f} · {Summary.of(arm.values('final_eval')).format()}")
+        rows.append(f"| {episodes.setting} {episodes.config['expert_loss']} | {len(episodes.runs)}, "
+                    f"{len(rollouts.runs)} | {cells[0]} | {cells[1]} | {winner} |")
+    verdict = (f"**default: `{choice}`**" if choice else
+               f"not decided yet: {len(pairs)} of the rule's 4 pairs have run")
+    return [f"Rule (docs/PREREGISTRATION.md §2): {rule_text(dynamic_default)}", "",
+            "Per mode: interactions to threshold (median [95% CI], ∞ = never) · mean roll-out interactions per "
+            "run · final evaluation.", "",
+            "| setting, loss | seeds (episodes, rollouts) | `episodes` | `rollouts` | lower median |",
+            "| --- | --- | --- | --- | --- |", *rows, "", f"Verdict: {verdict}."]
+
+
+def _ablations(arms: list[ArmRuns]) -> list[str]:
+    """Each ablation (one part of the Bayesian machinery off) against the full arm."""
+    pairs = ablation_pairs(arms)
+    if not pairs:
+        return ["Not run: `python -m dqfd_bc_keras.experiments run ablations`."]
+    rows = []
+    for key, ablated, full in pairs:
+        result = judge_ablation(ablated, full)
+        [c] = result.comparisons
+        rows.append(f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
+                    f"{len(full.runs)}, {len(ablated.runs)} | {c.metric}: full {c.bayes.format(2)} · ablated "
+                    f"{c.ce.format(2)} | {c.interval()} | {c.test} p = {c.p:.3g} | {result.power:.2f} | "
+                    f"**{result.verdict}** |")
+    return [f"Rule (docs/PREREGISTRATION.md §6): {rule_text(judge_ablation)}", "",
+            "| setting, loss | switched off | seeds (full, ablated) | metric per arm | Δ full − ablated | test "
+            "| power | verdict |", "| --- | --- | --- | --- | --- | --- | --- | --- |", *rows]
+
+
+def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_dir: str | os.PathLike,
+           warn: Callable[[str], None] = _warn) -> str:
+    """Write the RESULTS-style markdown for every complete run of `source` (a suite directory or
+    an archive of one), its figures into `figures_dir` (linked relative to `out_markdown`) and
+    PER_SEED beside it; return the markdown. A run with a missing or unreadable file is skipped:
+    `warn` gets one line naming the file, and the markdown lists it."""
     out_markdown, figures_dir = Path(out_markdown), Path(figures_dir)
-    arms = group_arms(load_runs(suite_dir))
+    suite_name, skipped = Path(source).resolve().name, []
+    with open_suite(source) as directory:
+        directory = directory.resolve()
+        arms = group_arms(load_runs(directory, skipped))
+        efficiency, sweeps = efficiency_section(directory), _sweeps(directory)
+    for error in skipped:
+        warn(f"{Path(source) / error.file}: {error.problem}; run skipped")
     claims, sensitivity = _claim_rows(arms)
-    wall = sum(r.metrics[-1]["wall_time"] for a in arms for r in a.runs if r.metrics)
+    wall = sum(r.metrics[-1]["wall_time"] for a in arms for r in a.runs)
     doc = ["# Results: the paper's claims over seeds", "",
-           f"{sum(len(a.runs) for a in arms)} complete runs in {len(arms)} arms under `{suite_dir}`; "
-           f"total training wall time {wall / 60:.1f} min (sum over runs). Regenerate with:", "",
-           f"    {REGENERATE}", "", *_notes(out_markdown), "## Claims", "",
-           "Metrics and rules were fixed before the runs (`dqfd_bc_keras/analysis.py`). Per arm: mean "
+           f"{sum(len(a.runs) for a in arms)} complete runs in {len(arms)} arms of `{suite_name}`; total training "
+           f"wall time {wall / 60:.1f} min (sum over runs); every run's metrics in [{PER_SEED}]({PER_SEED}). "
+           "Regenerate with:", "", f"    {REGENERATE}", "", _provenance(arms), "", *_skipped(skipped),
+           *_notes(out_markdown), "## Claims", "",
+           "Metrics and rules were fixed before the runs (docs/PREREGISTRATION.md, `dqfd_bc_keras/experiments/"
+           "claims.py`; their commit is printed above). Per arm: mean "
            "[95% percentile-bootstrap CI] (IQM: the mean of the middle half of the seeds) over seeds; Δ is the "
            f"95% CI of the difference of means bayes − ce; tests are two-sided at α = {ALPHA}.", ""]
     doc += [f"- `{name}`: {text}." for name, text in METRICS.items()]
-    doc += [f"- {c.id} ({', '.join(setting_name(*s) for s in c.settings)}): {c.rule}" for c in CLAIMS]
-    doc += ["", "| claim | setting (seeds bayes, ce) | the paper | metric per arm | Δ bayes − ce | test | verdict |",
-            "| --- | --- | --- | --- | --- | --- | --- |", *claims, "", "## Figures", "",
+    doc += [f"- {c.id} ({'; '.join(s.name for s in c.settings)}): {c.rule}" for c in CLAIMS]
+    doc += [f"- Seeds planned for {claim} on {setting}: {plan.describe()}." for (claim, setting), plan in
+            PLANNED_SEEDS.items()]
+    doc += ["- Δ: the 95% CI of the difference of means and, in parentheses, the CI whose ends are one-sided "
+            f"bounds at α = {ALPHA} (TOST's). *n · sd · power*: seeds per arm, the judged metric's pooled sd over "
+            "seeds and the power its rule has at that spread and n when bayes and ce truly do not differ.", "",
+            "| claim | setting | the paper | metric per arm | Δ bayes − ce | test | n · sd · power | verdict |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- |", *claims, "", "## Figures", "",
             *_figures(arms, figures_dir, out_markdown.parent), "", "## Baselines", "",
             "Final evaluation on the plain env against the mean plain return of the demonstrations the run "
-            "started from (for cartpole-200 those are capped at 200 steps, the evaluation at 500).", "",
-            "| setting | arm | seeds | demos | final eval | mean training return | steps to threshold "
-            "(median, reached) | demonstrator | beats it by |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |", *map(_baseline_row, arms), "",
+            "started from (for cartpole-200 those are capped at 200 steps, the evaluation at 500). *Demos*, "
+            "*demo transitions* (range over seeds) and *demonstrator* are D_demo before any dynamic demonstration, "
+            "as each run's demonstrations.json records it (unknown: a run from before that file); *pre-training*: "
+            "gradient steps on D_demo alone before the first interaction (`pretrain_steps`).", "",
+            "| setting | arm | seeds | demos | demo transitions | pre-training | final eval | mean training return "
+            "| interactions to threshold (median, reached) | demonstrator | beats it by |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |", *map(_baseline_row, arms), "",
             "## Sensitivity", "",
             "Each further bayes arm of a claim's setting (σ0², demonstrator, …) judged against its ce arm "
             "with the same rule; *flips*: holds ↔ does not hold against the reference pair's verdict (yes), the "
@@ -207,8 +331,12 @@ def report(suite_dir: str | os.PathLike, out_markdown: str | os.PathLike, figure
             "| claim | bayes arm | ce arm | metric per arm | verdict | flips |",
             "| --- | --- | --- | --- | --- | --- |",
             *(sensitivity or ["| — | no sensitivity arms | | | | |"]), ""]
-    doc += ["## Sample efficiency", "", *_efficiency(Path(suite_dir)), "", "## Demonstrations", "", DEMOS, "",
-            "## Wall time", "", *_sweeps(Path(suite_dir)), ""]
-    text = "\n".join(doc)
+    doc += ["## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
+            "## Ablations", "", *_ablations(arms), ""]
+    doc += ["## Sample efficiency", "", *efficiency, "", "## Demonstrations", "", _demos_text(), "",
+            "## Wall time", "", *sweeps, ""]
+    # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
+    text = "\n".join(doc).replace(str(directory), suite_name)
+    write_text(out_markdown.with_name(PER_SEED), _per_seed(arms))
     write_text(out_markdown, text)
     return text

@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -25,14 +24,13 @@ from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 
-from ..cli import ArgumentParser, positive_int, run
 from ..config import QUICK, Config
 from ..errors import ConfigError
 from ..files import write_text
+from .claims import CLAIMS, PAPER_READING_STEPS, planned_seeds
+from .data import SWEEP_LOG
 
 BACKENDS = ("local", "ray")
-SWEEP_LOG = "sweeps.jsonl"
-"""One line per sweep in the suite directory: what ran, on how many workers, in how many seconds."""
 
 
 @dataclass(frozen=True)
@@ -72,18 +70,27 @@ def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides:
     return Arm(task, timeout, expert_loss, tuple(changed.items()), label, seeds)
 
 
-PLANNED_SEEDS = {("cartpole", "naive"): 36, ("cartpole-200", "naive"): 24, ("cartpole", "bootstrap"): 26,
-                 ("mountaincar-goals", "bootstrap"): 10}
-"""Seeds per arm of each claim setting, from the power calculation in docs/PREREGISTRATION.md:
-TOST at α = 0.05 with ≥ 80% power for a true zero difference of mean training return
-(C1, C3), and the floor of 10 where the spread is far below the margin (C4)."""
+PAPER_SETTINGS = (("C1", "cartpole", "naive"), ("C1", "cartpole-200", "naive"), ("C3", "cartpole", "bootstrap"),
+                  ("C4", "mountaincar-goals", "bootstrap"))
+"""The paper's settings (ALGORITHM.md §7) and the claim whose power plan sets each one's seeds."""
+C2_PAPER_READING_SEEDS = 10
+"""C2's plan asks for 69–108 seeds per arm (docs/PREREGISTRATION.md §5), beyond any session's budget:
+the paper's reading gets 10, today's reading shares C1's cartpole-200 arms, and the report states
+the power that gives."""
+
+
+def claim_seeds(claim_id: str, task: str) -> int:
+    """The planned seeds per arm of `claim_id` on its setting of `task` (claims.PLANNED_SEEDS)."""
+    setting = next(s for c in CLAIMS if c.id == claim_id for s in c.settings if s.task == task)
+    return planned_seeds(claim_id, setting)
+
 
 PROTOCOL = {"eval_every": 1_000, "eval_episodes": 10}
 """The sample-efficiency protocol, ours and SB3's alike: 10 greedy episodes on the plain env with
 fixed seeds (`seeds.eval_seed`) at exactly every 1,000 interactions."""
 EFFICIENCY_TASKS = {"cartpole": 5, "mountaincar": 10}
 """Sample-efficiency tasks → demonstration episodes of the imperfect expert (the presets')."""
-C2_PAPER_READING = {"early_stop_window": 0, "total_steps": 60_000}
+C2_PAPER_READING = {"early_stop_window": 0, "total_steps": PAPER_READING_STEPS}
 """C2 as the paper runs it: "average ≥ 490, 10 times in a row" with 200-step episodes can never
 fire, so no early stop, and a budget of at least 300 episodes (300 × 200 steps)."""
 
@@ -91,8 +98,9 @@ fire, so no early stop, and a budget of at least 300 episodes (300 × 200 steps)
 def _paper() -> list[Arm]:
     """C1–C4 (ALGORITHM.md §7): ce vs bayes in the paper's settings, each with its planned seeds,
     and C2 also under the paper's own reading."""
-    arms = [arm(t, m, loss, PLANNED_SEEDS[t, m]) for t, m in PLANNED_SEEDS for loss in ("ce", "bayes")]
-    return arms + [arm("cartpole-200", "naive", loss, 10, **C2_PAPER_READING) for loss in ("ce", "bayes")]
+    arms = [arm(t, m, loss, claim_seeds(claim, t)) for claim, t, m in PAPER_SETTINGS for loss in ("ce", "bayes")]
+    return arms + [arm("cartpole-200", "naive", loss, C2_PAPER_READING_SEEDS, **C2_PAPER_READING)
+                   for loss in ("ce", "bayes")]
 
 
 def _dynamic() -> list[Arm]:
@@ -134,7 +142,7 @@ SUITES: dict[str, list[Arm]] = {
     "efficiency": _efficiency(),
     "paper": _paper(),
     "ablations": _ablations(),
-    "baselines": [arm(t, m, loss) for t, m in PLANNED_SEEDS for loss in ("none", "margin", "bc_margin")],
+    "baselines": [arm(t, m, loss) for _, t, m in PAPER_SETTINGS for loss in ("none", "margin", "bc_margin")],
     "sensitivity": _sensitivity(),
     "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick", 2) for loss in ("bayes", "ce")],
 }

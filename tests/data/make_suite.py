@@ -1,0 +1,120 @@
+"""Writes tests/data/suite.tar.xz: a tiny synthetic suite for the report's golden test.
+
+    .venv/bin/python tests/data/make_suite.py
+
+cartpole/naive: bayes and ce (3 seeds; runs stop early at different episodes, one never does)
+and plain DQN (2 seeds); mountaincar-goals/bootstrap: bayes and ce (2 seeds, 40 episodes). Runs
+carry demonstrations.json, provenance.json (two code commits, one dirty run, one run without
+it) and one dynamic_demos.json; the suite a sweep log. Numbers come from a seeded generator, so
+the archive only changes when this script does; regenerate the golden RESULTS.md after it
+(see tests/test_report.py).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from dqfd_bc_keras.config import Config  # noqa: E402
+from dqfd_bc_keras.evaluation import EvalResult  # noqa: E402
+from dqfd_bc_keras.experiments.data import export_archive  # noqa: E402
+from dqfd_bc_keras.runs import EVAL_FIELDS  # noqa: E402
+from dqfd_bc_keras.training import METRIC_FIELDS  # noqa: E402
+
+ARCHIVE = Path(__file__).with_name("suite.tar.xz")
+COMMITS = ("1f0c2a9e8d7b6c5a4f3e2d1c0b9a8f7e6d5c4b3a", "2b3c4d5e6f708192a3b4c5d6e7f8091a2b3c4d5e")
+RULES = "9e8d7c6b5a4f3e2d1c0b9a8f7e6d5c4b3a2f1e0d"
+
+
+def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    path.write_text(buffer.getvalue())
+
+
+def cartpole_lengths(rng: np.random.Generator, solve_at: int | None, episodes: int = 45) -> list[int]:
+    """Rising episode lengths; with `solve_at`, 10 episodes of 500 end the run there (early stop)."""
+    if solve_at is None:
+        return [int(min(480, 20 + 10 * e + rng.integers(0, 40))) for e in range(episodes)]
+    climb = [int(min(480, 20 + 500 * e / (solve_at - 10) + rng.integers(0, 40))) for e in range(solve_at - 10)]
+    return climb + [500] * 10
+
+
+def write_run(root: Path, name: str, config: Config, rows: list[dict], final: list[float], rng: np.random.Generator,
+              provenance: dict | None, dynamic: bool = False) -> None:
+    run = root / name / f"seed{config.seed}"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps(config.to_dict(), indent=1))
+    steps = np.cumsum([r["length"] for r in rows])
+    metrics = [{**{f: 0.0 for f in METRIC_FIELDS}, **r, "episode": i + 1, "env_step": int(steps[i]),
+                "interactions": int(steps[i]), "epsilon": 0.01, "wall_time": round(1.5 * (i + 1), 1)}
+               for i, r in enumerate(rows)]
+    write_csv(run / "metrics.csv", METRIC_FIELDS, metrics)
+    evals = [{"env_step": int(s), "interactions": int(s), "episode": i, "mean_return": float(m), "std_return": 0.0,
+              "mean_goals": ""} for i, (s, m) in enumerate(zip((0, steps[len(steps) // 2], steps[-1]), final))]
+    write_csv(run / "evals.csv", EVAL_FIELDS, evals)
+    returns = [float(final[-1])] * 4
+    result = EvalResult(config.task, "q", 1_010_000, returns, [200] * 4,
+                        [1] * 4 if config.task == "mountaincar-goals" else None, config.timeout)
+    (run / "eval.json").write_text(json.dumps(result.to_dict(), indent=1))
+    if config.uses_demos:
+        lengths = [int(x) for x in rng.integers(150, 250, config.demo_episodes)]
+        plain = [float(-n) if config.task.startswith("mountaincar") else float(n) for n in lengths]
+        (run / "demonstrations.json").write_text(json.dumps(
+            {"transitions": sum(lengths), "episodes": len(lengths), "expert": config.expert, "source": "recorded",
+             "episode_returns": plain, "plain_returns": plain}, indent=1))
+    if dynamic:
+        (run / "dynamic_demos.json").write_text(json.dumps(
+            [{"episode": 12, "new_transitions": 1500, "demo_transitions": 2500},
+             {"episode": 20, "new_transitions": 2500, "demo_transitions": 5000}], indent=1))
+    if provenance is not None:
+        (run / "provenance.json").write_text(json.dumps(provenance, indent=1))
+
+
+def build(root: Path) -> None:
+    rng = np.random.default_rng(0)
+    clean = {"code_commit": COMMITS[0], "rules_commit": RULES, "dirty": False, "versions": {"python": "3.11"}}
+    for loss, solves in (("bayes", (25, 32, None)), ("ce", (28, None, 40))):
+        for seed, solve_at in enumerate(solves):
+            lengths = cartpole_lengths(rng, solve_at)
+            rows = [{"return": float(n), "plain_return": float(n), "length": n, "goals": 0} for n in lengths]
+            provenance = {**clean, "code_commit": COMMITS[1], "dirty": True} if (loss, seed) == ("ce", 2) else clean
+            write_run(root, f"cartpole-naive-{loss}", Config.for_task("cartpole", timeout="naive", expert_loss=loss,
+                                                                      seed=seed),
+                      rows, [40.0, 300.0, 480.0 if solve_at else 350.0], rng, provenance,
+                      dynamic=(loss, seed) == ("bayes", 0))
+    for seed in range(2):
+        rows = [{"return": 30.0, "plain_return": 30.0, "length": 30, "goals": 0}] * 45
+        write_run(root, "cartpole-naive-none", Config.for_task("cartpole", timeout="naive", expert_loss="none",
+                                                               seed=seed),
+                  rows, [20.0, 25.0, 30.0], rng, None if seed == 1 else clean)
+    for loss, rate in (("bayes", 0.5), ("ce", 0.3)):
+        for seed in range(2):
+            goals = [int(g) for g in rng.binomial(2, rate, 40)]
+            rows = [{"return": 100.0 * g - 200.0, "plain_return": -200.0 + 40.0 * g, "length": 200, "goals": g}
+                    for g in goals]
+            write_run(root, f"mountaincar-goals-bootstrap-{loss}",
+                      Config.for_task("mountaincar-goals", expert_loss=loss, seed=seed),
+                      rows, [-200.0, -150.0, -120.0], rng, clean)
+    sweeps = [{"suite": "paper", "seeds": 3, "runs": 10, "workers": 2, "backend": "local", "seconds": 123.4,
+               "ended": "2026-12-01 10:00:00", **clean},
+              {"suite": "baselines", "seeds": 2, "runs": 2, "workers": 2, "backend": "local", "seconds": 45.6,
+               "ended": "2026-12-01 10:05:00", **clean, "code_commit": COMMITS[1], "dirty": True}]
+    (root / "sweeps.jsonl").write_text("".join(json.dumps(s) + "\n" for s in sweeps))
+
+
+if __name__ == "__main__":
+    with tempfile.TemporaryDirectory() as tmp:
+        build(Path(tmp) / "suite")
+        names = export_archive(Path(tmp) / "suite", ARCHIVE)
+    print(f"wrote {ARCHIVE}: {len(names)} files, {ARCHIVE.stat().st_size:,} bytes")
