@@ -45,10 +45,6 @@ MIN_SEEDS = 10
 """Seeds per arm at least, whatever the power calculation says: a spread has to be seen to be trusted."""
 PAPER_READING_STEPS = 60_000
 """C2's paper reading runs without early stop for this budget: ≥ 300 episodes of at most 200 steps."""
-REGENERATE = ("python -m dqfd_bc_keras.experiments run all --out results && "
-              "python benchmarks/bench_sample_efficiency.py --out results && "
-              "python -m dqfd_bc_keras.experiments report results")
-"""Every run, the benchmark and this report (finished runs are skipped, so it also resumes)."""
 
 METRICS = {
     "episodes_to_solve": "training episodes until the early-stopping rule fired (the last `early_stop_window` "

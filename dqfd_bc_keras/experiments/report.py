@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from . import figures
-from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, PLANNED_SEEDS, REGENERATE, ArmRuns, Comparison, EARLY_EPISODES,
+from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, PLANNED_SEEDS, ArmRuns, Comparison, EARLY_EPISODES,
                      ablation_pairs, bayes_ce_pairs, dynamic_default, finished, group_arms, judge, judge_ablation,
                      preset_distance, rule_text)
 from ..config import Config
@@ -28,6 +28,16 @@ from ..files import write_text
 from .data import ARCHIVE_SUFFIX, Demonstrations, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
 from .stats import CensoredSummary, Summary
+
+
+ARCHIVE = "docs/data/results.tar.xz"
+"""Where the per-run data behind docs/RESULTS.md are committed."""
+REGENERATE = (f"python -m dqfd_bc_keras.experiments report {ARCHIVE} --docs",
+              "python -m dqfd_bc_keras.experiments run all --out results && "
+              "python benchmarks/bench_sample_efficiency.py --out results && "
+              f"python -m dqfd_bc_keras.experiments export results --out {ARCHIVE}")
+"""This report from the committed per-run data (no training), and every run, the benchmark and the
+archive behind it (finished runs are skipped, so the second also resumes a cut-off sweep)."""
 
 
 PER_SEED = "per_seed.csv"
@@ -161,8 +171,9 @@ def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list
         pair = next((p for p in bayes_ce_pairs(members, task, timeout) if p[1] is not None), members)
         main = [a.name for a in members if preset_distance(a) == 0] or list(runs)
         stem = figures_dir / setting.replace("/", "-")
-        paths = figures.setting_figures(setting, {n: runs[n] for n in main}, [a.name for a in pair], score,
-                                        ylabel, stem, window, zoom)
+        cases = [a.name for a in pair if a.name in main] or main
+        paths = figures.setting_figures(setting, {n: runs[n] for n in main}, cases, score, ylabel, stem, window,
+                                        zoom)
         variants = [a.name for a in members if a.name not in main]
         if variants:
             path = stem.with_name(f"{stem.name}-variants.png")
@@ -249,7 +260,7 @@ def _dynamic(arms: list[ArmRuns]) -> list[str]:
         cells = []
         for arm in (episodes, rollouts):
             steps = CensoredSummary.of(arm.values("interactions_to_threshold"))
-            extra = np.mean([sum(u.get("new_transitions", 0) for u in r.demo_updates) for r in arm.runs]
+            extra = np.mean([sum(u.get("new_transitions", 0) for u in r.dynamic_demos) for r in arm.runs]
                             ) if arm.config["dynamic_demos"] == "rollouts" else 0.0
             cells.append(f"{steps.format(0)} · {extra:,.0f} · {Summary.of(arm.values('final_eval')).format()}")
         rows.append(f"| {episodes.setting} {episodes.config['expert_loss']} | {len(episodes.runs)}, "
@@ -300,7 +311,8 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
     doc = ["# Results: the paper's claims over seeds", "",
            f"{sum(len(a.runs) for a in arms)} complete runs in {len(arms)} arms of `{suite_name}`; total training "
            f"wall time {wall / 60:.1f} min (sum over runs); every run's metrics in [{PER_SEED}]({PER_SEED}). "
-           "Regenerate with:", "", f"    {REGENERATE}", "", _provenance(arms), "", *_skipped(skipped),
+           "Regenerate it from the committed per-run data, without training:", "", f"    {REGENERATE[0]}", "",
+           "and the data themselves (then the line above):", "", f"    {REGENERATE[1]}", "", _provenance(arms), "", *_skipped(skipped),
            *_notes(out_markdown), "## Claims", "",
            "Metrics and rules were fixed before the runs (docs/PREREGISTRATION.md, `dqfd_bc_keras/experiments/"
            "claims.py`; their commit is printed above). Per arm: mean "
