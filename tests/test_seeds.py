@@ -15,7 +15,8 @@ def test_demo_and_evaluation_seeds_keep_their_ranges_apart():
     assert [demo_seed(s) for s in (0, 1, 2)] == [0, 1000, 2000]
     assert [eval_seed(s) for s in (0, 1)] == [10_000, 11_000]
     assert final_eval_seed(3) == 13_000 + 1_000_000
-    # 10-episode evaluations of seeds 0…99 never reuse a demonstration episode's reset seed
-    demos = {demo_seed(s) + i for s in range(100) for i in range(20)}
-    evals = {eval_seed(s) + i for s in range(100) for i in range(20)}
-    assert not demos & {e for e in evals if e < 100_000}
+    for seed in range(100):  # within one run, demonstrations and evaluations never share a reset seed
+        demos = {demo_seed(seed) + i for i in range(20)}
+        evals = {eval_seed(seed) + i for i in range(20)}
+        final = {final_eval_seed(seed) + i for i in range(100)}
+        assert not demos & evals and not demos & final and not evals & final
