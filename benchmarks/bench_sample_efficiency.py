@@ -78,11 +78,15 @@ def arms(quick: bool) -> list[Arm]:
     return SUITES["efficiency"]
 
 
-def ours(suite: list[Arm], seeds: int, out: Path) -> list[ArmSteps]:
-    """Each arm's seeds (complete runs under `out`), stepped by `interactions`."""
+def ours(suite: list[Arm], seeds: int, out: Path, complete_only: bool = False) -> list[ArmSteps]:
+    """Each arm's seeds (complete runs under `out`; with `complete_only`, those that exist),
+    stepped by `interactions`."""
     steps = []
     for a in suite:
-        runs = [r for seed in range(seeds) for r in load_runs(out / a.name / f"seed{seed}")]
+        dirs = [out / a.name / f"seed{seed}" for seed in range(seeds)]
+        runs = [r for d in dirs if not complete_only or (d / "eval.json").is_file() for r in load_runs(d)]
+        if not runs:
+            continue
         steps.append(ArmSteps.of(a.task, a.expert_loss, map(interaction_evals, runs),
                                  [r.final["mean_return"] for r in runs], get_task(a.task).solved_return))
     return steps
@@ -150,16 +154,16 @@ class SB3Job(NamedTuple):
 
 
 def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool,
-        progress: Callable[[str], None] = print) -> list[ArmSteps]:
+        progress: Callable[[str], None] = print, complete_only: bool = False) -> list[ArmSteps]:
     """Every (task, seed) of SB3's DQN whose file under `out/sb3-dqn/` is missing or stale, on a
-    process pool; then each task's seeds."""
+    process pool (with `complete_only`, none: the current files only); then each task's seeds."""
     every = (QUICK_PROTOCOL if quick else PROTOCOL)["eval_every"]
     jobs = {(task, seed): SB3Job(task, seed, QUICK_SB3_STEPS if quick else ZOO[task]["n_timesteps"], every,
                                  out / "sb3-dqn" / task / f"seed{seed}{'-quick' if quick else ''}.json")
             for task in tasks for seed in range(seeds)}
-    todo = [job for job in jobs.values() if not job.current]
-    progress(f"SB3 DQN: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
-             f"on {workers} worker(s)")
+    todo = [] if complete_only else [job for job in jobs.values() if not job.current]
+    current = sum(job.current for job in jobs.values())
+    progress(f"SB3 DQN: {len(jobs)} runs, {current} complete, {len(todo)} to run on {workers} worker(s)")
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
         futures = {pool.submit(sb3_run, *job): job for job in todo}
         for done, future in enumerate(as_completed(futures), start=1):
@@ -171,7 +175,10 @@ def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool,
                      f"{'never' if first is None else f'{first:,.0f}'} ({run['seconds']:.0f} s)")
     steps = []
     for task in tasks:
-        evals = [json.loads(jobs[task, seed].path.read_text())["evals"] for seed in range(seeds)]
+        evals = [json.loads(jobs[task, seed].path.read_text())["evals"] for seed in range(seeds)
+                 if jobs[task, seed].current]
+        if not evals:
+            continue
         steps.append(ArmSteps.of(task, SB3_METHOD, evals, [e[-1][1] for e in evals], get_task(task).solved_return,
                                  anchor=ANCHOR[task]))
     return steps
@@ -186,6 +193,8 @@ def main(argv=None) -> int:
     parser.add_argument("--parts", default="ours,sb3", help="what to run: ours, sb3 or both (default)")
     parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the script runs "
                         f"(writes no {EFFICIENCY_FILE})")
+    parser.add_argument("--no-run", action="store_true", help="run nothing: summarise the complete runs and "
+                        "SB3 files under --out, over the seeds each arm has")
     parser.add_argument("--json", action="store_true", help="one JSON list with every arm's row (∞ as Infinity)")
     args = parser.parse_args(argv)
     parts = set(args.parts.split(","))
@@ -198,10 +207,11 @@ def main(argv=None) -> int:
     suite = arms(args.quick)
     steps = []
     if "ours" in parts:
-        run_suite(suite, seeds, out, workers=args.workers, progress=progress, name="sample efficiency")
-        steps += ours(suite, seeds, out)
+        if not args.no_run:
+            run_suite(suite, seeds, out, workers=args.workers, progress=progress, name="sample efficiency")
+        steps += ours(suite, seeds, out, complete_only=args.no_run)
     if "sb3" in parts:
-        steps += sb3(sorted({a.task for a in suite}), seeds, args.workers, out, args.quick, progress)
+        steps += sb3(sorted({a.task for a in suite}), seeds, args.workers, out, args.quick, progress, args.no_run)
     if not args.quick:  # keep the arms of a part not run this time (`--parts sb3` leaves ours as they were)
         protocol, kept = load(out / EFFICIENCY_FILE) or (PROTOCOL, [])
         fresh = {(s.task, s.method) for s in steps}

@@ -51,6 +51,12 @@ def test_bench_sample_efficiency_quick(tmp_path):
     assert [step for step, _ in run["evals"]] == list(range(0, 1501, 300))
     assert set(run["versions"]) == {"stable-baselines3", "torch", "gymnasium"}
     assert not (tmp_path / "efficiency.json").exists()  # --quick never writes the table
+    again = bench("bench_sample_efficiency.py", "--quick", "--no-run", "--out", tmp_path, "--json")
+    assert again == [ours, sb3]  # --no-run summarises what is there and runs nothing
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert bench("bench_sample_efficiency.py", "--quick", "--no-run", "--out", empty, "--json") == []
+    assert [p.name for p in empty.iterdir()] == []
 
 
 def test_sb3_runs_as_rl_zoo3_does_one_learn_call_evaluated_on_the_exact_grid(tmp_path, monkeypatch):
