@@ -32,12 +32,12 @@ def our_rate(steps: int, expert_loss: str) -> float:
     config = Config.for_task("cartpole", expert_loss=expert_loss, total_steps=10 * steps, pretrain_steps=100,
                              bc_epochs=2)
     learner, _ = training.build(config)
-    interaction, env = learner.interaction, learner.interaction.env
+    interaction = learner.interaction
 
     def play(budget: int) -> int:
         done = 0
         while done < budget:
-            obs, _ = env.reset(seed=done)
+            obs = interaction.reset(seed=done)  # the default loop: the episode is recorded for D_demo
             before = int(interaction.env_steps.numpy())
             interaction.play(tf.constant(obs, tf.float32), tf.constant(budget - done, tf.int64))
             done += int(interaction.env_steps.numpy()) - before
