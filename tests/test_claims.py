@@ -466,3 +466,11 @@ def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_p
     assert choice == "rollouts" and [w for *_, w in pairs].count("rollouts") == 3
     tie = arms + [arm("e4", "episodes", "ce", fast), arm("r4", "rollouts", "ce", slow)]
     assert analysis.dynamic_default(tie)[0] == "episodes"  # 2–2
+
+
+def test_fields_a_loss_does_not_read_do_not_name_its_arm(tmp_path):
+    """dynamic_demos varies between the bayes arms of the setting, but margin has no BC model."""
+    runs = [make_run(tmp_path / name, cartpole_rows([500] * 3), task="cartpole", expert_loss=loss, dynamic_demos=mode)
+            for name, loss, mode in (("a", "bayes", "episodes"), ("b", "bayes", "rollouts"), ("c", "margin", "episodes"))]
+    names = sorted(a.name for a in analysis.group_arms(runs))
+    assert names == ["bayes dynamic_demos=episodes", "bayes dynamic_demos=rollouts", "margin"]

@@ -37,6 +37,8 @@ EARLY_EPISODES = 30
 BAYES_ONLY = ("sigma0_sq", "mc_passes", "prior_scale", "prior_center", "bc_dropout", "bc_prior_scale", "bayes_prior",
               "mc_dropout")
 """Config fields only the bayes loss reads: a bayes arm pairs with the ce arm equal in every other field."""
+BC_ONLY, BC_LOSSES = ("dynamic_demos", "dynamic_window", "dynamic_rollouts", "bc_refit_epochs"), ("bc_margin", "ce", "bayes")
+"""Config fields only the losses with a BC model read: they do not name a margin or none arm."""
 PEAK_FRACTION, COLLAPSE_FRACTION = 0.98, 0.5
 """A collapse (the paper's perturbation): plain return < 0.5 × limit after the first episode ≥ 0.98 × limit."""
 POWER = 0.8
@@ -165,7 +167,8 @@ def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
         peers = [a.config for a in arms.values() if a.setting == arm.setting]
         varying = [k for k in arm.config if k not in ("task", "timeout", "expert_loss")
                    and len({json.dumps(p[k]) for p in peers}) > 1
-                   and not (k in BAYES_ONLY and arm.config["expert_loss"] != "bayes")]
+                   and not (k in BAYES_ONLY and arm.config["expert_loss"] != "bayes")
+                   and not (k in BC_ONLY and arm.config["expert_loss"] not in BC_LOSSES)]
         arm.name = " ".join([arm.config["expert_loss"], *(f"{k}={arm.config[k]}" for k in varying)])
     return sorted(arms.values(), key=lambda a: a.label)
 
