@@ -19,11 +19,11 @@ def write_run(path, evals: list[dict], final: float = 500.0) -> None:
     """A complete run directory as the lab reads it (config, metrics, evals.csv, eval.json)."""
     path.mkdir(parents=True)
     (path / "config.json").write_text(json.dumps(Config.for_task("cartpole").to_dict()))
-    for name, rows in (("metrics.csv", [{f: 0.0 for f in METRIC_FIELDS}]), ("evals.csv", evals)):
+    for name, table_rows in (("metrics.csv", [{f: 0.0 for f in METRIC_FIELDS}]), ("evals.csv", evals)):
         with (path / name).open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer = csv.DictWriter(f, fieldnames=list(table_rows[0]))
             writer.writeheader()
-            writer.writerows(rows)
+            writer.writerows(table_rows)
     (path / "eval.json").write_text(json.dumps({"task": "cartpole", "mean_return": final}))
 
 
