@@ -376,8 +376,9 @@ def train_episodes(
         state.stopped_early = early_stop(c, state.returns)
         on_episode(learner, state, row)
     evaluate_due(learner, state, on_eval)
-    if state.stopped_early and state.evals[-1]["interactions"] <= learner.interactions:
-        # It learns nothing after the stop: the next grid point sees the final network.
+    if state.stopped_early and state.next_eval - c.eval_every <= learner.interactions:
+        # It learns nothing after the stop: the next grid point sees the final network (once: a
+        # resumed finished run has already evaluated past its tally).
         point, state.next_eval = state.next_eval, state.next_eval + c.eval_every
         on_eval([point])
     return state
