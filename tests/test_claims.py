@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy import stats as sps
-from dqfd_bc_keras.experiments import claims as analysis, report as results
+from dqfd_bc_keras.experiments import claims as analysis, plans as planning, report as results
 from dqfd_bc_keras.experiments.claims import ArmRuns, Setting
 from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
@@ -308,8 +308,8 @@ def test_rules_state_the_constants():
 def test_planned_seeds():
     """Seeds per arm n = ⌈2 (z_0.95 + z_0.90)² sd² / margin²⌉ (z_0.80 for C4's one bound), at least 10."""
     settings = {(c.id, s.name) for c in analysis.CLAIMS for s in c.settings}
-    assert set(analysis.PLANNED_SEEDS) == settings
-    plans = {key: (plan.sd, plan.margin, plan.seeds) for key, plan in analysis.PLANNED_SEEDS.items()}
+    assert set(planning.PLANNED_SEEDS) == settings
+    plans = {key: (plan.sd, plan.margin, plan.seeds) for key, plan in planning.PLANNED_SEEDS.items()}
     today, paper = (s.name for s in analysis.CLAIMS[1].settings)
     assert plans[("C1", "cartpole/naive")] == (pytest.approx(36.13, abs=0.01), 25.0, 36)  # 17.128 · 36.13² / 25²
     assert plans[("C1", "cartpole-200/naive")] == (pytest.approx(11.73, abs=0.01), 10.0, 24)  # 17.128 · 1.3755
@@ -317,9 +317,9 @@ def test_planned_seeds():
     assert plans[("C2", paper)] == (0.5, 0.2, 108)  # 17.128 · 6.25 = 107.05
     assert plans[("C3", "cartpole/bootstrap")] == (pytest.approx(30.21, abs=0.01), 25.0, 26)  # 25.01
     assert plans[("C4", "mountaincar-goals/*")] == (pytest.approx(0.0767, abs=1e-4), 0.25, 10)  # 12.37 · 0.094 → 2
-    assert analysis.planned_seeds("C2", analysis.CLAIMS[1].settings[1]) == analysis.planned_seeds("C2", paper) == 108
-    with pytest.raises(analysis.ConfigError, match="no planned seeds for claim 'C2' on setting 'cartpole/naive'"):
-        analysis.planned_seeds("C2", Setting("cartpole", "naive"))
+    assert planning.planned_seeds("C2", analysis.CLAIMS[1].settings[1]) == planning.planned_seeds("C2", paper) == 108
+    with pytest.raises(planning.ConfigError, match="no planned seeds for claim 'C2' on setting 'cartpole/naive'"):
+        planning.planned_seeds("C2", Setting("cartpole", "naive"))
 
 
 def claim_rows(text: str) -> list[list[str]]:

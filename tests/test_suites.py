@@ -7,7 +7,7 @@ import pytest
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
-from dqfd_bc_keras.experiments.claims import planned_seeds
+from dqfd_bc_keras.experiments.plans import planned_seeds
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, run_suite, suite_arms
 
 

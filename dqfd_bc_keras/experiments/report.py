@@ -19,12 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from . import figures
-from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, PLANNED_SEEDS, ArmRuns, Comparison, EARLY_EPISODES,
+from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, ArmRuns, Comparison, EARLY_EPISODES,
                      ablation_pairs, bayes_ce_pairs, dynamic_default, finished, group_arms, judge, judge_ablation,
                      preset_distance, rule_text)
 from ..config import Config
 from ..envs import get_task
 from ..files import write_text
+from .plans import PLANNED_SEEDS
 from .data import ARCHIVE_SUFFIX, Demonstrations, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
 from .stats import CensoredSummary, Summary

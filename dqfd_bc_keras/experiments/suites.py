@@ -27,7 +27,8 @@ from pathlib import Path
 from ..config import QUICK, Config
 from ..errors import ConfigError
 from ..files import write_text
-from .claims import CLAIMS, PAPER_READING_STEPS, planned_seeds
+from .claims import CLAIMS, PAPER_READING_STEPS
+from .plans import planned_seeds
 from .data import SWEEP_LOG
 
 BACKENDS = ("local", "ray")
@@ -80,7 +81,7 @@ the power that gives."""
 
 
 def claim_seeds(claim_id: str, task: str) -> int:
-    """The planned seeds per arm of `claim_id` on its setting of `task` (claims.PLANNED_SEEDS)."""
+    """The planned seeds per arm of `claim_id` on its setting of `task` (plans.PLANNED_SEEDS)."""
     setting = next(s for c in CLAIMS if c.id == claim_id for s in c.settings if s.task == task)
     return planned_seeds(claim_id, setting)
 
