@@ -8,7 +8,7 @@ from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.plans import planned_seeds
-from dqfd_bc_keras.experiments.suites import ALL, SUITES, run_suite, suite_arms
+from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, run_suite, suite_arms, sweep_jobs
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -63,6 +63,14 @@ def test_arms_equal_in_config_share_a_name_across_suites():
             "mountaincar-goals-bootstrap-ce"} <= names & {a.name for a in SUITES["paper"]}
     assert {"cartpole-bootstrap-bayes-sigma0.05", "cartpole-bootstrap-bayes-strong-sigma2",
             "mountaincar-goals-bootstrap-ce-strong"} <= names
+
+
+def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
+    a, b = Arm("cartpole", "bootstrap", "ce", seeds=3), Arm("cartpole", "bootstrap", "bayes", seeds=1)
+    order = [(job.arm.expert_loss, job.seed) for job in sweep_jobs([a, b], None, tmp_path)]
+    assert order == [("ce", 0), ("bayes", 0), ("ce", 1), ("ce", 2)]
+    assert [(job.arm.expert_loss, job.seed) for job in sweep_jobs([a, b], 2, tmp_path)] == [
+        ("ce", 0), ("bayes", 0), ("ce", 1), ("bayes", 1)]
 
 
 def test_unknown_suite_or_backend_is_refused(tmp_path):

@@ -257,6 +257,13 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
             ray.shutdown()
 
 
+def sweep_jobs(arms: Sequence[Arm], seeds: int | None, out: Path) -> list[Job]:
+    """Every (arm, seed) of a sweep, seed-major: a sweep cut off partway leaves its arms with
+    seed counts that differ by at most one."""
+    last = seeds or max(arm.seeds for arm in arms)
+    return [Job(arm, seed, out) for seed in range(last) for arm in arms if seed < (seeds or arm.seeds)]
+
+
 def run_suite(
     suite: str | Sequence[Arm], seeds: int | None, out: str | Path, workers: int = 2, backend: str = "local",
     address: str | None = None, progress: Callable[[str], None] = print, name: str = "arms",
@@ -268,7 +275,7 @@ def run_suite(
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
     name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
     out = Path(out)
-    jobs = [Job(arm, seed, out) for arm in arms for seed in range(seeds or arm.seeds)]
+    jobs = sweep_jobs(arms, seeds, out)
     todo = [job for job in jobs if not job.complete]
     progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
              f"on {workers} {backend} worker(s)")
