@@ -11,7 +11,7 @@ import json
 import sys
 from collections.abc import Sequence
 
-from dqfd_bc_keras.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.cli import ArgumentParser, positive_int, run, seed
 from dqfd_bc_keras.envs import TASKS
 from dqfd_bc_keras.evaluation import POLICY_FILES, evaluate, load_policy
 from dqfd_bc_keras.files import write_text
@@ -24,7 +24,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--policy", choices=sorted(POLICY_FILES),
                         help="a run directory's q_network.keras (q, the default) or bc_model.keras (bc)")
     parser.add_argument("--episodes", type=positive_int, default=100, help="greedy episodes (default 100)")
-    parser.add_argument("--seed", type=int, default=12345, help="episode i is reset with seed + i (default 12345)")
+    parser.add_argument("--seed", type=seed, default=12345, help="episode i is reset with seed + i (default 12345)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
     parser.add_argument("--out", help="also write the JSON result to this file")
     args = parser.parse_args(argv)

@@ -32,7 +32,7 @@ def parse(argv):
     parser.add_argument("--expert", choices=EXPERT_NAMES, help="scripted expert to record (default: imperfect)")
     parser.add_argument("--demo-episodes", type=cli.positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
     parser.add_argument("--steps", type=cli.positive_int, help="environment-step budget")
-    parser.add_argument("--seed", type=int, help="seed of every random generator (default: 0)")
+    parser.add_argument("--seed", type=cli.seed, help="seed of every random generator (default: 0)")
     parser.add_argument("--out", help="run directory (default: runs/TASK-LOSS-seedSEED)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     parser.add_argument("--force", action="store_true", help="replace an existing run in --out")

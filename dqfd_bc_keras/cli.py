@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Callable, Sequence
 
 from .errors import DqfdError
+from .seeds import MAX_SEED
 
 EXIT_USAGE = 2
 
@@ -27,13 +29,39 @@ def positive_int(text: str) -> int:
     return value
 
 
+def seed(text: str) -> int:
+    """argparse type for a seed: an integer in [0, MAX_SEED]."""
+    value = int(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_SEED}], got {value}")
+    return value
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that it stops a run the same way (a run is resumable from
+    its last checkpoint at any moment)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
 def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
-    """Call `main`, turning a user error into one line on stderr and exit code 2."""
+    """Call `main`, turning every failure a user can meet into one line on stderr: a user error
+    or an OS error (full disk, read-only path, a directory where a file belongs) exits 2,
+    Ctrl-C 130 and SIGTERM 143."""
+    signal.signal(signal.SIGTERM, _terminate)
     try:
         return main(argv)
     except DqfdError as error:
         print(f"error: {error}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    except OSError as error:
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"error: {where}{error.strerror or error}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt as error:
+        name, code = ("SIGTERM", 143) if isinstance(error, Terminated) else ("Ctrl-C", 130)
+        print(f"interrupted ({name}); a training run continues from its last checkpoint with --resume",
+              file=sys.stderr)
+        return code

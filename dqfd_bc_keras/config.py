@@ -8,11 +8,13 @@ and the field's comment says so. `Config.for_task(name)` gives a task preset's d
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 from .envs import TIMEOUT_MODES, get_task
 from .errors import ConfigError
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
+from .seeds import MAX_SEED
 
 PRIOR_CENTERS = ("pretrained", "zero")
 DYNAMIC_MODES = ("episodes", "rollouts", "off")
@@ -240,7 +242,12 @@ class Config:
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name}={getattr(self, name)!r} is not one of {allowed}")
+        for f in dataclasses.fields(self):  # inf or NaN passes every comparison below it, or none
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ConfigError(f"{f.name} must be a finite number, got {value!r}")
         checks = [
+            ("seed", 0 <= self.seed <= MAX_SEED, f"in [0, {MAX_SEED}]"),
             ("gamma", 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
             ("n_step", self.n_step >= 1, "≥ 1"),
             ("batch_size", self.batch_size >= 1, "≥ 1"),

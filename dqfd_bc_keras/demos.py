@@ -18,6 +18,7 @@ Transitions are stored in time order, episode after episode, and every episode i
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import sys
 import zipfile
@@ -241,6 +242,17 @@ def save(dataset: DemoDataset, path: str | Path, force: bool = False) -> None:
         np.savez_compressed(tmp, meta=meta, **arrays)
 
 
+def _not_a_file(path: Path) -> str:
+    """What `path` is, when it is not a regular file."""
+    try:
+        path.stat()
+    except OSError as error:
+        if error.errno == errno.ELOOP:
+            return "is a symbolic link loop"
+        return "is a broken symbolic link" if path.is_symlink() else "no such file"
+    return "is a directory, not an .npz file" if path.is_dir() else "is not a regular file"
+
+
 def load(path: str | Path, task: str | None = None, timeout: str | None = None) -> DemoDataset:
     """Read and validate a dataset; with `task`/`timeout`, also check it was recorded for them.
 
@@ -250,7 +262,7 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None) 
     """
     path = Path(path)
     if not path.is_file():
-        raise DemoFileError(path, "no such file")
+        raise DemoFileError(path, _not_a_file(path))
     if not zipfile.is_zipfile(path):
         raise DemoFileError(path, "is not an .npz file")
     try:

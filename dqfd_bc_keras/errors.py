@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 
 class DqfdError(Exception):
     """Base class of every error a user can cause (bad file, bad option, bad model)."""
@@ -26,3 +28,25 @@ class ModelFileError(DqfdError, ValueError):
 
 class OutputExistsError(DqfdError, FileExistsError):
     """Writing would replace an existing result and the user did not ask for that."""
+
+
+class RunDirectoryError(DqfdError):
+    """A run directory cannot be written or resumed (in use, not a directory, a failed write);
+    the message names the path."""
+
+
+class BrokenRunError(RunDirectoryError):
+    """A run's checkpoint or config is corrupt or does not fit: it can only be started over."""
+
+
+class DivergedError(DqfdError):
+    """Training produced a non-finite loss: the run stops before saving it, keeping the last
+    good checkpoint."""
+
+
+def one_line(error: BaseException) -> str:
+    """An exception as one short line: its type and the first line of its message, without
+    TensorFlow's op decorations (`{{function_node …}}`, `[Op:SaveV2]`)."""
+    text = str(getattr(error, "message", None) or error).strip()
+    text = re.sub(r"\{\{.*?\}\}\s*|\s*\[Op:\w+\]", "", text.splitlines()[0] if text else "")
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__

@@ -1,30 +1,54 @@
-"""Atomic file writes: a reader (or a killed run) never sees half a file.
+"""Files that survive kills, full disks and a second writer.
 
 Everything the package writes (demos, models, checkpoints, metrics, reports) goes through
 `atomic_path`: write to a temporary name in the same directory, then `os.replace`, which is
-atomic on POSIX filesystems.
+atomic on POSIX filesystems, so a reader (or a killed run) never sees half a file. What must
+also survive a power cut (checkpoints and the pointer to them) is written `durable`: fsynced
+before the switch. `DirectoryLock` keeps a run directory to one writer.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import os
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import OutputExistsError
+from .errors import OutputExistsError, RunDirectoryError
+
+
+def _sync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def sync_tree(root: Path) -> None:
+    """fsync every file and directory under `root`, then `root` itself."""
+    for directory, _, names in os.walk(root, topdown=False):
+        for name in names:
+            _sync(Path(directory) / name)
+        _sync(Path(directory))
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, *, overwrite: bool = True) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success it is renamed to `path`.
 
     The temporary name keeps `path`'s suffix, so writers that check it (Keras wants
     `.keras`, numpy appends `.npz` otherwise) work unchanged. On error the temporary file is
-    removed and `path` is left as it was.
+    removed and `path` is left as it was. `durable`: fsync the file before the rename and the
+    directory after it.
     """
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a directory, not a file", str(path))
     if not overwrite and path.exists():
         raise OutputExistsError(f"{path} exists; pass --force to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -36,12 +60,59 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True) -> Iterator[
     tmp = Path(tmp)
     try:
         yield tmp
+        if durable:
+            _sync(tmp)
         os.replace(tmp, path)
+        if durable:
+            _sync(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
 
 
-def write_text(path: str | os.PathLike, text: str) -> None:
+def write_text(path: str | os.PathLike, text: str, durable: bool = False) -> None:
     """Atomically write a text file."""
-    with atomic_path(path) as tmp:
+    with atomic_path(path, durable=durable) as tmp:
         tmp.write_text(text)
+
+
+class DirectoryLock:
+    """One writer per directory: an exclusive `flock` on DIR/.lock, which holds the writer's PID.
+
+    The kernel drops the lock when its process dies, so a lock file that still names a PID but
+    can be locked was left by a writer that died: it is taken over with a warning. The file is
+    emptied on release, never deleted (deleting it would let two writers lock two different
+    files of the same name).
+    """
+
+    NAME = ".lock"
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        self.fd: int | None = None
+
+    def __enter__(self) -> DirectoryLock:
+        if self.directory.exists() and not self.directory.is_dir():
+            raise RunDirectoryError(f"{self.directory} is a file, not a run directory")
+        self.directory.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.directory / self.NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        holder = os.pread(fd, 64, 0).decode(errors="replace").strip()
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise RunDirectoryError(f"{self.directory} is in use by process {holder or '(unknown)'}; "
+                                    "wait for it to finish or stop it") from None
+        stale = os.pread(fd, 64, 0).decode(errors="replace").strip()  # a clean release leaves it empty
+        if stale:
+            print(f"warning: {self.directory}: taking over the lock left by process {stale}, which is no longer "
+                  "running", file=sys.stderr)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self.fd = fd
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.fd is not None:
+            os.ftruncate(self.fd, 0)
+            os.close(self.fd)  # closing releases the flock
+            self.fd = None

@@ -9,14 +9,16 @@
             checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state)
             q_network.keras  bc_model.keras  demos.npz  eval.json  learning_curve.png   (at the end)
 
-Every file is written atomically; a checkpoint is a new directory made current by rewriting
-`checkpoints/latest.json`, so a run killed at any moment resumes from a complete one.
+Every file is written atomically; a checkpoint is a new directory, fsynced, then made current
+by rewriting `checkpoints/latest.json`, then the old one is deleted, so a run killed at any
+moment resumes from a complete one. One process writes a run directory (`.lock` holds its PID).
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import json
 import shutil
@@ -29,8 +31,8 @@ import tensorflow as tf
 
 from . import demos as demo_io
 from .config import Config
-from .errors import ConfigError, OutputExistsError
-from .files import atomic_path, write_text
+from .errors import BrokenRunError, ConfigError, DivergedError, OutputExistsError, RunDirectoryError, one_line
+from .files import DirectoryLock, atomic_path, sync_tree, write_text
 from .envs import get_task
 from .evaluation import EvalResult
 from .seeds import eval_seed, final_eval_seed
@@ -53,17 +55,21 @@ class RunResult:
     evaluation: EvalResult
 
 
-def prepare_dir(out: Path, resume: bool, force: bool) -> None:
-    """Refuse to overwrite an existing run unless resuming it or forced."""
+def check_dir(out: Path, resume: bool, force: bool) -> None:
+    """Refuse to overwrite an existing run unless resuming it or forced. Checked before the lock
+    is taken (so a refusal writes nothing) and again holding it."""
     if resume:
         if not (out / "checkpoints" / "latest.json").is_file():
             raise ConfigError(f"{out} has no checkpoint to resume from")
-        return
-    if out.exists() and any(out.iterdir()):
-        if not force:
-            raise OutputExistsError(f"{out} already holds a run; pass --resume to continue it or --force to replace it")
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
+    elif not force and out.is_dir() and any(path.name != DirectoryLock.NAME for path in out.iterdir()):
+        raise OutputExistsError(f"{out} already holds a run; pass --resume to continue it or --force to replace it")
+
+
+def clear(out: Path) -> None:
+    """Delete everything in `out` but its lock."""
+    for path in out.iterdir():
+        if path.name != DirectoryLock.NAME:
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
 def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
@@ -79,13 +85,17 @@ class RunDirectory:
 
     def __init__(self, config: Config, out: Path, learner: Learner, state: TrainingState, quiet: bool) -> None:
         self.config, self.out, self.learner, self.state = config, out, learner, state
-        self.tb = tf.summary.create_file_writer(str(out / "tb"))
         self.progress = None
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
 
             self.progress = tqdm(total=config.total_steps, unit="step", dynamic_ncols=True,
                                  initial=int(learner.interaction.env_steps.numpy()))
+
+    @functools.cached_property
+    def tb(self) -> tf.summary.SummaryWriter:
+        """Opened at the first summary: a resume that fails to restore leaves no event file."""
+        return tf.summary.create_file_writer(str(self.out / "tb"))
 
     def write_demonstrations(self, data: demo_io.DemoDataset | None) -> None:
         """What the run was given before any interaction (not interactions themselves)."""
@@ -134,33 +144,45 @@ class RunDirectory:
 
     # --- checkpoints ------------------------------------------------------------------------
     def save_checkpoint(self) -> None:
+        """Write a complete new checkpoint, fsync it, switch `latest.json` to it, then delete
+        the old one: at every moment `latest.json` names a complete checkpoint."""
         root = self.out / "checkpoints"
-        name = f"ckpt-{int(self.learner.interaction.env_steps.numpy())}"
-        target = root / name
-        shutil.rmtree(target, ignore_errors=True)
-        self.learner.checkpoint().write(str(target / "tf"))
-        dynamic = self.learner.dynamic
-        if dynamic is not None:
-            demo_io.save(dynamic.dataset, target / "demos.npz", force=True)
-            if dynamic.recent:
-                demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
-        self.state.interactions = self.learner.interactions
-        write_text(target / "state.json", json.dumps(dataclasses.asdict(self.state)))
-        previous = json.loads((root / "latest.json").read_text())["dir"] if (root / "latest.json").exists() else None
-        write_text(root / "latest.json", json.dumps({"dir": name}))
-        if previous and previous != name:
-            shutil.rmtree(root / previous, ignore_errors=True)
+        target = free_name(root / f"ckpt-{int(self.learner.interaction.env_steps.numpy())}")
+        try:
+            self.learner.checkpoint().write(str(target / "tf"))
+            dynamic = self.learner.dynamic
+            if dynamic is not None:
+                demo_io.save(dynamic.dataset, target / "demos.npz", force=True)
+                if dynamic.recent:
+                    demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
+            self.state.interactions = self.learner.interactions
+            write_text(target / "state.json", json.dumps(dataclasses.asdict(self.state)))
+            sync_tree(target)
+            write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
+        except BaseException as error:
+            shutil.rmtree(target, ignore_errors=True)  # the debris of a save that did not finish
+            if isinstance(error, tf.errors.OpError):  # e.g. the disk is full
+                raise RunDirectoryError(f"{target}: cannot write the checkpoint ({one_line(error)})") from None
+            raise
+        for old in root.iterdir():
+            if old.is_dir() and old != target:
+                shutil.rmtree(old, ignore_errors=True)
 
     def restore_checkpoint(self) -> None:
         root = self.out / "checkpoints"
-        source = root / json.loads((root / "latest.json").read_text())["dir"]
-        self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
-        dynamic = self.learner.dynamic
-        if dynamic is not None:
-            dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
-            recent = source / "recent.npz"
-            dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
-        self.state = state_from_dict(json.loads((source / "state.json").read_text()))
+        source = root / "latest.json"
+        try:
+            source = root / json.loads(source.read_text())["dir"]
+            self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
+            dynamic = self.learner.dynamic
+            if dynamic is not None:
+                dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
+                recent = source / "recent.npz"
+                dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
+            self.state = state_from_dict(json.loads((source / "state.json").read_text()))
+        except (OSError, ValueError, LookupError, TypeError, tf.errors.OpError) as error:
+            raise BrokenRunError(f"{source}: the checkpoint cannot be resumed ({one_line(error)}); "
+                                 "start the run over with --force") from None
         self.learner.tally.count = self.state.interactions
 
     # --- the end ----------------------------------------------------------------------------
@@ -193,11 +215,39 @@ def train(
     force: bool = False,
     quiet: bool = False,
 ) -> RunResult:
-    """Train `config` into run directory `out` (or continue the run there with `resume`)."""
+    """Train `config` into run directory `out` (or continue the run there with `resume`), as
+    its only writer. A new run that fails before its first checkpoint leaves nothing behind."""
     out = Path(out)
-    prepare_dir(out, resume, force)
+    created = not out.exists()
+    check_dir(out, resume, force)
+    with DirectoryLock(out):
+        check_dir(out, resume, force)
+        if not resume:
+            clear(out)
+        try:
+            run = _start(config, out, dataset, resume, quiet)
+        except BaseException as error:
+            if not resume:
+                shutil.rmtree(out) if created else clear(out)
+            if isinstance(error, DivergedError):
+                raise DivergedError(f"{out}: {error}; nothing was kept") from None
+            raise
+        try:
+            train_episodes(run.learner, run.state, run.on_episode, run.evaluate)
+        except DivergedError as error:
+            kept = json.loads((out / "checkpoints" / "latest.json").read_text())["dir"]
+            raise DivergedError(f"{out}: {error}; the last good checkpoint, {kept}, is kept") from None
+        return run.finish()
+
+
+def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool) -> RunDirectory:
+    """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
     if resume:
-        config = Config.from_dict(json.loads((out / "config.json").read_text()))
+        try:
+            config = Config.from_dict(json.loads((out / "config.json").read_text()))
+        except (OSError, ValueError) as error:
+            raise BrokenRunError(f"{out / 'config.json'}: cannot be resumed ({one_line(error)}); "
+                                 "start the run over with --force") from None
     else:
         write_text(out / "config.json", json.dumps(config.to_dict(), indent=1))
     if config.deterministic:
@@ -210,8 +260,16 @@ def train(
         run.write_demonstrations(learner.demos)
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
-    train_episodes(learner, run.state, run.on_episode, run.evaluate)
-    return run.finish()
+    return run
+
+
+def free_name(path: Path) -> Path:
+    """`path`, or `path.1`, `path.2`, … if taken: a checkpoint never overwrites the current one."""
+    candidate, k = path, 0
+    while candidate.exists():
+        k += 1
+        candidate = path.with_name(f"{path.name}.{k}")
+    return candidate
 
 
 def plot_learning_curve(metrics: list[dict], evals: list[dict], config: Config, path: Path) -> None:

@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+MAX_SEED = 2**31 - 1
+"""The largest run seed: every generator it seeds (NumPy's legacy one wants < 2³²) takes it and
+every seed derived from it below."""
+
 TRAIN, ROLLOUT, BC_FIT = 0, 2, 3
 """Streams of `episode_seed`: training resets, dynamic-demonstration roll-outs, BC (re)fits."""
 

@@ -19,6 +19,7 @@ checkpoints) stays in Python; `runs.py` holds the files a run writes.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +34,7 @@ from .agent import DQfDAgent, make_agent
 from .bc import BCModel, build_bc_model
 from .config import Config
 from .envs import CountInteractions, Tally, make_task
+from .errors import DivergedError
 from .evaluation import EvalResult, GreedyPolicy, evaluate
 from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed
 
@@ -310,6 +312,7 @@ def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: boo
     agent, bc = build_learner(config, data, env, fit=fresh)
     pretrain = fresh and data is not None and config.pretrain_steps > 0
     losses = agent.pretrain(config.pretrain_steps) if pretrain else {}
+    check_finite(losses, "pre-training")
     agent.reset_metrics()
     dynamic = None
     if bc is not None and config.dynamic_demos != "off":
@@ -318,6 +321,14 @@ def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: boo
         dynamic = DynamicDemos(config, data, rollout_env)
     record = dynamic is not None and config.dynamic_demos == "episodes"
     return Learner(config, agent, bc, Interaction(agent, env, config, record), dynamic, tally, data), losses
+
+
+def check_finite(losses: dict[str, float], where: str) -> None:
+    """Stop at the first non-finite loss term: a non-finite Q-value makes the TD terms
+    non-finite too, and nothing learned after it can be trusted or saved."""
+    bad = {name: value for name, value in losses.items() if not math.isfinite(float(value))}
+    if bad:
+        raise DivergedError(f"training diverged in {where}: " + ", ".join(f"{k} = {v}" for k, v in bad.items()))
 
 
 Evaluate = Callable[[list[int]], None]
@@ -355,6 +366,7 @@ def train_episodes(
         stats = interaction.episode
         losses = {name: float(t.result()) for name, t in agent.trackers.items()}
         agent.reset_metrics()
+        check_finite(losses, f"episode {state.episode + 1} (env step {steps()})")
         state.returns.append(stats.ret)
         state.episode += 1
         state.wall_time += time.perf_counter() - started

@@ -132,6 +132,8 @@ def test_a_truncated_metrics_csv_is_skipped_with_a_warning(tmp_path, capsys):
     text = (tmp_path / "out" / "RESULTS.md").read_text()
     assert "11 complete runs" in text
     assert "- `cartpole-naive-ce/seed1/metrics.csv`: ends in the middle of a line (truncated?)" in text
+    assert run(main, ["report", str(suite), "--results", str(tmp_path / "out" / "RESULTS.md"), "--strict"]) == 1
+    assert "run skipped" in capsys.readouterr().err
 
 
 def test_what_is_not_a_suite_exits_2_in_one_line(tmp_path, capsys):

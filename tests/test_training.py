@@ -484,7 +484,9 @@ def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
     assert evaluation["std_return"] == 0.0
     assert (out / "learning_curve.png").read_bytes()[:8] == PNG_SIGNATURE
     latest = json.loads((out / "checkpoints" / "latest.json").read_text())
-    assert latest == {"dir": f"ckpt-{config.total_steps}"}
+    # The final save lands on the step of the last periodic one: a new directory, then the switch.
+    assert latest == {"dir": f"ckpt-{config.total_steps}.1"}
+    assert [p.name for p in (out / "checkpoints").iterdir() if p.is_dir()] == [latest["dir"]]
     checkpoint = out / "checkpoints" / latest["dir"]
     assert json.loads((checkpoint / "state.json").read_text())["episode"] == result.episodes
     assert (checkpoint / "tf.index").is_file() and (checkpoint / "demos.npz").is_file()
@@ -503,7 +505,7 @@ def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path)
         runs.train(tiny("none"), out, resume=True, quiet=True)
     with pytest.raises(ConfigError, match="checkpoint"):
         runs.train(tiny("none"), tmp_path / "missing", resume=True, quiet=True)
-    assert (out / "notes.txt").read_text() == "keep me"
+    assert [p.name for p in out.iterdir()] == ["notes.txt"] and not (tmp_path / "missing").exists()
 
     # force: a plain-DQN run replaces it (and writes nothing of demonstrations or BC)
     result = runs.train(tiny("none"), out, force=True, quiet=True)

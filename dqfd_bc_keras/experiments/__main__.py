@@ -9,6 +9,9 @@ from pathlib import Path
 from ..cli import ArgumentParser, positive_int, run
 from .suites import ALL, BACKENDS, SUITES, run_suite
 
+EXIT_SKIPPED = 1
+"""`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
+
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments", description=__doc__)
@@ -20,6 +23,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     go.add_argument("--out", required=True, help="suite directory")
     go.add_argument("--backend", choices=BACKENDS, default="local")
     go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
+    go.add_argument("--restart-broken", action="store_true",
+                    help="start over every run whose checkpoint cannot be resumed (default: report it as failed)")
     exp = commands.add_parser(
         "export", help="one archive of exactly the files the report reads",
         description="Writes the suite's config.json, metrics.csv, evals.csv, eval.json, demonstrations.json, "
@@ -39,23 +44,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     rep.add_argument("--results", help="markdown file to write, per_seed.csv beside it (overrides the default "
                      "and --docs)")
     rep.add_argument("--figures", help="directory for the PNG figures (default: figures/ beside the markdown)")
+    rep.add_argument("--strict", action="store_true",
+                     help=f"exit {EXIT_SKIPPED} if any run was skipped (a file missing, truncated or unreadable)")
     args = parser.parse_args(argv)
     if args.command == "run":
         for suite in ALL if args.suite == "all" else (args.suite,):
             run_suite(suite, args.seeds, args.out, args.workers, args.backend, args.address,
-                      progress=lambda line: print(line, flush=True))
+                      progress=lambda line: print(line, flush=True), restart_broken=args.restart_broken)
     elif args.command == "export":
         from .data import export_archive
 
         names = export_archive(args.directory, args.out)
         print(f"wrote {args.out}: {len(names)} files")
     else:
-        from .report import PER_SEED, default_location, report
+        from .report import PER_SEED, default_location, report, warn
 
         results = Path(args.results or (Path("docs") if args.docs else default_location(args.source)) / "RESULTS.md")
         figures = Path(args.figures or results.parent / "figures")
-        report(args.source, results, figures)
+        skipped: list[str] = []
+        report(args.source, results, figures, warn=lambda line: (skipped.append(line), warn(line)))
         print(f"wrote {results}, {results.with_name(PER_SEED)} and figures in {figures}")
+        if args.strict and skipped:
+            return EXIT_SKIPPED
     return 0
 
 

@@ -247,7 +247,7 @@ def default_location(source: str | os.PathLike) -> Path:
     return source if source.is_dir() else source.with_name(f"{source.name.removesuffix(ARCHIVE_SUFFIX)}-report")
 
 
-def _warn(line: str) -> None:
+def warn(line: str) -> None:
     print(f"warning: {line}", file=sys.stderr)
 
 
@@ -294,7 +294,7 @@ def _ablations(arms: list[ArmRuns]) -> list[str]:
 
 
 def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_dir: str | os.PathLike,
-           warn: Callable[[str], None] = _warn) -> str:
+           warn: Callable[[str], None] = warn) -> str:
     """Write the RESULTS-style markdown for every complete run of `source` (a suite directory or
     an archive of one), its figures into `figures_dir` (linked relative to `out_markdown`) and
     PER_SEED beside it; return the markdown. A run with a missing or unreadable file is skipped:

@@ -25,7 +25,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from ..config import QUICK, Config
-from ..errors import ConfigError
+from ..errors import BrokenRunError, ConfigError
 from ..files import write_text
 from .claims import CLAIMS, PAPER_READING_STEPS
 from .plans import planned_seeds
@@ -156,6 +156,8 @@ class Job:
     arm: Arm
     seed: int
     out: Path
+    restart_broken: bool = False
+    """Start a run whose checkpoint cannot be resumed over, instead of reporting it."""
 
     @property
     def directory(self) -> Path:
@@ -211,8 +213,14 @@ def run_job(job: Job) -> Outcome:
 
     started = time.perf_counter()
     resume = (job.directory / "checkpoints" / "latest.json").is_file()
+    config = job.arm.config(job.seed)
     try:
-        result = train(job.arm.config(job.seed), job.directory, resume=resume, force=not resume, quiet=True)
+        try:
+            result = train(config, job.directory, resume=resume, force=not resume, quiet=True)
+        except BrokenRunError as error:
+            if not job.restart_broken:
+                raise BrokenRunError(f"{error} (or rerun the sweep with --restart-broken)") from None
+            result = train(config, job.directory, force=True, quiet=True)
         write_text(job.directory / "provenance.json", json.dumps(provenance(), indent=1))
     except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
         return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}")
@@ -257,25 +265,27 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
             ray.shutdown()
 
 
-def sweep_jobs(arms: Sequence[Arm], seeds: int | None, out: Path) -> list[Job]:
+def sweep_jobs(arms: Sequence[Arm], seeds: int | None, out: Path, restart_broken: bool = False) -> list[Job]:
     """Every (arm, seed) of a sweep, seed-major: a sweep cut off partway leaves its arms with
     seed counts that differ by at most one."""
     last = seeds or max(arm.seeds for arm in arms)
-    return [Job(arm, seed, out) for seed in range(last) for arm in arms if seed < (seeds or arm.seeds)]
+    return [Job(arm, seed, out, restart_broken) for seed in range(last) for arm in arms if seed < (seeds or arm.seeds)]
 
 
 def run_suite(
     suite: str | Sequence[Arm], seeds: int | None, out: str | Path, workers: int = 2, backend: str = "local",
     address: str | None = None, progress: Callable[[str], None] = print, name: str = "arms",
+    restart_broken: bool = False,
 ) -> list[Outcome]:
     """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms called `name` in the
     progress lines and the sweep log), seeds 0 … `seeds` − 1, or each arm's own number when
-    `seeds` is None; one progress line per run."""
+    `seeds` is None; one progress line per run. A run whose checkpoint cannot be resumed fails
+    (reported, the sweep goes on) unless `restart_broken`, which starts it over."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
     name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
     out = Path(out)
-    jobs = sweep_jobs(arms, seeds, out)
+    jobs = sweep_jobs(arms, seeds, out, restart_broken)
     todo = [job for job in jobs if not job.complete]
     progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
              f"on {workers} {backend} worker(s)")
