@@ -259,6 +259,25 @@ def test_bad_paths_are_named_in_one_line(tmp_path, capsys, monkeypatch, make, ar
     one_line(capsys, cli.run(train_main, [a.format(p=path) for a in args]), message.format(p=path))
 
 
+def test_a_read_only_filesystem_is_one_line(tmp_path, monkeypatch, capsys):
+    def read_only(self, *args, **kwargs):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(self))
+
+    monkeypatch.setattr(Path, "mkdir", read_only)
+    one_line(capsys, cli.run(train_main, ["--quick", "--out", str(tmp_path / "run")]),
+             f"error: {tmp_path / 'run'}: Read-only file system")
+    monkeypatch.undo()
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=100k", "tmpfs", str(ro)], capture_output=True).returncode:
+        return  # a real read-only mount needs root; the injected case above runs everywhere
+    try:
+        one_line(capsys, cli.run(train_main, ["--quick", "--out", str(ro / "run")]),
+                 f"error: {ro / 'run'}: Read-only file system")
+    finally:
+        subprocess.run(["umount", str(ro)], check=True)
+
+
 def test_evaluate_into_a_directory_is_one_line(finished, tmp_path, capsys):
     code = cli.run(evaluate_main, [str(finished), "--episodes", "1", "--out", str(tmp_path)])
     one_line(capsys, code, f"error: {tmp_path}: is a directory, not a file")

@@ -73,6 +73,20 @@ def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
         ("ce", 0), ("bayes", 0), ("ce", 1), ("bayes", 1)]
 
 
+def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
+    from dqfd_bc_keras.experiments import suites
+
+    def cut_after_one(jobs, workers):
+        yield suites.Outcome(jobs[0], 3, 300, 10.0, 1.0)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(suites, "_local", cut_after_one)
+    with pytest.raises(KeyboardInterrupt):
+        run_suite("quick", 2, tmp_path, progress=lambda line: None)
+    [logged] = [json.loads(line) for line in (tmp_path / "sweeps.jsonl").read_text().splitlines()]
+    assert (logged["suite"], logged["runs"], logged["interrupted"]) == ("quick", 1, True)
+
+
 def test_unknown_suite_or_backend_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="unknown suite 'everything'"):
         suite_arms("everything")

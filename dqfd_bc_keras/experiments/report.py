@@ -195,7 +195,8 @@ def _sweeps(suite_dir: Path) -> list[str]:
                for line in log.read_text().splitlines() if line.strip()]
     if not entries:
         return ["No sweep log (sweeps.jsonl) under the suite directory."]
-    rows = [f"| {e['suite']} | {e['seeds']} | {e['runs']} | {e['workers']} × {e['backend']} | "
+    rows = [f"| {e['suite']}{' (interrupted)' if e.get('interrupted') else ''} | {e['seeds']} | {e['runs']} | "
+            f"{e['workers']} × {e['backend']} | "
             f"{e['seconds'] / 60:.1f} min | {e['ended']} | {_commit(e.get('code_commit'), e.get('dirty', False))} |"
             for e in entries]
     return ["Each sweep as logged by the runner (runs it ran, not those it found complete).", "",

@@ -238,10 +238,14 @@ def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
     """A pool of fresh processes (one run each: no TensorFlow state carried between runs)."""
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), max_tasks_per_child=1) as pool:
         pending = {pool.submit(run_job, job) for job in jobs}
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for future in finished:
-                yield future.result()
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    yield future.result()
+        except BaseException:  # Ctrl-C, SIGTERM: the queued runs are dropped, the running ones end
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
 
 
 def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Outcome]:
@@ -290,21 +294,25 @@ def run_suite(
     progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
              f"on {workers} {backend} worker(s)")
     os.environ.setdefault("DQFD_TF_THREADS", "1")  # one core per run
-    outcomes, started = [], time.perf_counter()
+    outcomes, started, interrupted = [], time.perf_counter(), True
     stream = _local(todo, workers) if backend == "local" else _ray(todo, workers, address)
-    for outcome in stream:
-        outcomes.append(outcome)
-        job = outcome.job
-        status = (f"failed: {outcome.error}" if outcome.error else
-                  f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
-        progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
-                 f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
-    if todo:
-        log = out / SWEEP_LOG
-        entry = {"suite": name, "seeds": seeds or max(arm.seeds for arm in arms), "runs": len(todo),
-                 "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
-                 "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **provenance()}
-        write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
+    try:
+        for outcome in stream:
+            outcomes.append(outcome)
+            job = outcome.job
+            status = (f"failed: {outcome.error}" if outcome.error else
+                      f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
+            progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
+                     f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
+        interrupted = False
+    finally:
+        if outcomes or (todo and not interrupted):  # a sweep cut off is logged too, as such
+            log = out / SWEEP_LOG
+            entry = {"suite": name, "seeds": seeds or max(arm.seeds for arm in arms), "runs": len(outcomes),
+                     "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
+                     "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **({"interrupted": True} if interrupted else {}),
+                     **provenance()}
+            write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
     failed = [o for o in outcomes if o.error]
     if failed:
         raise ConfigError(f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}")
