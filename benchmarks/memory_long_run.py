@@ -5,14 +5,16 @@
 
 Runs `train.py --task mountaincar` in a child process and samples its resident set size
 (/proc/PID/status, VmRSS) every few seconds beside the env step the run has logged. Prints the
-curve at every tenth of the budget and the ratio of the RSS at the end to the RSS at a tenth of
-it (the goal: within 10%). Linux only (it reads /proc).
+median and peak RSS over each tenth of the budget and the ratio of the last tenth's median to
+the second's (the goal: within 10%). `--json FILE` keeps the samples, `--samples FILE`
+summarises them again. Linux only (it reads /proc).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -63,25 +65,38 @@ def measure(steps: int, every: float) -> list[tuple[int, float]]:
     return samples
 
 
+def summarise(steps: int, samples: list[tuple[int, float]]) -> list[str]:
+    """The curve per tenth of the budget: median and peak RSS (checkpoint saves make short peaks),
+    and the median of the last tenth ÷ the median of the second (from 10% of the budget on)."""
+    lines = [f"MountainCar, {steps:,} env steps: resident memory (MB) per tenth of the budget",
+             "  env steps               median    peak"]
+    tenths: dict[int, list[float]] = {}
+    for step, rss in samples:
+        tenths.setdefault(min(9, step * 10 // steps), []).append(rss)
+    for tenth, values in sorted(tenths.items()):
+        lines.append(f"  {tenth * steps // 10:>9,}–{(tenth + 1) * steps // 10:<9,}  {statistics.median(values):7.0f} "
+                     f"{max(values):7.0f}")
+    if 1 in tenths and 9 in tenths:
+        ratio = statistics.median(tenths[9]) / statistics.median(tenths[1])
+        lines.append(f"RSS over the last tenth ÷ RSS over {steps // 10:,}–{2 * steps // 10:,} steps (medians): {ratio:.3f}")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--every", type=float, default=5.0, help="seconds between samples")
     parser.add_argument("--quick", action="store_true", help="5,000 steps, a sample every half second")
     parser.add_argument("--json", help="also write the samples to this file")
+    parser.add_argument("--samples", help="summarise the samples saved by an earlier --json instead of running")
     args = parser.parse_args(argv)
-    steps, every = (5_000, 0.5) if args.quick else (args.steps, args.every)
-    samples = measure(steps, every)
-    print(f"MountainCar, {steps:,} env steps: resident memory (MB) at each tenth of the budget")
-    marks = {}
-    for step, rss in samples:
-        tenth = min(10, step * 10 // steps)
-        marks[tenth] = (step, rss)  # the last sample within each tenth
-    for tenth in sorted(marks):
-        print(f"  {marks[tenth][0]:>9,} steps  {marks[tenth][1]:7.0f} MB")
-    first, last = marks.get(1), marks[max(marks)]
-    if first:
-        print(f"RSS at the end ÷ RSS at {first[0]:,} steps: {last[1] / first[1]:.3f}")
+    if args.samples:
+        saved = json.loads(Path(args.samples).read_text())
+        steps, samples = saved["steps"], saved["samples"]
+    else:
+        steps, every = (5_000, 0.5) if args.quick else (args.steps, args.every)
+        samples = measure(steps, every)
+    print("\n".join(summarise(steps, samples)))
     if args.json:
         Path(args.json).write_text(json.dumps({"steps": steps, "samples": samples}))
     return 0
