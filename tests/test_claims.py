@@ -466,6 +466,11 @@ def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_p
     assert choice == "rollouts" and [w for *_, w in pairs].count("rollouts") == 3
     tie = arms + [arm("e4", "episodes", "ce", fast), arm("r4", "rollouts", "ce", slow)]
     assert analysis.dynamic_default(tie)[0] == "episodes"  # 2–2
+    # Seeds one mode ran elsewhere (C3's 26 seeds of the episodes arm) do not enter the comparison:
+    # seeds 0–2 tie (fast, fast); seeds 3–6 of the episodes arm alone (slow) would make rollouts win.
+    e5, r5 = arm("e5", "episodes", "bayes", fast + slow + slow + slow + slow), arm("r5", "rollouts", "bayes", fast)
+    [(first, second, winner)] = analysis.dynamic_default([e5, r5])[1]
+    assert winner == "tie" and len(first.runs) == len(second.runs) == 3
 
 
 def test_fields_a_loss_does_not_read_do_not_name_its_arm(tmp_path):

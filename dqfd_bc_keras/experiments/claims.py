@@ -7,6 +7,7 @@ directory names) and grouped into arms by config.json: every field except `seed`
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from collections.abc import Callable, Iterable
@@ -145,6 +146,14 @@ class ArmRuns:
 
     def values(self, metric: str) -> np.ndarray:
         return np.array([PER_RUN[metric](run) for run in self.runs], dtype=float)
+
+
+def common_seeds(first: ArmRuns, second: ArmRuns) -> tuple[ArmRuns, ArmRuns]:
+    """The two arms restricted to the seeds both ran: a comparison the pre-registration plans
+    within one suite stays the same when one of its arms gets more seeds in another suite."""
+    seeds = {r.config.seed for r in first.runs} & {r.config.seed for r in second.runs}
+    return tuple(dataclasses.replace(arm, runs=[r for r in arm.runs if r.config.seed in seeds])
+                 for arm in (first, second))
 
 
 def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
@@ -400,7 +409,7 @@ def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
     def without(arm: ArmRuns, key: str) -> dict:
         return {k: v for k, v in arm.config.items() if k != key}
 
-    return [(key, ablated, full) for key, off in ABLATED.items() for ablated in arms
+    return [(key, *common_seeds(ablated, full)) for key, off in ABLATED.items() for ablated in arms
             if ablated.config[key] == off and ablated.config["task"] in ABLATION_METRIC
             for full in arms if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)]
 
@@ -432,7 +441,7 @@ DYNAMIC_TIE = "episodes"
 
 def dynamic_default(arms: list[ArmRuns]) -> tuple[str | None, list[tuple[ArmRuns, ArmRuns, str]]]:
     """The default of `Config.dynamic_demos` by the pre-registered rule: per (task, loss) pair of
-    arms equal but for the mode, the mode with the lower median interactions_to_threshold (∞ for
+    arms equal but for the mode, on the seeds both ran, the mode with the lower median interactions_to_threshold (∞ for
     never) wins (a tie wins for neither); the mode winning ≥ 3 of the 4 pairs is the default, else
     DYNAMIC_TIE."""
     # Returns the default (None until all 4 pairs have run) and each pair with its winner.
@@ -445,9 +454,10 @@ def dynamic_default(arms: list[ArmRuns]) -> tuple[str | None, list[tuple[ArmRuns
             continue
         for second in arms:
             if second.config["dynamic_demos"] == DYNAMIC_MODES[1] and rest(second) == rest(first):
-                medians = [np.median(a.values("interactions_to_threshold")) for a in (first, second)]
+                pair = common_seeds(first, second)
+                medians = [np.median(a.values("interactions_to_threshold")) for a in pair]
                 winner = "tie" if medians[0] == medians[1] else DYNAMIC_MODES[int(medians[1] < medians[0])]
-                pairs.append((first, second, winner))
+                pairs.append((*pair, winner))
     if len(pairs) < 4:
         return None, pairs
     wins = {mode: sum(w == mode for *_, w in pairs) for mode in DYNAMIC_MODES}
