@@ -306,7 +306,7 @@ def run_suite(
                      f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
         interrupted = False
     finally:
-        if outcomes or (todo and not interrupted):  # a sweep cut off is logged too, as such
+        if outcomes:  # every sweep that ran something, one cut off too (as such)
             log = out / SWEEP_LOG
             entry = {"suite": name, "seeds": seeds or max(arm.seeds for arm in arms), "runs": len(outcomes),
                      "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
