@@ -44,9 +44,15 @@ def td_target(returns: tf.Tensor, discount: tf.Tensor, next_value: tf.Tensor) ->
 
 def td_error(q: tf.Tensor, actions: tf.Tensor, y: tf.Tensor) -> tf.Tensor:
     """δ = y − Q(s, a), (B,). q: (B, A); actions: (B,) int; y: (B,)."""
-    q_sa = tf.gather(q, tf.cast(actions, tf.int32), axis=1, batch_dims=1)
+    q_sa = action_value(q, actions)
     _assert_same_shape(q_sa, y, "the target y must have shape (B,)")
     return y - q_sa
+
+
+def action_value(q: tf.Tensor, actions: tf.Tensor) -> tf.Tensor:
+    """Q(s, a) for each row's action, (B,), as Σ_a' Q(s, a')·1[a' = a]: the same numbers as a
+    gather, and a gradient of two ops where a batched gather's takes ~50."""
+    return tf.reduce_sum(q * tf.one_hot(tf.cast(actions, tf.int32), tf.shape(q)[1], dtype=q.dtype), axis=1)
 
 
 def td_loss(delta: tf.Tensor, kind: str = "squared") -> tf.Tensor:
@@ -68,8 +74,7 @@ def margin_loss(q: tf.Tensor, expert_actions: tf.Tensor, margin: float = 0.8) ->
     """
     a_e = tf.cast(expert_actions, tf.int32)
     l = margin * (1.0 - tf.one_hot(a_e, tf.shape(q)[1], dtype=q.dtype))
-    q_ae = tf.gather(q, a_e, axis=1, batch_dims=1)
-    return tf.reduce_max(q + l, axis=1) - q_ae
+    return tf.reduce_max(q + l, axis=1) - action_value(q, a_e)
 
 
 def q_policy(q: tf.Tensor, temperature: float = 1.0) -> tf.Tensor:
@@ -108,13 +113,14 @@ def bayes_prior_loss(
     weights: the Q-network's trainable variables θ; prior_weights: θ_prior, same shapes;
     prior_scale: s_p; n_data: N, the number of demonstration transitions (MAP scaling).
     """
-    squared = tf.add_n([tf.reduce_sum(tf.square(w - tf.stop_gradient(p))) for w, p in zip(weights, prior_weights)])
-    return squared / (2.0 * prior_scale**2 * tf.cast(n_data, squared.dtype))
+    # tf.nn.l2_loss(x) = ‖x‖²/2 in one op (and one for its gradient); θ_prior is not trained.
+    half_squared = tf.add_n([tf.nn.l2_loss(w - tf.stop_gradient(p)) for w, p in zip(weights, prior_weights)])
+    return half_squared / (prior_scale**2 * tf.cast(n_data, half_squared.dtype))
 
 
 def l2_loss(kernels: list[tf.Variable]) -> tf.Tensor:
     """J_L2 = Σ ‖W‖² over the Q-network's kernel matrices (biases excluded), a scalar."""
-    return tf.add_n([tf.reduce_sum(tf.square(k)) for k in kernels])
+    return 2.0 * tf.add_n([tf.nn.l2_loss(k) for k in kernels])  # l2_loss(k) = ‖k‖²/2
 
 
 def weighted_mean(per_sample: tf.Tensor, weights: tf.Tensor) -> tf.Tensor:

@@ -18,16 +18,19 @@ import tensorflow as tf
 class FusedAdam(keras.optimizers.Adam):
     """`keras.optimizers.Adam` (without amsgrad) whose per-variable step is one fused op."""
 
-    def update_step(self, gradient, variable, learning_rate):
+    def _backend_update_step(self, grads, trainable_variables, learning_rate):
         if self.amsgrad:
-            return super().update_step(gradient, variable, learning_rate)
-        dtype = variable.dtype
+            return super()._backend_update_step(grads, trainable_variables, learning_rate)
+        # The scalars all variables share, computed once per step rather than once per variable.
+        dtype = trainable_variables[0].dtype
         step = tf.cast(self.iterations + 1, dtype)
-        beta_1, beta_2 = tf.cast(self.beta_1, dtype), tf.cast(self.beta_2, dtype)
-        index = self._get_variable_index(variable)
-        tf.raw_ops.ResourceApplyAdam(
-            var=variable.handle, m=self._momentums[index].handle,
-            v=self._velocities[index].handle, beta1_power=tf.pow(beta_1, step),
-            beta2_power=tf.pow(beta_2, step), lr=tf.cast(learning_rate, dtype), beta1=beta_1,
-            beta2=beta_2, epsilon=tf.cast(self.epsilon, dtype), grad=tf.cast(gradient, dtype),
-        )
+        beta_1, beta_2 = tf.constant(self.beta_1, dtype), tf.constant(self.beta_2, dtype)
+        beta1_power, beta2_power = tf.pow(beta_1, step), tf.pow(beta_2, step)
+        lr, epsilon = tf.cast(learning_rate, dtype), tf.constant(self.epsilon, dtype)
+        for gradient, variable in zip(grads, trainable_variables):
+            index = self._get_variable_index(variable)
+            tf.raw_ops.ResourceApplyAdam(
+                var=variable.value.handle, m=self._momentums[index].value.handle,
+                v=self._velocities[index].value.handle, beta1_power=beta1_power, beta2_power=beta2_power,
+                lr=lr, beta1=beta_1, beta2=beta_2, epsilon=epsilon, grad=tf.cast(gradient, dtype),
+            )

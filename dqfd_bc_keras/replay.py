@@ -11,9 +11,12 @@ over all rows gives proportional prioritization,
 and new transitions enter at the largest priority seen. Everything here runs inside a
 TensorFlow graph, so storing, sampling and the priority write-back add no graph calls.
 
-Every sample carries its n-step return, computed on the fly from the stored sequence:
-R = Σ_{k<m} γ^k r_{t+k} with m ≤ n stopping at the episode's end (terminated or truncated)
-or at the newest stored transition, then bootstrapping from s_{t+m} with γ^m·(1 − terminated).
+Every sample carries its n-step return from the stored sequence: R = Σ_{k<m} γ^k r_{t+k}
+with m ≤ n stopping at the episode's end (terminated or truncated) or at the newest stored
+transition, then bootstrapping from s_{t+m} with γ^m·(1 − terminated). A row's return only
+changes when a row of its window is written, so it is computed then (for the n rows whose
+window holds a new transition, and for all of D_demo when it is set) and kept beside the
+table: sampling reads it with one gather instead of re-deriving it for every batch.
 """
 
 from __future__ import annotations
@@ -59,52 +62,59 @@ class Batch(NamedTuple):
 
 
 class SumTree(tf.Module):
-    """A 32-ary sum tree in `tf.Variable`s: sampling and updating touch 32 values per level.
+    """Proportional sampling over `size` leaves in two levels: blocks of `WIDTH` leaves and
+    each block's sum, both `tf.Variable`s.
 
-    `levels[0]` is the root, `levels[-1]` the leaves. A flat cumulative sum costs ~1 ms per
-    sample at 150k rows on this CPU; four levels of 32 cost a few µs.
+    Sampling is a cumulative sum and a binary search (`tf.searchsorted`) per level; an update
+    rewrites the leaves and re-sums their blocks: a dozen TensorFlow ops in all, where a
+    32-ary tree of 150k leaves takes five levels of a dozen each. Every op costs µs here
+    (README "Performance"); a 1-D cumulative sum of thousands of block sums costs ~7 µs, but
+    one along rows wider than ~100 costs far more (~250 µs for 64 rows of 388), hence narrow
+    blocks. The total is re-summed from the block sums on each read, so rounding never
+    accumulates.
     """
 
-    BRANCH = 32
+    WIDTH = 64
 
     def __init__(self, size: int) -> None:
         super().__init__()
-        self.depth = max(1, math.ceil(math.log(size, self.BRANCH) - 1e-9))
-        self.levels = [tf.Variable(tf.zeros([self.BRANCH**d]), trainable=False, name=f"level_{d}")
-                       for d in range(self.depth + 1)]
-        # (x @ upper)[:, j] = Σ_{i ≤ j} x[:, i]: TensorFlow's CPU cumsum is several times slower.
-        self._upper = tf.constant(np.triu(np.ones((self.BRANCH, self.BRANCH), np.float32)))
+        self.size = int(size)
+        self.width = self.WIDTH
+        self.blocks = max(1, math.ceil(self.size / self.width))
+        self.leaf = tf.Variable(tf.zeros([self.blocks, self.width]), trainable=False, name="leaves")
+        self.block_sums = tf.Variable(tf.zeros([self.blocks]), trainable=False, name="block_sums")
 
     @property
     def total(self) -> tf.Tensor:
-        return self.levels[0][0]
+        return tf.reduce_sum(self.block_sums)
+
+    def _cell(self, indices: tf.Tensor) -> tf.Tensor:
+        """(n, 2) [block, position] of each leaf index."""
+        indices = tf.cast(indices, tf.int32)
+        return tf.stack([indices // self.width, indices % self.width], axis=1)
 
     def leaves(self, indices: tf.Tensor) -> tf.Tensor:
-        return tf.gather(self.levels[-1], indices)
-
-    def _children(self, nodes: tf.Tensor) -> tf.Tensor:
-        return nodes[:, None] * self.BRANCH + tf.range(self.BRANCH)
+        return tf.gather_nd(self.leaf, self._cell(indices))
 
     def set(self, indices: tf.Tensor, values: tf.Tensor) -> None:
-        """Set leaves `indices` (n,) to `values` (n,) and recompute their ancestors."""
-        nodes = tf.cast(indices, tf.int32)
-        self.levels[-1].scatter_nd_update(nodes[:, None], tf.cast(values, tf.float32))
-        for d in range(self.depth - 1, -1, -1):
-            nodes = nodes // self.BRANCH
-            sums = tf.reduce_sum(tf.gather(self.levels[d + 1], self._children(nodes)), axis=1)
-            self.levels[d].scatter_nd_update(nodes[:, None], sums)
+        """Set leaves `indices` (n,) to `values` (n,) and re-sum their blocks."""
+        cells = self._cell(indices)
+        self.leaf.scatter_nd_update(cells, tf.cast(values, tf.float32))
+        blocks = cells[:, :1]
+        self.block_sums.scatter_nd_update(blocks, tf.reduce_sum(tf.gather_nd(self.leaf, blocks), axis=1))
 
     def find(self, mass: tf.Tensor) -> tf.Tensor:
         """The leaf whose cumulative-sum interval holds each of `mass` (n,) in [0, total)."""
-        nodes = tf.zeros_like(mass, dtype=tf.int32)
-        for d in range(1, self.depth + 1):
-            children = tf.gather(self.levels[d], self._children(nodes))  # (n, BRANCH)
-            cumulative = tf.matmul(children, self._upper)  # a cumsum along the row, as one matmul
-            mass = tf.minimum(mass, cumulative[:, -1] * (1.0 - 1e-6))  # float rounding at the edge
-            passed = tf.cast(cumulative <= mass[:, None], tf.float32)  # the children wholly below mass
-            mass -= tf.reduce_sum(children * passed, axis=1)
-            nodes = nodes * self.BRANCH + tf.cast(tf.reduce_sum(passed, axis=1), tf.int32)
-        return nodes
+        cumulative = tf.cumsum(self.block_sums)
+        # Float rounding can put a mass at or past the last boundary: keep it inside.
+        mass = tf.minimum(mass, cumulative[-1] * (1.0 - 1e-6))
+        # The first block whose cumulative sum exceeds the mass: never an empty one.
+        block = tf.searchsorted(cumulative, mass, side="right")
+        mass -= tf.gather(tf.concat([[0.0], cumulative], axis=0), block)
+        within = tf.cumsum(tf.gather(self.leaf, block), axis=1)  # (n, width)
+        mass = tf.minimum(mass, within[:, -1] * (1.0 - 1e-6))
+        position = tf.searchsorted(within, mass[:, None], side="right")[:, 0]
+        return block * self.width + position
 
 
 class PrioritizedReplay(tf.Module):
@@ -148,6 +158,8 @@ class PrioritizedReplay(tf.Module):
         self.head = tf.Variable(0, trainable=False, name="head")
         self.max_priority = tf.Variable(1.0, trainable=False, name="max_priority")
         """The largest p^α written so far: new transitions enter with it."""
+        self.n_step_view = tf.Variable(tf.zeros([rows, d + 2]), trainable=False, name="n_step_view")
+        """[R | s_{t+m} (d) | γ^m·(1 − terminated)] of each row, kept current by `_refresh_n_step`."""
         self.tree = SumTree(rows)
         self._strictly_upper = tf.constant(np.triu(np.ones((n_step, n_step), np.float32), k=1))
         self.rng = tf.random.Generator.from_seed(seed)
@@ -172,16 +184,20 @@ class PrioritizedReplay(tf.Module):
             raise ConfigError(f"demonstration rows have width {rows.shape[1]}, the table {self.table.shape[1]}")
         self.table.scatter_nd_update(tf.range(n)[:, None], rows)
         self.demo_size.assign(n)
+        self._refresh_n_step(tf.range(n))
         priorities = tf.concat([tf.fill([n], self.max_priority), tf.zeros([max(old - n, 0)])], axis=0)
         self.tree.set(tf.range(len(priorities)), priorities)
 
     def store(self, row: tf.Tensor) -> None:
         """Append one packed self-generated transition (width,) at the circular head, at max priority."""
-        index = self.demo_capacity + self.head
+        position = self.head.read_value()
+        index = self.demo_capacity + position
         self.table.scatter_nd_update([[index]], row[None])
         self.tree.set(index[None], self.max_priority[None])
-        self.head.assign((self.head + 1) % self.capacity)
+        self.head.assign((position + 1) % self.capacity)
         self.agent_size.assign(tf.minimum(self.agent_size + 1, self.capacity))
+        # The rows whose n-step window reaches the new one: it and the n − 1 stored before it.
+        self._refresh_n_step(self.demo_capacity + (position - tf.range(self.n_step)) % self.capacity)
 
     def stored_indices(self) -> tf.Tensor:
         """The table rows in use: D_demo, then D_replay."""
@@ -193,17 +209,24 @@ class PrioritizedReplay(tf.Module):
         indices = self.tree.find(self.rng.uniform([batch_size]) * total)
         weights = tf.pow(tf.cast(self.size, tf.float32) * self.tree.leaves(indices) / total, -beta)
         weights /= tf.reduce_max(weights)
-        window = tf.gather(self.table, self._window(indices))  # (B, n, width); step 0 is the row itself
-        row = window[:, 0]
-        n_returns, n_next_obs, n_discount = self._n_step(indices, window)
+        row = tf.gather(self.table, indices)
+        n_returns, n_next_obs, n_discount = tf.split(tf.gather(self.n_step_view, indices),
+                                                     [1, self.obs_dim, 1], axis=1)
         return Batch(
             indices=indices, obs=row[:, self.OBS], actions=tf.cast(row[:, self.ACTION], tf.int32),
             rewards=row[:, self.REWARD], next_obs=row[:, self.NEXT_OBS],
             discount=self.gamma * (1.0 - row[:, self.TERMINATED]),
-            n_returns=n_returns, n_next_obs=n_next_obs, n_discount=n_discount,
+            n_returns=n_returns[:, 0], n_next_obs=n_next_obs, n_discount=n_discount[:, 0],
             pi_bc=row[:, self.PI_BC], sigma_sq=row[:, self.SIGMA_SQ],
             is_demo=tf.cast(indices < self.demo_capacity, tf.float32), weights=weights,
         )
+
+    def _refresh_n_step(self, indices: tf.Tensor) -> None:
+        """Recompute the n-step return, s_{t+m} and discount of rows `indices` (distinct)."""
+        window = tf.gather(self.table, self._window(indices))  # (n, n_step, width); step 0 is the row
+        n_returns, n_next_obs, n_discount = self._n_step(indices, window)
+        self.n_step_view.scatter_nd_update(
+            indices[:, None], tf.concat([n_returns[:, None], n_next_obs, n_discount[:, None]], axis=1))
 
     def _window(self, indices: tf.Tensor) -> tf.Tensor:
         """(B, n) rows t, t+1, …, t+n−1 of each sample's region (D_replay wraps around)."""

@@ -364,7 +364,7 @@ def train_episodes(
             obs, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(budget, tf.int64))
             obs, done = obs.numpy(), bool(done)
         stats = interaction.episode
-        losses = {name: float(t.result()) for name, t in agent.trackers.items()}
+        losses = {name: float(value) for name, value in agent.losses_so_far().items()}
         agent.reset_metrics()
         check_finite(losses, f"episode {state.episode + 1} (env step {steps()})")
         state.returns.append(stats.ret)

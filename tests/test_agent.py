@@ -91,7 +91,7 @@ def test_train_step_assembles_the_total_loss_as_written(loss, target, demos, bc_
 
     agent.reset_metrics()
     delta = agent.train_step(b)
-    result = {name: float(t.result()) for name, t in agent.trackers.items()}
+    result = {name: float(value) for name, value in agent.losses_so_far().items()}
     np.testing.assert_allclose(result["td"], j_dq, rtol=1e-4)
     np.testing.assert_allclose(result["n_step"], j_n, rtol=1e-4)
     np.testing.assert_allclose(result["expert"], j_e, rtol=1e-4, atol=1e-6)

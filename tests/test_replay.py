@@ -105,17 +105,17 @@ def test_sumtree_zero_leaves_never_found():
 
 
 def test_sumtree_multi_level_total_and_find():
-    tree = SumTree(2000)  # 2000 > 32² leaves: the tree needs three levels of 32 below the root
-    assert len(tree.levels) >= 3
-    tree.set(tf.constant([0, 31, 32, 1023, 1024, 1999]), tf.constant([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]))
+    tree = SumTree(2000)  # 32 blocks of 64 leaves; 63 | 64 and 1023 | 1024 straddle block edges
+    assert (tree.blocks, tree.width) == (32, 64)
+    tree.set(tf.constant([0, 63, 64, 1023, 1024, 1999]), tf.constant([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]))
     close(tree.total, 1 + 2 + 3 + 4 + 5 + 6)
-    tree.set(tf.constant([31]), tf.constant([0.5]))  # overwrite one leaf
+    tree.set(tf.constant([63]), tf.constant([0.5]))  # overwrite one leaf
     close(tree.total, 1 + 0.5 + 3 + 4 + 5 + 6)
-    close(tree.leaves(tf.constant([0, 31, 32, 1023, 1024, 1999, 7])), [1, 0.5, 3, 4, 5, 6, 0])
-    # cumulative: leaf 0 → [0, 1), 31 → [1, 1.5), 32 → [1.5, 4.5), 1023 → [4.5, 8.5),
+    close(tree.leaves(tf.constant([0, 63, 64, 1023, 1024, 1999, 7])), [1, 0.5, 3, 4, 5, 6, 0])
+    # cumulative: leaf 0 → [0, 1), 63 → [1, 1.5), 64 → [1.5, 4.5), 1023 → [4.5, 8.5),
     #             1024 → [8.5, 13.5), 1999 → [13.5, 19.5)
     masses = tf.constant([0.5, 1.2, 1.5, 4.4, 4.6, 8.4, 8.6, 13.4, 13.6, 19.4])
-    assert tree.find(masses).numpy().tolist() == [0, 31, 32, 32, 1023, 1023, 1024, 1024, 1999, 1999]
+    assert tree.find(masses).numpy().tolist() == [0, 63, 64, 64, 1023, 1023, 1024, 1024, 1999, 1999]
     tree.set(tf.constant([1999]), tf.constant([0.0]))
     close(tree.total, 1 + 0.5 + 3 + 4 + 5)
     assert tree.find(tf.constant([13.49])).numpy().tolist() == [1024]
