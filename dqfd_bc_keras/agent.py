@@ -71,6 +71,9 @@ class DQfDAgent(keras.Model):
                               for w in self.q_network.trainable_weights]
         self.train_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="train_steps")
         self.loss_means = MeanVector(len(LOSS_TERMS), name="losses")
+        self.expert_view = tf.function(self.expert_targets, autograph=False,
+                                       input_signature=[tf.TensorSpec([None, self.obs_dim], tf.float32)])
+        """`expert_targets` of many states outside a graph (D_demo, refits): traced once."""
         self.compile(optimizer=FusedAdam(config.learning_rate))
         self.optimizer.build(self.q_network.trainable_variables)
         self.refresh_target()
@@ -112,7 +115,7 @@ class DQfDAgent(keras.Model):
 
     def set_demos(self, obs, actions, rewards, next_obs, terminated, truncated) -> None:
         """Fill D_demo with these transitions (with the BC model's view of each state)."""
-        pi_bc, sigma_sq = self.expert_targets(tf.constant(obs, tf.float32))
+        pi_bc, sigma_sq = self.expert_view(tf.constant(obs, tf.float32))
         self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated,
                                                pi_bc, sigma_sq))
 
@@ -128,7 +131,7 @@ class DQfDAgent(keras.Model):
         for start in range(0, int(indices.shape[0]), chunk):
             rows = indices[start:start + chunk]
             obs = tf.gather(self.replay.table, rows)[:, self.replay.OBS]
-            self.replay.set_expert_targets(rows, *self.expert_targets(obs))
+            self.replay.set_expert_targets(rows, *self.expert_view(obs))
 
     def expert_loss(self, q: tf.Tensor, batch: Batch) -> tf.Tensor:
         """J_E, importance-weighted: margin on demonstrations only, the others on every row."""
@@ -188,11 +191,18 @@ class DQfDAgent(keras.Model):
         delta = self.train_step(batch)
         self.replay.update_priorities(batch.indices, tf.abs(delta))
 
-    @tf.function(input_signature=[tf.TensorSpec([], tf.int32)])
+    @tf.function(input_signature=[tf.TensorSpec([], tf.int32)], autograph=False)
     def learn(self, steps: tf.Tensor) -> dict[str, tf.Tensor]:
-        """`steps` learning steps in one graph call; returns the running means of the losses."""
-        for _ in tf.range(steps):
+        """`steps` learning steps in one graph call; returns the running means of the losses.
+
+        Graphs here are written with explicit `tf.while_loop`/`tf.cond` (`autograph=False`):
+        AutoGraph would otherwise rewrite every function the loop calls, Keras's included,
+        which cost several seconds of tracing per run."""
+        def step(i: tf.Tensor) -> tf.Tensor:
             self.learn_step()
+            return i + 1
+
+        tf.while_loop(lambda i: i < steps, step, [tf.constant(0)])
         return self.losses_so_far()
 
     def pretrain(self, steps: int, steps_per_call: int = 100) -> dict[str, float]:

@@ -56,7 +56,7 @@ class Interaction(tf.Module):
         self.recorder = demo_io.EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed) \
             if record else None
         obs_dim = agent.obs_dim
-        self.play = tf.function(self._play, input_signature=[
+        self.play = tf.function(self._play, autograph=False, input_signature=[
             tf.TensorSpec([obs_dim], tf.float32), tf.TensorSpec([], tf.int64)])
 
     def epsilon(self) -> tf.Tensor:
@@ -90,10 +90,8 @@ class Interaction(tf.Module):
     def _play(self, obs: tf.Tensor, max_steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
         """Act, store and learn until the episode ends or `max_steps` env steps; returns (obs, done)."""
         agent, c, d = self.agent, self.config, self.agent.obs_dim
-        done = tf.constant(False)
-        steps = tf.constant(0, tf.int64)
-        while not done and steps < max_steps:
-            tf.autograph.experimental.set_loop_options(shape_invariants=[(obs, tf.TensorShape([d]))])
+
+        def step(obs: tf.Tensor, done: tf.Tensor, steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor, tf.Tensor]:
             # ε-greedy: one draw decides whether to explore, the other which action.
             u = self.rng.uniform([2])
             random_action = tf.minimum(tf.cast(u[1] * agent.n_actions, tf.int32), agent.n_actions - 1)
@@ -102,11 +100,12 @@ class Interaction(tf.Module):
             next_obs, reward, terminated, truncated = step[:d], step[d], step[d + 1] > 0, step[d + 2] > 0
             agent.store(obs, action, reward, next_obs, terminated, truncated)
             self.env_steps.assign_add(1)
-            steps += 1
-            if self.env_steps % c.train_freq == 0 and agent.replay.size >= c.batch_size:
-                agent.learn_step()
-            obs = next_obs
-            done = tf.logical_or(terminated, truncated)
+            learns = tf.logical_and(self.env_steps % c.train_freq == 0, agent.replay.size >= c.batch_size)
+            tf.cond(learns, agent.learn_step, lambda: None)
+            return next_obs, tf.logical_or(terminated, truncated), steps + 1
+
+        obs, done, _ = tf.while_loop(lambda obs, done, steps: tf.logical_and(tf.logical_not(done), steps < max_steps),
+                                     step, [obs, tf.constant(False), tf.constant(0, tf.int64)])
         return obs, done
 
 
@@ -160,9 +159,10 @@ def fit_bc(config: Config, bc: BCModel, data: demo_io.DemoDataset, epochs: int, 
 
     The global seed is set from (run seed, fit index), so a resumed run refits identically.
     """
-    keras.utils.set_random_seed(episode_seed(config.seed, fit_index, BC_FIT) % 2**31)
-    history = bc.fit_demos(data.obs, data.actions, epochs=epochs, batch_size=config.batch_size)
-    return float(history.history["accuracy"][-1]) if epochs else float("nan")
+    seed = episode_seed(config.seed, fit_index, BC_FIT) % 2**31
+    keras.utils.set_random_seed(seed)
+    metrics = bc.fit_demos(data.obs, data.actions, epochs=epochs, batch_size=config.batch_size, seed=seed)
+    return metrics["accuracy"] if epochs else float("nan")
 
 
 def random_obs_scale(env: gym.Env, seed: int, steps: int = 2000) -> tuple[np.ndarray, np.ndarray]:

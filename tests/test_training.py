@@ -484,8 +484,16 @@ def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
     assert evaluation["std_return"] == 0.0
     assert (out / "learning_curve.png").read_bytes()[:8] == PNG_SIGNATURE
     latest = json.loads((out / "checkpoints" / "latest.json").read_text())
-    # The final save lands on the step of the last periodic one: a new directory, then the switch.
-    assert latest == {"dir": f"ckpt-{config.total_steps}.1"}
+    # Periodic saves follow episode ends (the first at step ≥ checkpoint_every, each next one
+    # checkpoint_every after the last); when one lands on the final step, the final save gets a
+    # new directory, then the switch.
+    _, rows = read_csv(out / "metrics.csv")
+    due, periodic = config.checkpoint_every, None
+    for step in (int(r["env_step"]) for r in rows):
+        if step >= due:
+            due, periodic = step + config.checkpoint_every, step
+    suffix = ".1" if periodic == config.total_steps else ""
+    assert latest == {"dir": f"ckpt-{config.total_steps}{suffix}"}
     assert [p.name for p in (out / "checkpoints").iterdir() if p.is_dir()] == [latest["dir"]]
     checkpoint = out / "checkpoints" / latest["dir"]
     assert json.loads((checkpoint / "state.json").read_text())["episode"] == result.episodes
