@@ -4,31 +4,39 @@ Ours: the cartpole preset after pre-training, ε-greedy action, storing, one pri
 update per env step (batch 64), episodes run as one graph call each (`training.Interaction`).
 SB3 (when installed, `pip install -r benchmarks/requirements.txt`): DQN on CartPole-v1 with the
 same 64-64 network, batch 64 and one gradient step per env step (train_freq=1,
-gradient_steps=1), torch on one thread. Both are timed over the same number of env steps
-after a warm-up, in the same run.
+gradient_steps=1), torch on one thread. Each side is timed over the same number of env steps
+after a warm-up.
 
-    python benchmarks/bench_online.py [--steps 5000] [--expert-loss bayes] [--json]
+How it measures (`benchmarks/interleave.py`): each side runs in its own fresh process (TensorFlow
+and torch never share one; OMP/MKL/TensorFlow/torch on one thread each), interleaved over
+`--rounds` rounds (ours, SB3; then SB3, ours; ...). It reports per side the median, min and max
+env steps/s over rounds, the ratio ours ÷ SB3 computed per round and its median, min and max,
+and the versions, CPU count, load average and thread settings that ran.
+
+    python benchmarks/bench_online.py [--steps 5000] [--rounds 3] [--expert-loss bayes] [--json] [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log level)
-import tensorflow as tf  # noqa: E402
-
-from dqfd_bc_keras import training  # noqa: E402
-from dqfd_bc_keras.config import Config  # noqa: E402
+import interleave  # noqa: E402  (the parent imports neither TensorFlow nor torch)
 
 
 def our_rate(steps: int, expert_loss: str) -> float:
     """Env steps per second of `Interaction.play`, episodes back to back, after one warm-up episode."""
+    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+    import tensorflow as tf
+
+    from dqfd_bc_keras import training
+    from dqfd_bc_keras.config import Config
+
     config = Config.for_task("cartpole", expert_loss=expert_loss, total_steps=10 * steps, pretrain_steps=100,
                              bc_epochs=2)
     learner, _ = training.build(config)
@@ -67,25 +75,25 @@ def sb3_rate(steps: int) -> float | None:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=5000, help="env steps timed for each side")
+    parser.add_argument("--steps", type=int, default=5000, help="env steps timed for each side in each round")
     parser.add_argument("--expert-loss", default="bayes")
-    parser.add_argument("--json", action="store_true", help="one JSON object: steps_per_s, sb3_steps_per_s, ratio")
+    interleave.add_arguments(parser)
     args = parser.parse_args(argv)
-    ours = our_rate(args.steps, args.expert_loss)
-    sb3 = sb3_rate(args.steps)
-    figures = {"steps_per_s": round(ours, 1), "sb3_steps_per_s": None if sb3 is None else round(sb3, 1),
-               "ratio": None if sb3 is None else round(ours / sb3, 3)}
-    if args.json:
-        print(json.dumps(figures))
-        return 0
-    print(f"ours ({args.expert_loss}, one prioritized update per env step): {ours:7.0f} env steps/s")
-    if sb3 is None:
-        print("SB3 not installed: pip install -r benchmarks/requirements.txt to compare")
-    else:
-        print(f"SB3 DQN (uniform replay, one update per env step):      {sb3:7.0f} env steps/s")
-        print(f"ratio: {ours / sb3:.2f}x")
-    return 0
+    if args.quick:
+        args.steps, args.rounds = 300, 2
+
+    def sb3() -> dict | None:
+        rate = sb3_rate(args.steps)
+        return None if rate is None else {"steps_per_s": rate}
+
+    sides = {"ours": lambda: {"steps_per_s": our_rate(args.steps, args.expert_loss)}, "sb3": sb3}
+    return interleave.main("bench_online", __file__, argv, args, sides,
+                           ratios={"steps_per_s": ("steps_per_s", "steps_per_s")},
+                           settings={"steps": args.steps, "expert_loss": args.expert_loss,
+                                     "ours": f"{args.expert_loss}, one prioritized update per env step",
+                                     "sb3": "DQN, uniform replay, train_freq=1, gradient_steps=1, batch 64, 64-64"})
 
 
 if __name__ == "__main__":

@@ -3,35 +3,43 @@
 Each configuration: the cartpole preset, 5 episodes of the imperfect expert in D_demo, batch
 64, prioritized sampling, n-step returns and the priority write-back included. `fused` runs
 `agent.learn(K)` (K updates in one graph call); `per_call` runs `agent.learn(1)` K times, the
-cost of one graph call per update (what `train_on_batch` in a loop pays). When
+cost of one graph call per update (what `train_on_batch` in a loop pays); for `bayes` the fused
+update is also taken apart (`train_step` alone, prioritized sample + write-back alone). When
 Stable-Baselines3 is installed (`pip install -r benchmarks/requirements.txt`), SB3's DQN with
-the same network and batch is timed on its `train()` too.
+the same network and batch is timed on its `train()` (torch on one thread); the headline ratio
+is `bayes` fused ÷ SB3 `train()`.
 
-    python benchmarks/bench_updates.py [--updates 3000] [--json]
+How it measures (`benchmarks/interleave.py`): each side (all of ours; SB3) runs in its own fresh
+process (TensorFlow and torch never share one; OMP/MKL/TensorFlow/torch on one thread each),
+interleaved over `--rounds` rounds (ours, SB3; then SB3, ours; ...). It reports per figure the
+median, min and max over rounds, each ratio ours ÷ SB3 computed per round and its median, min
+and max, and the versions, CPU count, load average and thread settings that ran.
+
+    python benchmarks/bench_updates.py [--updates 3000] [--rounds 3] [--losses bayes,ce] [--json] [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log level)
-import keras  # noqa: E402
-import tensorflow as tf  # noqa: E402
-from dqfd_bc_keras.agent import make_agent  # noqa: E402
-from dqfd_bc_keras.bc import build_bc_model  # noqa: E402
-from dqfd_bc_keras.config import Config  # noqa: E402
-from dqfd_bc_keras.demos import record  # noqa: E402
+import interleave  # noqa: E402  (the parent imports neither TensorFlow nor torch)
 
 LOSSES = ("bayes", "ce", "bc_margin", "margin", "none")
 
 
 def agent_for(loss: str, demos):
+    import keras
+
+    from dqfd_bc_keras.agent import make_agent
+    from dqfd_bc_keras.bc import build_bc_model
+    from dqfd_bc_keras.config import Config
+
     keras.utils.set_random_seed(0)
     config = Config.for_task("cartpole", expert_loss=loss)
     bc = None
@@ -50,6 +58,8 @@ def rate(run, updates: int) -> float:
 
 
 def fused(agent, steps_per_call: int):
+    import tensorflow as tf
+
     def run(updates: int) -> None:
         for done in range(0, updates, steps_per_call):
             agent.learn(tf.constant(min(steps_per_call, updates - done)))
@@ -57,6 +67,8 @@ def fused(agent, steps_per_call: int):
 
 
 def per_call(agent):
+    import tensorflow as tf
+
     one = tf.constant(1)
     def run(updates: int) -> None:
         for _ in range(updates):
@@ -67,6 +79,8 @@ def per_call(agent):
 def parts(agent) -> dict:
     """The fused update taken apart: `train_step` alone on a fixed batch, and the prioritized
     sample + priority write-back alone (with |δ| = 1), each K per graph call."""
+    import tensorflow as tf
+
     batch = agent.replay.sample(agent.config.batch_size, agent.beta())
     ones = tf.ones([agent.config.batch_size])
 
@@ -103,43 +117,48 @@ def sb3_rate(updates: int) -> float | None:
     return updates / (time.perf_counter() - start)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--updates", type=int, default=3000, help="updates timed per configuration")
-    parser.add_argument("--steps-per-call", type=int, default=100, help="K, updates fused per graph call")
-    parser.add_argument("--losses", default=",".join(LOSSES))
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of lines")
-    args = parser.parse_args(argv)
+def our_figures(losses: list[str], updates: int, steps_per_call: int) -> dict[str, float]:
+    """Every figure of ours, in this process: per loss fused, per_call and their ratio; bayes taken apart."""
+    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+    from dqfd_bc_keras.demos import record
+
     demos = record("cartpole", "imperfect", episodes=5, seed=0)
     figures: dict[str, float] = {}
-    for loss in args.losses.split(","):
+    for loss in losses:
         agent = agent_for(loss, demos)
-        figures[f"{loss}/fused"] = rate(fused(agent, args.steps_per_call), args.updates)
-        figures[f"{loss}/per_call"] = rate(per_call(agent), max(args.updates // 5, 50))
+        figures[f"{loss}/fused"] = rate(fused(agent, steps_per_call), updates)
+        figures[f"{loss}/per_call"] = rate(per_call(agent), max(updates // 5, 50))
         figures[f"{loss}/ratio"] = figures[f"{loss}/fused"] / figures[f"{loss}/per_call"]
         if loss == "bayes":
             for name, run in parts(agent).items():
-                figures[f"{loss}/{name}"] = rate(run, args.updates)
-        if not args.json:
-            print(f"{loss:10s} fused (K={args.steps_per_call}) {figures[f'{loss}/fused']:7.0f} updates/s   "
-                  f"one call per update {figures[f'{loss}/per_call']:6.0f} updates/s   "
-                  f"ratio {figures[f'{loss}/ratio']:.1f}x", flush=True)
-    if not args.json and "bayes/train_step_only" in figures:
-        print(f"bayes, taken apart: train_step alone {figures['bayes/train_step_only']:.0f} updates/s, "
-              f"prioritized sample + write-back alone {figures['bayes/sample_and_priorities_only']:.0f}/s")
-    sb3 = sb3_rate(args.updates)
-    if sb3 is not None:
-        figures["sb3_dqn"] = sb3
-        for loss in args.losses.split(","):
-            figures[f"{loss}/vs_sb3"] = figures[f"{loss}/fused"] / sb3
-        if not args.json:
-            print(f"SB3 DQN train() {sb3:7.0f} updates/s (uniform replay, 1-step loss only); "
-                  + ", ".join(f"{loss} fused {figures[f'{loss}/vs_sb3']:.1f}x" for loss in args.losses.split(",")))
-    elif not args.json:
-        print("SB3 not installed: pip install -r benchmarks/requirements.txt to compare")
-    if args.json:
-        print(json.dumps({key: round(value, 3) for key, value in figures.items()}))
-    return 0
+                figures[f"{loss}/{name}"] = rate(run, updates)
+    return figures
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--updates", type=int, default=3000, help="updates timed per configuration and round")
+    parser.add_argument("--steps-per-call", type=int, default=100, help="K, updates fused per graph call")
+    parser.add_argument("--losses", default=",".join(LOSSES))
+    interleave.add_arguments(parser)
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.updates, args.steps_per_call, args.losses, args.rounds = 50, 25, "bayes", 2
+    losses = args.losses.split(",")
+
+    def sb3() -> dict | None:
+        train = sb3_rate(args.updates)
+        return None if train is None else {"train": train}
+
+    sides = {"ours": lambda: our_figures(losses, args.updates, args.steps_per_call), "sb3": sb3}
+    headline = "bayes" if "bayes" in losses else losses[0]
+    ratios = {f"{loss}/fused_vs_sb3": (f"{loss}/fused", "train")
+              for loss in [headline] + [loss for loss in losses if loss != headline]}
+    return interleave.main("bench_updates", __file__, argv, args, sides, ratios,
+                           settings={"updates": args.updates, "steps_per_call": args.steps_per_call,
+                                     "losses": losses, "per_call_updates": max(args.updates // 5, 50),
+                                     "sb3": "DQN train(), uniform replay, 1-step loss, batch 64, 64-64"})
 
 
 if __name__ == "__main__":

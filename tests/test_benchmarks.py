@@ -2,9 +2,12 @@
 
 import importlib.util
 import json
+import statistics
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -16,18 +19,75 @@ def bench(name, *args):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def check_interleaved(report, sides):
+    """Two rounds, each side's figures as median/min/max over them, the ratio paired by round."""
+    present = [["ours", "sb3"], ["sb3", "ours"]] if report["sides"]["sb3"] else [["ours"], ["ours"]]
+    assert report["rounds"] == 2 and report["order"] == present
+    assert report["versions"]["tensorflow"] and "stable-baselines3" in report["versions"]
+    assert report["machine"]["threads"] == {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "DQFD_TF_THREADS": "1"}
+    processes = report["machine"]["processes"]
+    assert processes["ours"]["torch_imported"] is False and processes["ours"]["tf_intra_op_threads"] == 1
+    assert set(report["code"]) == {"commit", "package_modified"}
+    for side, figure in sides:
+        s = report["sides"][side][figure]
+        assert len(s["per_round"]) == 2 and 0 < s["min"] <= s["median"] <= s["max"]
+        assert s["median"] == pytest.approx(statistics.median(s["per_round"]))
+    if report["sides"]["sb3"] is None:  # SB3 not installed: reported absent, no ratio
+        assert report["ratio"] is None
+        return
+    assert processes["sb3"]["tensorflow_imported"] is False and processes["sb3"]["torch_threads"] == 1
+    ratio = report["ratio"]
+    assert 0 < ratio["min"] <= ratio["median"] <= ratio["max"]
+    assert ratio["median"] == pytest.approx(statistics.median(ratio["per_round"]), abs=1e-4)
+    ours_figure, sb3_figure = sides[0][1], sides[-1][1]
+    per_round = [a / b for a, b in zip(report["sides"]["ours"][ours_figure]["per_round"],
+                                       report["sides"]["sb3"][sb3_figure]["per_round"])]
+    assert ratio["per_round"] == pytest.approx(per_round, rel=1e-3)  # paired by round, not medians divided
+
+
 def test_bench_updates_reports_rates_and_ratios():
-    figures = bench("bench_updates.py", "--updates", 50, "--steps-per-call", 25, "--losses", "bayes", "--json")
-    for key in ("bayes/fused", "bayes/per_call", "bayes/ratio", "bayes/train_step_only",
-                "bayes/sample_and_priorities_only"):
-        assert figures[key] > 0
-    assert abs(figures["bayes/ratio"] - figures["bayes/fused"] / figures["bayes/per_call"]) < 1e-2
+    report = bench("bench_updates.py", "--quick", "--json")
+    ours = report["sides"]["ours"]
+    assert set(ours) == {"bayes/fused", "bayes/per_call", "bayes/ratio", "bayes/train_step_only",
+                         "bayes/sample_and_priorities_only"}
+    for (fused, per_call, ratio) in zip(*(ours[f"bayes/{k}"]["per_round"] for k in ("fused", "per_call", "ratio"))):
+        assert ratio == pytest.approx(fused / per_call, rel=1e-3)
+    check_interleaved(report, [("ours", "bayes/fused"), ("sb3", "train")] if report["sides"]["sb3"] else
+                      [("ours", "bayes/fused")])
+    assert report["ratio"] is None or report["ratio"]["of"] == "ours bayes/fused / sb3 train"
 
 
 def test_bench_online_reports_steps_per_second():
-    figures = bench("bench_online.py", "--steps", 300, "--json")
-    assert figures["steps_per_s"] > 0
-    assert set(figures) == {"steps_per_s", "sb3_steps_per_s", "ratio"}
+    report = bench("bench_online.py", "--quick", "--json")
+    check_interleaved(report, [("ours", "steps_per_s"), ("sb3", "steps_per_s")] if report["sides"]["sb3"] else
+                      [("ours", "steps_per_s")])
+    assert report["settings"]["steps"] == 300
+
+
+def test_a_failing_side_fails_the_benchmark_in_one_line():
+    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_online.py"), "--rounds", "1",
+                           "--expert-loss", "nope", "--json"], capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert done.returncode != 0
+    [line] = done.stderr.strip().splitlines()
+    assert "the ours side failed in round 1" in line and "expert_loss='nope'" in line
+
+
+def test_interleave_alternates_first_place_and_pairs_ratios_by_round():
+    interleave = load_bench("interleave.py")
+    assert interleave.order(4) == [["ours", "sb3"], ["sb3", "ours"], ["ours", "sb3"], ["sb3", "ours"]]
+    assert interleave.order(3, ["ours"]) == [["ours"]] * 3
+    ours = [{"rate": 10.0}, {"rate": 30.0}, {"rate": 20.0}]
+    sb3 = [{"rate": 10.0}, {"rate": 10.0}, {"rate": 40.0}]
+    summary = interleave.summarise({"ours": ours, "sb3": sb3}, {"rate": ("rate", "rate")})
+    assert summary["sides"]["ours"]["rate"] == {"median": 20.0, "min": 10.0, "max": 30.0,
+                                                "per_round": [10.0, 30.0, 20.0]}
+    ratio = summary["ratios"]["rate"]
+    assert ratio["per_round"] == [1.0, 3.0, 0.5]  # round by round, not median ÷ median (20 / 10 = 2)
+    assert (ratio["median"], ratio["min"], ratio["max"]) == (1.0, 0.5, 3.0)
+    assert interleave.summarise({"ours": ours[:2], "sb3": sb3[:2]}, {"rate": ("rate", "rate")})["ratios"]["rate"][
+        "median"] == 2.0  # an even count: the mean of the middle two
+    absent = interleave.summarise({"ours": ours, "sb3": None}, {"rate": ("rate", "rate")})
+    assert absent["sides"]["sb3"] is None and absent["ratios"]["rate"] is None
 
 
 def load_bench(name):
@@ -105,3 +165,18 @@ def test_memory_long_run_quick_samples_the_curve(tmp_path):
     assert "MountainCar, 5,000 env steps" in done.stdout and "RSS over the last tenth ÷ RSS over 500–1,000" in done.stdout
     samples = json.loads((tmp_path / "rss.json").read_text())["samples"]
     assert max(step for step, _ in samples) >= 4_000 and samples[-1][1] > 100  # TensorFlow alone is more
+
+
+def test_learning_before_after_quick_same_code_same_seed_learns_the_same(tmp_path):
+    """Both sides the same tree: every metric of seed 0 is identical (training is deterministic), the
+    wall time of each run is logged, and a summary with --no-run runs nothing again."""
+    summary = bench("learning_before_after.py", "--quick", "--base", REPO, "--new", REPO, "--out", tmp_path, "--json")
+    assert summary["seeds"] == [0]
+    for name in ("interactions_to_threshold", "episodes_to_solve", "mean_train_return", "final_eval", "env_steps"):
+        metric = summary["metrics"][name]
+        assert metric["base"] == metric["new"] and len(metric["base"]) == 1, name
+    assert all(s > 0 for side in ("base", "new") for s in summary["metrics"]["wall_seconds"][side])
+    logged = (tmp_path / "wall.jsonl").read_text()
+    again = bench("learning_before_after.py", "--no-run", "--out", tmp_path, "--figure", tmp_path / "c.png", "--json")
+    assert again == summary and (tmp_path / "wall.jsonl").read_text() == logged
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
