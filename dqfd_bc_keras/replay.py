@@ -109,12 +109,14 @@ class SumTree(tf.Module):
         # Float rounding can put a mass at or past the last boundary: keep it inside.
         mass = tf.minimum(mass, cumulative[-1] * (1.0 - 1e-6))
         # The first block whose cumulative sum exceeds the mass: never an empty one.
-        block = tf.searchsorted(cumulative, mass, side="right")
+        # The clamps never bind for finite priorities; NaN ones (a diverged update) would index past
+        # the end, and the divergence must reach `training.check_finite`, not crash a gather.
+        block = tf.minimum(tf.searchsorted(cumulative, mass, side="right"), self.blocks - 1)
         mass -= tf.gather(tf.concat([[0.0], cumulative], axis=0), block)
         within = tf.cumsum(tf.gather(self.leaf, block), axis=1)  # (n, width)
         mass = tf.minimum(mass, within[:, -1] * (1.0 - 1e-6))
         position = tf.searchsorted(within, mass[:, None], side="right")[:, 0]
-        return block * self.width + position
+        return tf.minimum(block * self.width + position, self.size - 1)
 
 
 class PrioritizedReplay(tf.Module):

@@ -85,6 +85,8 @@ class RunDirectory:
 
     def __init__(self, config: Config, out: Path, learner: Learner, state: TrainingState, quiet: bool) -> None:
         self.config, self.out, self.learner, self.state = config, out, learner, state
+        self.metrics_rows = -1
+        """Rows metrics.csv holds as this process wrote it (−1: not written yet by this process)."""
         self.progress = None
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
@@ -117,12 +119,25 @@ class RunDirectory:
         if self.progress is not None:
             self.progress.update(step - self.progress.n)
             self.progress.set_postfix(episode=row["episode"], ret=f"{row['return']:.0f}")
-        write_csv(self.out / "metrics.csv", METRIC_FIELDS, state.metrics)
+        self.write_metrics()
         if state.demo_updates:
             write_text(self.out / "dynamic_demos.json", json.dumps(state.demo_updates, indent=1))
         if step >= state.next_checkpoint:
             state.next_checkpoint = step + self.config.checkpoint_every
             self.save_checkpoint()
+
+    def write_metrics(self) -> None:
+        """metrics.csv: the new episode's row appended, so a long run writes each row once (a
+        rewrite per episode cost O(episodes²)); written whole, atomically, when the file is not one
+        row behind (this process's first episode, a resume). A crash in an append leaves at worst a
+        partial last line, which the resume's rewrite replaces."""
+        path, rows = self.out / "metrics.csv", self.state.metrics
+        if self.metrics_rows == len(rows) - 1 and path.is_file():
+            with open(path, "a", newline="") as file:
+                csv.DictWriter(file, fieldnames=METRIC_FIELDS, extrasaction="ignore", lineterminator="\n").writerow(rows[-1])
+        else:
+            write_csv(path, METRIC_FIELDS, rows)
+        self.metrics_rows = len(rows)
 
     def evaluate(self, points: list[int]) -> None:
         """One greedy evaluation of the current network, logged at each grid point in `points`."""

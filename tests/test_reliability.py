@@ -215,15 +215,15 @@ def test_a_full_disk_at_the_first_checkpoint_is_one_line_and_leaves_no_debris(tm
 
 def test_a_full_disk_mid_run_is_one_line_and_keeps_a_resumable_checkpoint(tmp_path, monkeypatch, capsys):
     writes = []
-    real = runs.write_text
+    real = runs.RunDirectory.write_metrics
 
-    def fills_up(path, text, durable=False):
-        writes.append(Path(path).name)
-        if writes.count("metrics.csv") == 3:
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
-        real(path, text, durable)
+    def fills_up(self):
+        writes.append(1)
+        if len(writes) == 3:  # the third episode's row of metrics.csv (an append)
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.out / "metrics.csv"))
+        real(self)
 
-    monkeypatch.setattr(runs, "write_text", fills_up)
+    monkeypatch.setattr(runs.RunDirectory, "write_metrics", fills_up)
     out = tmp_path / "run"
     one_line(capsys, cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
              f"error: {out}/metrics.csv: No space left on device")

@@ -121,6 +121,15 @@ def test_sumtree_multi_level_total_and_find():
     assert tree.find(tf.constant([13.49])).numpy().tolist() == [1024]
 
 
+def test_sumtree_with_nan_priorities_still_returns_stored_rows():
+    """A diverged update writes NaN priorities: sampling must not crash a gather (the NaN loss
+    is what stops the run, in `training.check_finite`)."""
+    tree = SumTree(100)  # 2 blocks of 64 leaves, the last 28 padding
+    tree.set(tf.range(100), tf.fill([100], float("nan")))
+    found = tree.find(tf.constant([0.0, 1.0, float("nan")])).numpy()
+    assert ((0 <= found) & (found < 100)).all()
+
+
 def test_sumtree_many_sets_against_numpy():
     rng = np.random.default_rng(3)
     tree = SumTree(2000)
@@ -452,6 +461,32 @@ def test_n_step_private_helper_agrees_for_a_whole_batch():
                       11 + 0.9 * 12 + 0.9**2 * 13, 12 + 0.9 * 13, 13])
     close(n_discount, [0.0, 0.9**3, 0.0, 0.9**3, 0.9**2, 0.9])
     close(n_next_obs, [[2, -2], [5, -5], [6, -6], [13, -13], [13, -13], [13, -13]])
+
+
+def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
+    """The cached view (refreshed when a row's window changes) is the plain windowed computation at
+    every moment: random episode ends, D_demo replaced twice, the agent buffer wrapping 5 times."""
+    rng = np.random.default_rng(7)
+    replay = make_replay(n_step=4, capacity=6, demo_capacity=8)
+
+    def flags(n):
+        return [i for i in range(n) if rng.random() < 0.2], [i for i in range(n) if rng.random() < 0.1]
+
+    tag = 0
+    for round_ in range(3):
+        terminated, truncated = flags(5 + round_)
+        replay.set_demos(make_rows(replay, range(100 * round_, 100 * round_ + 5 + round_),
+                                   rewards=rng.normal(size=5 + round_), terminated=terminated, truncated=truncated))
+        for _ in range(10):
+            terminated, truncated = flags(1)
+            store_all(replay, make_rows(replay, [tag], rewards=rng.normal(size=1), terminated=terminated,
+                                        truncated=truncated))
+            tag += 1
+            indices = replay.stored_indices()
+            plain = replay._n_step(indices, tf.gather(replay.table, replay._window(indices)))
+            cached = tf.split(tf.gather(replay.n_step_view, indices), [1, 2, 1], axis=1)
+            for expected, got in zip(plain, (cached[0][:, 0], cached[1], cached[2][:, 0])):
+                np.testing.assert_array_equal(got.numpy(), expected.numpy())
 
 
 # --------------------------------------------------------------------------------------------
