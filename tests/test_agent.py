@@ -169,6 +169,23 @@ def test_checkpoint_restores_optimizer_and_replay_for_an_identical_continuation(
         np.testing.assert_array_equal(a.numpy(), b.numpy())
 
 
+def test_fused_learning_equals_one_graph_call_per_update(demos, bc_models, tmp_path):
+    """`learn(K)` (K updates in one graph call) is K × `learn(1)`: the same weights, Adam state,
+    priorities, target network and loss means, bit for bit (K spans a target refresh)."""
+    fused, single = agent_for("bayes", demos, bc_models), agent_for("bayes", demos, bc_models)
+    # The same start, D_demo's MC-dropout view included (the shared BC model's dropout stream moved on).
+    single.checkpoint().read(fused.checkpoint().write(str(tmp_path / "start"))).assert_consumed()
+    steps = fused.config.target_update_period + 5
+    fused_losses = fused.learn(tf.constant(steps))
+    for _ in range(steps):
+        single_losses = single.learn(tf.constant(1))
+    for a, b in zip(fused.q_network.weights + fused.target_network.weights + fused.optimizer.variables,
+                    single.q_network.weights + single.target_network.weights + single.optimizer.variables):
+        np.testing.assert_array_equal(a.numpy(), b.numpy())
+    np.testing.assert_array_equal(fused.replay.tree.leaf.numpy(), single.replay.tree.leaf.numpy())
+    assert {k: float(v) for k, v in fused_losses.items()} == {k: float(v) for k, v in single_losses.items()}
+
+
 @pytest.mark.parametrize("change, match", [
     ({"expert_loss": "kl"}, "expert_loss='kl' is not one of"),
     ({"n_step": 0}, "n_step must be ≥ 1, got 0"),
