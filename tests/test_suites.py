@@ -145,22 +145,3 @@ def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     again = report(tmp_path / "suite.tar.xz", tmp_path / "again.md", tmp_path / "figures")
     assert again == (tmp_path / "again.md").read_text() and again.replace("suite.tar.xz", "suite") == text
 
-
-def test_a_run_after_others_in_one_worker_process_matches_a_run_in_a_fresh_process(tmp_path):
-    """Worker processes take several runs (`RUNS_PER_PROCESS`); what a run learns must not depend on
-    what ran before it in its process: bayes seed 1 after three runs equals it in a fresh process."""
-    import subprocess
-    import sys
-
-    from dqfd_bc_keras.experiments.suites import RUNS_PER_PROCESS
-
-    assert RUNS_PER_PROCESS >= 4  # the four runs below share one process
-    run_suite("quick", 2, tmp_path / "shared", workers=1, progress=lambda line: None)
-    code = ("import sys; from pathlib import Path; from dqfd_bc_keras.experiments.suites import Job, run_job, "
-            "suite_arms; run_job(Job(suite_arms('quick')[0], 1, Path(sys.argv[1])))")
-    subprocess.run([sys.executable, "-c", code, str(tmp_path / "fresh")], check=True, capture_output=True)
-    shared, fresh = (tmp_path / side / "cartpole-bootstrap-bayes-quick" / "seed1" for side in ("shared", "fresh"))
-    assert (shared / "evals.csv").read_text() == (fresh / "evals.csv").read_text()
-    without_wall_time = [[line.rsplit(",", 1)[0] for line in (run / "metrics.csv").read_text().splitlines()]
-                         for run in (shared, fresh)]
-    assert without_wall_time[0] == without_wall_time[1] and len(without_wall_time[0]) > 2

@@ -234,18 +234,13 @@ def suite_arms(suite: str) -> list[Arm]:
     return SUITES[suite]
 
 
-RUNS_PER_PROCESS = 10
-"""Runs a worker process takes before it is replaced. Importing TensorFlow costs ~5 s, a sixth of a
-CartPole run; a run's files do not depend on what ran before it in its process (tested: a run
-after another gives the same numbers as one in a fresh process). TensorFlow keeps ~40 MB of each
-finished run (RSS 714 → 895 MB over six short CartPole runs in one process, `clear_session` or
-not); renewing the process every 10 runs bounds that to ~0.4 GB per worker."""
-
-
 def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
-    """A pool of `workers` processes, each taking `RUNS_PER_PROCESS` runs, one after another."""
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                             max_tasks_per_child=RUNS_PER_PROCESS) as pool:
+    """A pool of fresh processes (one run each: no TensorFlow state carried between runs).
+
+    Not several runs per process: it would save TensorFlow's import (~5 s per run), but Python
+    3.11's `ProcessPoolExecutor` stopped starting new workers once two had retired after their
+    `max_tasks_per_child` > 1 (a 72-run sweep hung after its 20th run)."""
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), max_tasks_per_child=1) as pool:
         pending = {pool.submit(run_job, job) for job in jobs}
         try:
             while pending:
