@@ -20,6 +20,7 @@ import argparse
 import json
 import math
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -88,16 +89,10 @@ def summarise(out: Path) -> dict:
         finite = all(not math.isnan(v) for side in SIDES for v in by_side[side])
         _, p = mann_whitney(by_side["base"], by_side["new"]) if finite and len(seeds) > 1 else (None, None)
         summary["metrics"][name] = {**{side: by_side[side] for side in SIDES},
-                                    **{f"{side}_median": _median(by_side[side]) for side in SIDES}, "p": p}
+                                    **{f"{side}_median": statistics.median(by_side[side]) for side in SIDES}, "p": p}
     summary["curves"] = {side: {s: [(e["interactions"], e["mean_return"]) for e in values[side][s].evals]
                                 for s in seeds} for side in SIDES}
     return summary
-
-
-def _median(values: list[float]) -> float:
-    ordered = sorted(values)
-    n = len(ordered)
-    return math.nan if n == 0 else (ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2)
 
 
 def figure(summary: dict, path: Path) -> None:

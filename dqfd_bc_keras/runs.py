@@ -72,9 +72,13 @@ def clear(out: Path) -> None:
             shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
+def csv_writer(file, fields: tuple[str, ...]) -> csv.DictWriter:
+    return csv.DictWriter(file, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
+
+
 def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
+    writer = csv_writer(buffer, fields)
     writer.writeheader()
     writer.writerows(rows)
     write_text(path, buffer.getvalue())
@@ -134,7 +138,7 @@ class RunDirectory:
         path, rows = self.out / "metrics.csv", self.state.metrics
         if self.metrics_rows == len(rows) - 1 and path.is_file():
             with open(path, "a", newline="") as file:
-                csv.DictWriter(file, fieldnames=METRIC_FIELDS, extrasaction="ignore", lineterminator="\n").writerow(rows[-1])
+                csv_writer(file, METRIC_FIELDS).writerow(rows[-1])
         else:
             write_csv(path, METRIC_FIELDS, rows)
         self.metrics_rows = len(rows)
