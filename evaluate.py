@@ -1,8 +1,9 @@
-"""Evaluate a trained agent: greedy episodes on the plain env (CartPole-v1, MountainCar-v0).
+"""Evaluate a trained agent: greedy episodes on the plain env (CartPole-v1, MountainCar-v0, …).
 
     python evaluate.py runs/cartpole-bayes-0                 # the run's Q-network, 100 episodes
     python evaluate.py runs/cartpole-bayes-0 --policy bc     # its BC model instead
     python evaluate.py model.keras --task cartpole --json    # a bare model file: name its task
+    python evaluate.py models/acrobot --episodes 3 --video videos/   # also MP4s (needs moviepy)
 """
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level, custom Keras objects)
@@ -11,25 +12,30 @@ import json
 import sys
 from collections.abc import Sequence
 
-from dqfd_bc_keras.cli import ArgumentParser, positive_int, run, seed
-from dqfd_bc_keras.envs import TASKS
-from dqfd_bc_keras.evaluation import POLICY_FILES, evaluate, load_policy
+from dqfd_bc_keras.cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run, seed
+from dqfd_bc_keras.evaluation import POLICY_FILES, evaluate, load_policy, record_video
 from dqfd_bc_keras.files import write_text
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="evaluate.py", description=__doc__.splitlines()[0])
     parser.add_argument("target", help="a run directory (config.json + models) or a .keras file")
-    parser.add_argument("--task", choices=sorted(TASKS), help="the task to play (default: from config.json)")
+    add_task_arguments(parser)  # default: the config.json's task
     parser.add_argument("--policy", choices=sorted(POLICY_FILES),
                         help="a run directory's q_network.keras (q, the default) or bc_model.keras (bc)")
     parser.add_argument("--episodes", type=positive_int, default=100, help="greedy episodes (default 100)")
     parser.add_argument("--seed", type=seed, default=12345, help="episode i is reset with seed + i (default 12345)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
     parser.add_argument("--out", help="also write the JSON result to this file")
+    parser.add_argument("--video", metavar="DIR", help="also record the episodes as MP4 files in DIR "
+                        "(needs moviepy: requirements-extras.txt)")
     args = parser.parse_args(argv)
 
-    policy, settings = load_policy(args.target, args.policy, args.task)
+    policy, settings = load_policy(args.target, args.policy, chosen_task(args))
+    if args.video:
+        files = record_video(policy, settings.task, args.video, args.episodes, args.seed, settings.timeout,
+                             settings.max_steps)
+        print(f"recorded {len(files)} episode(s) in {args.video}", file=sys.stderr)
     result = evaluate(policy, settings.task, args.episodes, args.seed, settings.timeout, settings.max_steps)
     report = {**result.to_dict(), "model": str(settings.model_path)}
     if args.out:

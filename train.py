@@ -2,6 +2,8 @@
 
     python train.py                                  # cartpole, bayes, 5 imperfect-expert episodes
     python train.py --task mountaincar-goals --expert-loss ce --seed 3
+    python train.py --env Acrobot-v1 --expert my_rules:swing       # any Gymnasium env, your demonstrator
+    python train.py --env CartPole-v1 --demos minari:cartpole/expert-v0   # a local Minari dataset
     python train.py --demos demos.npz --set sigma0_sq=1.0 --set total_steps=20000
     python train.py --out runs/x --resume            # continue a killed run from its checkpoint
 """
@@ -13,7 +15,7 @@ import sys
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
 from dqfd_bc_keras.config import QUICK, Config
-from dqfd_bc_keras.envs import TASKS, TIMEOUT_MODES
+from dqfd_bc_keras.envs import TIMEOUT_MODES
 from dqfd_bc_keras.experts import EXPERT_NAMES
 from dqfd_bc_keras.losses import EXPERT_LOSSES, TARGETS
 from dqfd_bc_keras.runs import train
@@ -24,12 +26,15 @@ def parse(argv):
     parser = cli.ArgumentParser(prog="train.py", description=__doc__.split("\n\n")[0],
                                 epilog="Every Config field can be set with --set key=value "
                                        "(see dqfd_bc_keras/config.py for the list and the defaults).")
-    parser.add_argument("--task", choices=sorted(TASKS), default="cartpole", help="task preset (default: cartpole)")
+    cli.add_task_arguments(parser, default="cartpole")
     parser.add_argument("--expert-loss", choices=(*EXPERT_LOSSES, "none"), help="J_E (default: bayes; none = plain DQN)")
     parser.add_argument("--target", choices=TARGETS, help="bootstrap target (default: dqn)")
     parser.add_argument("--timeout", choices=TIMEOUT_MODES, help="time-limit handling (default: bootstrap)")
-    parser.add_argument("--demos", help="demonstration dataset (.npz); else recorded from --expert")
-    parser.add_argument("--expert", choices=EXPERT_NAMES, help="scripted expert to record (default: imperfect)")
+    parser.add_argument("--demos", help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari "
+                        "cache); else recorded from --expert")
+    parser.add_argument("--expert", "--policy", dest="expert",
+                        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect), "
+                             "a rule module:function (obs → action) or a saved model.keras")
     parser.add_argument("--demo-episodes", type=cli.positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
     parser.add_argument("--steps", type=cli.positive_int, help="environment-step budget")
     parser.add_argument("--seed", type=cli.seed, help="seed of every random generator (default: 0)")
@@ -48,9 +53,10 @@ def main(argv=None) -> int:
              "expert": args.expert, "demo_episodes": args.demo_episodes, "total_steps": args.steps,
              "seed": args.seed}
     chosen = {k: v for k, v in flags.items() if v is not None}
-    config = Config.for_task(args.task, **({**QUICK, **chosen} if args.quick else chosen)).with_overrides(args.set)
-    out = args.out or f"runs/{config.task}-{config.expert_loss}-seed{config.seed}"
-    dataset = demos.load(args.demos, task=config.task, timeout=config.timeout) if args.demos else None
+    task = cli.chosen_task(args)
+    config = Config.for_task(task, **({**QUICK, **chosen} if args.quick else chosen)).with_overrides(args.set)
+    out = args.out or f"runs/{config.task.replace('/', '-').replace(':', '-')}-{config.expert_loss}-seed{config.seed}"
+    dataset = demos.load_source(args.demos, task=config.task, timeout=config.timeout) if args.demos else None
     if not args.quiet:
         print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
               f"config: {out}/config.json", flush=True)

@@ -1,7 +1,8 @@
 """Sample efficiency: environment interactions until the greedy policy first solves the plain env.
 
 Ours: `bayes`, `ce`, `margin` (DQfD) and `none` (DQN) from 5 (CartPole) / 10 (MountainCar)
-episodes of the imperfect expert, one run of the experiment runner per seed. The baseline:
+episodes of the imperfect expert, and `bayes` (the default) from 10 episodes on Acrobot and
+LunarLander; one run of the experiment runner per seed. The baseline:
 Stable-Baselines3's DQN as rl-zoo3 runs it (its tuned hyperparameters, one `learn()` call of
 n_timesteps per seed, so ε decays over the schedule it was tuned with). Both are evaluated on
 one grid, at step 0 and every 1,000 steps: 10 greedy episodes on the plain env with the seed's
@@ -9,10 +10,12 @@ fixed evaluation seeds (`seeds.eval_seed`). A step is an environment interaction
 training data: ours count dynamic-demonstration roll-outs too (evals.csv's `interactions`), SB3
 counts its own `num_timesteps`. Per arm: median and 95% bootstrap CI over seeds of the first
 grid step whose mean reaches the threshold (CartPole-v1 475, MountainCar-v0 −110; never: ∞),
-and for ours SB3's median ÷ ours with its bootstrap CI against the 10× goal
-(dqfd_bc_keras/experiments/efficiency.py). SB3's rows show an independent check beside them.
+and for ours SB3's median ÷ ours with its bootstrap CI against the goal (10× on CartPole and
+MountainCar, 5× on Acrobot and LunarLander: dqfd_bc_keras/experiments/efficiency.py). SB3's rows
+show an independent check beside them.
 
-    python benchmarks/bench_sample_efficiency.py [--seeds 10] [--workers 2] [--out results] [--parts ours,sb3] [--json]
+    python benchmarks/bench_sample_efficiency.py [--seeds 10] [--workers 2] [--out results] [--parts ours,sb3]
+                                                 [--tasks cartpole,mountaincar,acrobot,lunarlander] [--json]
     python benchmarks/bench_sample_efficiency.py --quick     # seconds: one seed, tiny budgets (tests)
 
 Writes only under --out: efficiency.json (the arms of parts not run this time are kept) and
@@ -44,7 +47,7 @@ from dqfd_bc_keras.experiments.claims import first_reaching  # noqa: E402
 from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, ArmSteps,  # noqa: E402
                                                   interaction_evals, load, rows, save, table)
-from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES, Arm, run_suite  # noqa: E402
+from dqfd_bc_keras.experiments.suites import EFFICIENCY_TASKS, PROTOCOL, SUITES, Arm, run_suite  # noqa: E402
 from dqfd_bc_keras.files import write_text  # noqa: E402
 from dqfd_bc_keras.seeds import eval_seed  # noqa: E402
 
@@ -63,11 +66,20 @@ ZOO = {
         learning_rate=4e-3, batch_size=128, buffer_size=10_000, learning_starts=1000, gamma=0.98,
         target_update_interval=600, train_freq=16, gradient_steps=8, exploration_fraction=0.2,
         exploration_final_eps=0.07, policy_kwargs={"net_arch": [256, 256]})},
+    # rl-zoo3 tunes these two entries identically (its LunarLander entry is for v2; v3 fixed bugs in v2).
+    **{task: {"env": env, "policy": "MlpPolicy", "n_timesteps": 100_000, "kwargs": dict(
+        learning_rate=6.3e-4, batch_size=128, buffer_size=50_000, learning_starts=0, gamma=0.99,
+        target_update_interval=250, train_freq=4, gradient_steps=-1, exploration_fraction=0.12,
+        exploration_final_eps=0.1, policy_kwargs={"net_arch": [256, 256]})}
+       for task, env in (("acrobot", "Acrobot-v1"), ("lunarlander", "LunarLander-v3"))},
 }
 ANCHOR = {"cartpole": 28_000, "mountaincar": 90_000}
 """An independent check of this baseline (one `learn()`, an evaluation callback): SB3's DQN with the
 same hyperparameters first reached 475 on CartPole-v1 at 22k/28k/36k steps (3 seeds, median 28k) and
 −110 on MountainCar-v0 at 88k/96k. Printed beside the measured median: the two should agree."""
+ANCHOR_FINAL = {"acrobot": -76.6, "lunarlander": 154.0}
+"""Where no such check exists, rl-zoo3's published benchmark (benchmark.md; one run each, final
+evaluation after 100k steps; LunarLander-v2): printed beside the median final return."""
 
 
 def arms(quick: bool) -> list[Arm]:
@@ -180,7 +192,7 @@ def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool,
         if not evals:
             continue
         steps.append(ArmSteps.of(task, SB3_METHOD, evals, [e[-1][1] for e in evals], get_task(task).solved_return,
-                                 anchor=ANCHOR[task]))
+                                 anchor=ANCHOR.get(task), anchor_final=ANCHOR_FINAL.get(task)))
     return steps
 
 
@@ -195,6 +207,8 @@ def main(argv=None) -> int:
                         f"(writes no {EFFICIENCY_FILE})")
     parser.add_argument("--no-run", action="store_true", help="run nothing: summarise the complete runs and "
                         "SB3 files under --out, over the seeds each arm has")
+    parser.add_argument("--tasks", default=",".join(EFFICIENCY_TASKS),
+                        help=f"the tasks to run (default: all of {', '.join(EFFICIENCY_TASKS)})")
     parser.add_argument("--json", action="store_true", help="one JSON list with every arm's row (∞ as Infinity)")
     args = parser.parse_args(argv)
     parts = set(args.parts.split(","))
@@ -202,9 +216,13 @@ def main(argv=None) -> int:
         parser.error(f"--parts must be ours, sb3 or ours,sb3, got {args.parts!r}")
     if "sb3" in parts and find_spec("stable_baselines3") is None:
         parser.error("--parts sb3 needs Stable-Baselines3: pip install -r benchmarks/requirements.txt")
+    tasks = args.tasks.split(",")
+    if set(tasks) - set(EFFICIENCY_TASKS):
+        parser.error(f"--tasks: unknown task(s) {sorted(set(tasks) - set(EFFICIENCY_TASKS))}; "
+                     f"expected among {', '.join(EFFICIENCY_TASKS)}")
     seeds, out = 1 if args.quick else args.seeds, Path(args.out)
     progress = (lambda line: None) if args.json else print
-    suite = arms(args.quick)
+    suite = [a for a in arms(args.quick) if args.quick or a.task in tasks]
     steps = []
     if "ours" in parts:
         if not args.no_run:

@@ -21,6 +21,24 @@ class ArgumentParser(argparse.ArgumentParser):
         sys.exit(EXIT_USAGE)
 
 
+def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = None, required: bool = False) -> None:
+    """`--task PRESET` or `--env ID` (any Gymnasium env with a flat Box observation and Discrete
+    actions; `module:Env-v0` imports `module` first); read the choice with `chosen_task`."""
+    from .envs import TASKS
+
+    group = parser.add_mutually_exclusive_group(required=required)
+    group.add_argument("--task", choices=sorted(TASKS),
+                       help="task preset" + (f" (default: {default})" if default else ""))
+    group.add_argument("--env", metavar="ID", help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
+                       "or my_module:MyEnv-v0 (generic defaults; see config.EnvConfig)")
+    parser.set_defaults(default_task=default)
+
+
+def chosen_task(args: argparse.Namespace) -> str | None:
+    """The task of `add_task_arguments`' flags: --env, else --task, else the default."""
+    return args.env or args.task or args.default_task
+
+
 def positive_int(text: str) -> int:
     """argparse type for counts that must be ≥ 1 (episodes, steps, seeds)."""
     value = int(text)

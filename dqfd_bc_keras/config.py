@@ -1,7 +1,8 @@
 """Every hyperparameter, with the paper's (or DQfD's) default, in one typed dataclass.
 
 Where the paper is silent, ALGORITHM.md decides; where that is silent too, the value is ours
-and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults;
+and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults (any other Gymnasium env id gets
+`EnvConfig`'s);
 `validate` rejects settings the algorithm cannot use with a `ConfigError` naming the value.
 """
 
@@ -11,7 +12,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from .envs import TIMEOUT_MODES, get_task
+from .envs import TIMEOUT_MODES, get_task, step_limit
 from .errors import ConfigError
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 from .seeds import MAX_SEED
@@ -34,11 +35,12 @@ class Config:
 
     # --- task -------------------------------------------------------------------------------
     task: str = "cartpole"
-    """Task preset (envs.TASKS)."""
+    """Task preset (envs.TASKS), or the id of any Gymnasium env with a flat Box observation and
+    Discrete actions (`module:Env-v0` imports `module` first)."""
     timeout: str = "bootstrap"
     """Time-limit mode: bootstrap | naive | time-aware."""
     max_steps: int | None = None
-    """Episode step limit; None: the task's (CartPole 500 or 200, MountainCar 200)."""
+    """Episode step limit; None: the task's (CartPole 500 or 200, MountainCar 200, an env's own)."""
 
     # --- the loss J = J_DQ + λ1·J_n + λ2·J_E + λ3·J_L2 (§2) ----------------------------------
     expert_loss: str = "bayes"
@@ -119,7 +121,8 @@ class Config:
 
     # --- demonstrations (§4, §5) ----------------------------------------------------------
     expert: str = "imperfect"
-    """Scripted expert whose demonstrations are recorded when no dataset file is given."""
+    """Who demonstrates when no dataset is given: a preset's scripted expert (strong | imperfect),
+    a rule `module:function` (obs → action), or a saved `.keras` Q-network or BC model."""
     demo_episodes: int = 5
     """Episodes recorded from `expert` (seeds seed·1000 + i)."""
     dynamic_demos: str = "episodes"
@@ -173,10 +176,10 @@ class Config:
 
     @classmethod
     def for_task(cls, task: str, **overrides: object) -> Config:
-        """Task preset `task`'s defaults (its dataclass in `PRESETS`) with `overrides`, validated:
-        the only way to make a Config."""
+        """Task preset `task`'s defaults (its dataclass in `PRESETS`; `EnvConfig` for any other
+        Gymnasium env) with `overrides`, validated: the only way to make a Config."""
         get_task(task)
-        return PRESETS[task](**overrides)
+        return PRESETS[task](**overrides) if task in PRESETS else EnvConfig(task=task, **overrides)
 
     @classmethod
     def from_dict(cls, fields: dict) -> Config:
@@ -199,7 +202,7 @@ class Config:
             key, sep, text = assignment.partition("=")
             key = key.strip().replace("-", "_")
             if key == "task":
-                raise ConfigError("the task is chosen with --task: each task has its own preset defaults")
+                raise ConfigError("the task is chosen with --task or --env: each has its own preset defaults")
             if not sep or key not in types:
                 raise ConfigError(f"--set {assignment!r}: expected key=value with a key among {sorted(types)}")
             changes[key] = _parse(key, types[key], text.strip())
@@ -209,7 +212,7 @@ class Config:
     @property
     def limit(self) -> int:
         """The episode step limit in force."""
-        return get_task(self.task).max_steps if self.max_steps is None else self.max_steps
+        return step_limit(self.task, self.max_steps)
 
     @property
     def uses_demos(self) -> bool:
@@ -285,10 +288,9 @@ class Config:
             ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
             ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
         ]
-        from .experts import EXPERT_NAMES
+        from .experts import check_demonstrator
 
-        if self.expert not in EXPERT_NAMES:
-            raise ConfigError(f"expert={self.expert!r} is not one of {EXPERT_NAMES}")
+        check_demonstrator(self.expert)
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
@@ -334,9 +336,40 @@ class MountainCarGoalsConfig(MountainCarConfig):
     task: str = "mountaincar-goals"
 
 
+@dataclass
+class AcrobotConfig(Config):
+    """`acrobot`: Acrobot-v1, 500 steps, solved at −100; SB3's budget, no early stop."""
+
+    task: str = "acrobot"
+    demo_episodes: int = 10
+    total_steps: int = 100_000
+    eval_every: int = 1_000
+    early_stop_window: int = 0
+
+
+@dataclass
+class LunarLanderConfig(AcrobotConfig):
+    """`lunarlander`: LunarLander-v3, 1000 steps, solved at 200; as `acrobot`."""
+
+    task: str = "lunarlander"
+
+
+@dataclass
+class EnvConfig(Config):
+    """Any other Gymnasium env (`--env ID`): no shaping, its own step limit, no early stop;
+    10 demonstrated episodes, 100k steps, an evaluation every 5k. Ours, not the paper's."""
+
+    task: str = ""
+    demo_episodes: int = 10
+    total_steps: int = 100_000
+    eval_every: int = 5_000
+    early_stop_window: int = 0
+
+
 PRESETS: dict[str, type[Config]] = {
     "cartpole": CartPoleConfig, "cartpole-200": CartPole200Config,
     "mountaincar": MountainCarConfig, "mountaincar-goals": MountainCarGoalsConfig,
+    "acrobot": AcrobotConfig, "lunarlander": LunarLanderConfig,
 }
 
 

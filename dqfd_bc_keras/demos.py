@@ -1,5 +1,6 @@
-"""Demonstration datasets: record them with a scripted expert, save them as plain `.npz`, and
-load them back with every check a learner relies on.
+"""Demonstration datasets: record them with any demonstrator (a scripted expert, a rule
+`module:function`, a saved `.keras` model), save them as plain `.npz`, and load them back with
+every check a learner relies on; Minari datasets convert both ways (`minari_io`).
 
 File format (version 1), readable with `numpy.load(path, allow_pickle=False)`:
 
@@ -12,7 +13,9 @@ Transitions are stored in time order, episode after episode, and every episode i
 (its last transition is terminated or truncated), so n-step returns can be read off directly.
 
     python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
+    python -m dqfd_bc_keras.demos record --env Acrobot-v1 --policy my_rules:swing --out acrobot.npz
     python -m dqfd_bc_keras.demos inspect demos.npz
+    python -m dqfd_bc_keras.demos export demos.npz --minari mountaincar/imperfect-v0
 """
 
 from __future__ import annotations
@@ -28,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import ArgumentParser, positive_int, run
-from .envs import TASKS, TIMEOUT_MODES, get_task, make_task
+from .cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run
+from .envs import TIMEOUT_MODES, get_task, make_task
 from .errors import ConfigError, DemoFileError
-from .experts import EXPERT_NAMES, make_expert
+from .experts import EXPERT_NAMES, make_demonstrator
 from .files import atomic_path
 
 FORMAT_VERSION = 1
@@ -129,12 +132,12 @@ def record(
     timeout: str = "bootstrap",
     max_steps: int | None = None,
 ) -> DemoDataset:
-    """Run the scripted `expert` for `episodes` episodes of `task`; episode i resets with seed + i."""
+    """Run the demonstrator `expert` (`experts.make_demonstrator`: strong | imperfect |
+    module:function | model.keras) for `episodes` episodes of `task`; episode i resets with seed + i."""
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
-    spec = get_task(task)
+    policy = make_demonstrator(expert, task, epsilon=epsilon, seed=seed)
     env = make_task(task, timeout=timeout, max_steps=max_steps)
-    policy = make_expert(spec.family, expert, epsilon=epsilon, seed=seed)
     dataset = rollout(env, policy, [seed + i for i in range(episodes)], task=task, source=expert,
                       epsilon=epsilon, seed=seed)
     env.close()
@@ -287,6 +290,16 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None) 
     return dataset
 
 
+def load_source(source: str, task: str, timeout: str) -> DemoDataset:
+    """Demonstrations for `task` from `source`: a `.npz` file of ours or `minari:DATASET_ID`
+    (a dataset in the local Minari cache, converted by `minari_io.from_minari`)."""
+    if source.startswith("minari:"):
+        from .minari_io import from_minari  # optional dependency
+
+        return from_minari(source.removeprefix("minari:"), task, timeout)
+    return load(source, task=task, timeout=timeout)
+
+
 def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
     if raw.ndim != 0 or raw.dtype.kind != "U":
         raise DemoFileError(path, f"meta must be a JSON string, got an array of dtype {raw.dtype}")
@@ -303,8 +316,10 @@ def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
     if missing:
         raise DemoFileError(path, f"meta lacks {missing}")
     meta = DemoMeta(**{key: fields[key] for key in names})
-    if meta.task not in TASKS:
-        raise DemoFileError(path, f"meta names unknown task {meta.task!r}")
+    try:
+        get_task(meta.task)
+    except ConfigError as error:
+        raise DemoFileError(path, f"meta names a task that cannot be made here: {error}") from None
     if meta.timeout not in TIMEOUT_MODES:
         raise DemoFileError(path, f"meta names unknown timeout mode {meta.timeout!r}")
     return meta
@@ -349,9 +364,11 @@ def _validate(path: Path, ds: DemoDataset) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.demos", description=__doc__.split("\n\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
-    rec = commands.add_parser("record", help="record a dataset with a scripted expert")
-    rec.add_argument("--task", required=True, choices=sorted(TASKS))
-    rec.add_argument("--expert", required=True, choices=EXPERT_NAMES)
+    rec = commands.add_parser("record", help="record a dataset with a demonstrator")
+    add_task_arguments(rec, required=True)
+    rec.add_argument("--expert", "--policy", dest="expert", required=True,
+                     help=f"a preset's {' | '.join(EXPERT_NAMES)}, a rule module:function (obs → action) "
+                          "or a saved model.keras (its greedy policy)")
     rec.add_argument("--episodes", type=positive_int, default=5)
     rec.add_argument("--seed", type=int, default=0, help="episode i resets with seed + i")
     rec.add_argument("--epsilon", type=float, default=0.0, help="probability of a random action")
@@ -360,13 +377,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     rec.add_argument("--force", action="store_true", help="overwrite an existing file")
     ins = commands.add_parser("inspect", help="print a dataset's summary")
     ins.add_argument("path")
+    exp = commands.add_parser("export", help="publish a dataset in the local Minari cache")
+    exp.add_argument("path", help="the .npz dataset (recorded with --timeout bootstrap)")
+    exp.add_argument("--minari", required=True, metavar="DATASET_ID", help="e.g. acrobot/imperfect-v0")
+    exp.add_argument("--force", action="store_true", help="replace an existing Minari dataset of that id")
     args = parser.parse_args(argv)
     if args.command == "record":
         if not args.out.endswith(".npz"):
             raise ConfigError(f"--out must end in .npz, got {args.out!r}")
-        dataset = record(args.task, args.expert, args.episodes, args.seed, args.epsilon, args.timeout)
+        dataset = record(chosen_task(args), args.expert, args.episodes, args.seed, args.epsilon, args.timeout)
         save(dataset, args.out, force=args.force)
         print(f"wrote {args.out}")
+    elif args.command == "export":
+        from .minari_io import to_minari  # optional dependency
+
+        dataset = load(args.path)
+        print(f"wrote Minari dataset {args.minari} to {to_minari(dataset, args.minari, force=args.force)}")
     else:
         dataset = load(args.path)
     print(dataset.summary())

@@ -1,4 +1,9 @@
-"""The paper's tasks (ALGORITHM.md §6) as Gymnasium wrappers, task presets and registered ids.
+"""Tasks: the paper's (ALGORITHM.md §6) and ours as presets, or any Gymnasium env by its id.
+
+A task is a preset name (`TASKS`: cartpole, cartpole-200, mountaincar, mountaincar-goals,
+acrobot, lunarlander) or the id of any registered Gymnasium env with a flat `Box`
+observation and a `Discrete` action space (`"module:Env-v0"` imports `module` first, as
+`gym.make` does); `get_task` turns either into a `TaskSpec`.
 
 A task env is built from the plain Gymnasium env with no time limit of its own, then
 
@@ -191,13 +196,15 @@ class TaskSpec:
     name: str
     env_id: str
     """The plain Gymnasium env; evaluation scores on it, unmodified."""
-    family: str
-    """`cartpole` or `mountaincar`: which scripted experts apply."""
-    max_steps: int
+    family: str | None
+    """Which scripted experts apply (experts.FAMILIES); None for an env without any."""
+    max_steps: int | None
+    """The step limit; None only for an env without a `TimeLimit` of its own (set `max_steps`)."""
     fall_penalty: float | None = None
     goal_reward: float | None = None
-    solved_return: float = 0.0
-    """The plain env's conventional "solved" threshold (CartPole-v1: 475, MountainCar-v0: −110)."""
+    solved_return: float | None = None
+    """The plain env's "solved" threshold (its spec's `reward_threshold`: CartPole-v1 475,
+    MountainCar-v0 −110, Acrobot-v1 −100, LunarLander-v3 200); None when it has none."""
 
     @property
     def gym_id(self) -> str:
@@ -217,16 +224,51 @@ TASKS: dict[str, TaskSpec] = {
         TaskSpec("mountaincar", "MountainCar-v0", "mountaincar", 200, solved_return=-110.0),
         TaskSpec("mountaincar-goals", "MountainCar-v0", "mountaincar", 200, goal_reward=100.0,
                  solved_return=-110.0),
+        TaskSpec("acrobot", "Acrobot-v1", "acrobot", 500, solved_return=-100.0),
+        TaskSpec("lunarlander", "LunarLander-v3", "lunarlander", 1000, solved_return=200.0),
     )
 }
 
+SUPPORTED_SPACES = "a flat Box observation (one dimension) and a Discrete action space starting at 0"
+
 
 def get_task(name: str) -> TaskSpec:
-    """The preset called `name`, or a `ConfigError` listing the known ones."""
-    try:
+    """The preset called `name`, else the Gymnasium env with that id (`env_task`)."""
+    if name in TASKS:
         return TASKS[name]
-    except KeyError:
-        raise ConfigError(f"unknown task {name!r}; expected one of {sorted(TASKS)}") from None
+    return env_task(name)
+
+
+@functools.cache
+def env_task(env_id: str) -> TaskSpec:
+    """Any registered Gymnasium env as a task: no shaping, its own time limit and threshold.
+
+    A `ConfigError` of one line for an unknown id and for spaces the networks cannot take
+    (images, continuous actions, Dict observations).
+    """
+    try:
+        env = gym.make(env_id, max_episode_steps=-1)
+    except (gym.error.Error, ModuleNotFoundError, ImportError) as error:
+        raise ConfigError(f"unknown task {env_id!r}: neither a preset ({', '.join(sorted(TASKS))}) nor a "
+                          f"Gymnasium env id ({type(error).__name__}: {error})") from None
+    obs_space, action_space = env.observation_space, env.action_space
+    spec = gym.registry[env_id.rpartition(":")[2]]  # registered by now, its module imported
+    env.close()
+    flat_box = isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1
+    discrete = isinstance(action_space, gym.spaces.Discrete) and int(action_space.start) == 0
+    if not (flat_box and discrete):
+        raise ConfigError(f"{env_id} has observation space {obs_space} and action space {action_space}; "
+                          f"supported: {SUPPORTED_SPACES}")
+    threshold = None if spec.reward_threshold is None else float(spec.reward_threshold)
+    return TaskSpec(env_id, env_id, None, spec.max_episode_steps, solved_return=threshold)
+
+
+def step_limit(name: str, max_steps: int | None = None) -> int:
+    """The step limit in force: `max_steps`, else the task's; an error if neither exists."""
+    limit = get_task(name).max_steps if max_steps is None else max_steps
+    if limit is None:
+        raise ConfigError(f"{name} has no time limit of its own: set one with --set max_steps=N")
+    return limit
 
 
 def make_task(
@@ -236,13 +278,12 @@ def make_task(
     render_mode: str | None = None,
 ) -> gym.Env:
     """Build the task env `name` with the paper's settings; `max_steps` overrides the limit."""
-    spec = get_task(name)
+    spec, limit = get_task(name), step_limit(name, max_steps)
     env = gym.make(spec.env_id, max_episode_steps=-1, render_mode=render_mode)
     if spec.fall_penalty is not None:
         env = FallPenalty(env, spec.fall_penalty)
     if spec.goal_reward is not None:
         env = GoalCount(env, spec.goal_reward)
-    limit = spec.max_steps if max_steps is None else max_steps
     env = TimeLimitMode(env, limit, timeout)
     return TimeFeature(env, limit) if timeout == "time-aware" else env
 
@@ -250,14 +291,17 @@ def make_task(
 def make_plain_env(
     name: str, timeout: str = "bootstrap", max_steps: int | None = None, render_mode: str | None = None
 ) -> gym.Env:
-    """The unmodified Gymnasium env of task `name`, with its own time limit.
+    """The unmodified Gymnasium env of task `name`, with its own time limit (an env without
+    one gets the training limit `max_steps`).
 
     With `timeout="time-aware"` the observation also carries the time feature the agent was
     trained with (fraction of the training limit `max_steps` left); rewards and ends are untouched.
     """
-    env = gym.make(get_task(name).env_id, render_mode=render_mode)
+    spec = get_task(name)
+    own_limit = None if spec.max_steps is not None else step_limit(name, max_steps)
+    env = gym.make(spec.env_id, max_episode_steps=own_limit, render_mode=render_mode)
     if timeout == "time-aware":
-        env = TimeFeature(env, get_task(name).max_steps if max_steps is None else max_steps)
+        env = TimeFeature(env, step_limit(name, max_steps))
     return env
 
 

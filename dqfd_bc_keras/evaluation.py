@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import gymnasium as gym
 import keras
 import numpy as np
 
@@ -130,12 +131,17 @@ class EvalResult:
             f"{self.task} ({get_task(self.task).env_id}), {self.policy} policy, {n} greedy episodes "
             f"(seeds {self.seed}..{self.seed + n - 1})",
             f"return {self.mean_return:.2f} ± {self.std_return:.2f}  "
-            f"(min {min(self.returns):g}, max {max(self.returns):g}, solved at {get_task(self.task).solved_return:g})",
+            f"(min {min(self.returns):g}, max {max(self.returns):g}, {solved_text(self.task)})",
             f"length {statistics.fmean(self.lengths):.1f} steps on average",
         ]
         if self.goals is not None:
             lines.append(f"goals per episode {statistics.fmean(self.goals):.2f} on average: {self.goals}")
         return "\n".join(lines)
+
+
+def solved_text(task: str) -> str:
+    threshold = get_task(task).solved_return
+    return "no solved threshold" if threshold is None else f"solved at {threshold:g}"
 
 
 def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed: int,
@@ -155,6 +161,25 @@ def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed
     if get_task(task).goal_count:
         goals = _play(make_task(task, timeout, max_steps), policy, episodes, seed)[2]
     return EvalResult(task, getattr(policy, "kind", "custom"), seed, returns, lengths, goals, timeout)
+
+
+def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str | Path, episodes: int, seed: int,
+                 timeout: str = "bootstrap", max_steps: int | None = None) -> list[Path]:
+    """Play `episodes` greedy episodes on the plain env (as `evaluate`) and save each as an MP4
+    in `directory` with Gymnasium's `RecordVideo` (needs `moviepy`); returns the files."""
+    try:
+        import moviepy  # noqa: F401  (RecordVideo's encoder; fail before playing, in one line)
+    except ImportError:
+        raise ConfigError("--video needs moviepy: pip install -r requirements-extras.txt") from None
+    directory = Path(directory)
+    if directory.is_file():
+        raise ConfigError(f"--video {directory}: is a file, not a directory")
+    env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array")
+    prefix = get_task(task).name.replace("/", "-").replace(":", "-")
+    env = gym.wrappers.RecordVideo(env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix,
+                                   disable_logger=True)
+    _play(env, policy, episodes, seed)
+    return sorted(directory.glob(f"{prefix}-episode-*.mp4"))
 
 
 def _play(env, policy, episodes: int, seed: int) -> tuple[list[float], list[int], list[int]]:

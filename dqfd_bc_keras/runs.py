@@ -311,7 +311,8 @@ def plot_learning_curve(metrics: list[dict], evals: list[dict], config: Config, 
         ax.plot([e["env_step"] for e in evals], [e["mean_return"] for e in evals], "o-", color="tab:orange",
                 label="greedy evaluation")
     spec = get_task(config.task)
-    ax.axhline(spec.solved_return, color="grey", ls="--", lw=1, label=f"solved ({spec.solved_return:g})")
+    if spec.solved_return is not None:
+        ax.axhline(spec.solved_return, color="grey", ls="--", lw=1, label=f"solved ({spec.solved_return:g})")
     ax.set_xlabel("environment steps")
     ax.set_ylabel(f"return on {spec.env_id}")
     ax.set_title(f"{config.task} · {config.expert_loss} · timeout={config.timeout} · seed {config.seed}")

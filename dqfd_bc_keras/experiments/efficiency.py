@@ -29,8 +29,9 @@ SB3_METHOD = "SB3 DQN (rl-zoo3)"
 """The method name of the Stable-Baselines3 arms."""
 EFFICIENCY_FILE = "efficiency.json"
 """Written into the suite directory by benchmarks/bench_sample_efficiency.py; quoted by the report."""
-TARGET_RATIO = 10.0
-"""The goal: SB3's median steps to threshold ÷ ours ≥ 10, judged on the point estimate."""
+TARGET_RATIO = {"cartpole": 10.0, "mountaincar": 10.0, "acrobot": 5.0, "lunarlander": 5.0}
+"""The goal per task: SB3's median steps to threshold ÷ ours ≥ it, judged on the point estimate
+(issue E set 10× on the paper's envs, issue H 5× on Acrobot and LunarLander)."""
 RESAMPLES, RNG_SEED, LEVEL = 10_000, 0, 0.95
 """Percentile bootstrap of every interval here: resamples, generator seed, coverage."""
 
@@ -48,13 +49,19 @@ class ArmSteps:
     threshold: float
     anchor: float | None = None
     """SB3 arms: the median of an independent check of the same baseline, to compare with."""
+    anchor_final: float | None = None
+    """SB3 arms without such a check: a published final return of the same baseline."""
 
     @classmethod
     def of(cls, task: str, method: str, evals: Iterable[Iterable[tuple[float, float]]], final: Sequence[float],
-           threshold: float, anchor: float | None = None) -> ArmSteps:
+           threshold: float, anchor: float | None = None, anchor_final: float | None = None) -> ArmSteps:
         """From each seed's (step, mean return) evaluations."""
         return cls(task, method, [first_reaching(e, threshold) for e in evals], [float(f) for f in final],
-                   threshold, anchor)
+                   threshold, anchor, anchor_final)
+
+    @property
+    def target(self) -> float:
+        return TARGET_RATIO.get(self.task, 10.0)
 
     @property
     def label(self) -> str:
@@ -119,7 +126,7 @@ def rows(arms: list[ArmSteps]) -> list[dict]:
         row = summarise(arm)
         if arm.method != SB3_METHOD and arm.task in sb3:
             row["ratio"] = list(ratio_ci(sb3[arm.task], arm.steps))
-            row["target_met"] = bool(row["ratio"][0] >= TARGET_RATIO)
+            row["target_met"] = bool(row["ratio"][0] >= arm.target)
         out.append(row)
     return out
 
@@ -134,10 +141,10 @@ def _times(value: float) -> str:
 
 def table(arms: list[ArmSteps]) -> list[str]:
     """The arms as a markdown table: each of ours with SB3's median ÷ its median (95% CI) and
-    whether that reaches TARGET_RATIO; each SB3 arm with its independent check beside the
-    median; then a note on any open-ended or undefined interval."""
+    whether that reaches the task's TARGET_RATIO; each SB3 arm with its independent check beside
+    the median; then a note on any open-ended or undefined interval."""
     lines = ["| arm | median steps to threshold | 95% CI | seeds that reached it | above it at the end "
-             f"| SB3's median ÷ this median [95% CI] | {TARGET_RATIO:g}× goal |",
+             "(median final return) | SB3's median ÷ this median [95% CI] | goal |",
              "| --- | --- | --- | --- | --- | --- | --- |"]
     notes = set()
     for arm, row in zip(arms, rows(arms)):
@@ -149,10 +156,12 @@ def table(arms: list[ArmSteps]) -> list[str]:
             point, low, high = row["ratio"]
             interval = "CI undefined" if np.isnan(low) else f"{_times(low)}, {_times(high)}"
             ratio = _times(point) + ("" if np.isnan(point) else f" [{interval}]")
-            goal = f"{TARGET_RATIO:g}× met" if row["target_met"] else "—" if np.isnan(point) else "not met"
+            goal = f"{arm.target:g}×: " + ("met" if row["target_met"] else "—" if np.isnan(point) else "not met")
             notes.add("undefined" if np.isnan(low) else "open" if high == np.inf else "")
+        final = f"{row['above_at_end']}/{row['seeds']} ({np.median(arm.final):.1f}"
+        final += f"; published ≈ {arm.anchor_final:g})" if arm.anchor_final is not None else ")"
         lines.append(f"| {row['arm']} | {median} | [{_steps(row['ci'][0])}, {_steps(row['ci'][1])}] | "
-                     f"{row['reached']}/{row['seeds']} | {row['above_at_end']}/{row['seeds']} | {ratio} | {goal} |")
+                     f"{row['reached']}/{row['seeds']} | {final} | {ratio} | {goal} |")
     if "open" in notes:
         lines += ["", "A ratio interval ending at ∞ is open-ended: in some resamples SB3's median is ∞ (at least "
                   "half its seeds never reached the threshold) or ours is 0, so the data set no upper bound."]

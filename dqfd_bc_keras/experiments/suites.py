@@ -89,8 +89,10 @@ def claim_seeds(claim_id: str, task: str) -> int:
 PROTOCOL = {"eval_every": 1_000, "eval_episodes": 10}
 """The sample-efficiency protocol, ours and SB3's alike: 10 greedy episodes on the plain env with
 fixed seeds (`seeds.eval_seed`) at exactly every 1,000 interactions."""
-EFFICIENCY_TASKS = {"cartpole": 5, "mountaincar": 10}
+EFFICIENCY_TASKS = {"cartpole": 5, "mountaincar": 10, "acrobot": 10, "lunarlander": 10}
 """Sample-efficiency tasks → demonstration episodes of the imperfect expert (the presets')."""
+PAPER_TASKS = ("cartpole", "mountaincar")
+"""The paper's two envs: the dynamic-demonstration readings and every expert loss run on them."""
 C2_PAPER_READING = {"early_stop_window": 0, "total_steps": PAPER_READING_STEPS}
 """C2 as the paper runs it: "average ≥ 490, 10 times in a row" with 200-step episodes can never
 fire, so no early stop, and a budget of at least 300 episodes (300 × 200 steps)."""
@@ -108,14 +110,15 @@ def _dynamic() -> list[Arm]:
     """The two readings of dynamic demonstrations, measured with every interaction counted; the
     rule that picks `Config.dynamic_demos`'s default from them is in docs/PREREGISTRATION.md."""
     return [arm(task, "bootstrap", loss, 10, dynamic_demos=mode, **PROTOCOL)
-            for task in EFFICIENCY_TASKS for loss in ("bayes", "ce") for mode in ("episodes", "rollouts")]
+            for task in PAPER_TASKS for loss in ("bayes", "ce") for mode in ("episodes", "rollouts")]
 
 
 def _efficiency() -> list[Arm]:
-    """Interactions to the plain env's threshold: bayes, ce, DQfD's margin and DQN, against SB3's
-    DQN (benchmarks/bench_sample_efficiency.py)."""
+    """Interactions to the plain env's threshold, against SB3's DQN (benchmarks/bench_sample_efficiency.py):
+    bayes, ce, DQfD's margin and DQN on the paper's envs; the default (bayes) alone on the others."""
     return [arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
-            for task, episodes in EFFICIENCY_TASKS.items() for loss in ("bayes", "ce", "margin", "none")]
+            for task, episodes in EFFICIENCY_TASKS.items()
+            for loss in (("bayes", "ce", "margin", "none") if task in PAPER_TASKS else ("bayes",))]
 
 
 def _ablations() -> list[Arm]:
