@@ -15,7 +15,7 @@ import sys
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
 from dqfd_bc_keras.config import QUICK, Config
-from dqfd_bc_keras.envs import TIMEOUT_MODES
+from dqfd_bc_keras.envs import TIMEOUT_MODES, task_slug
 from dqfd_bc_keras.experts import EXPERT_NAMES
 from dqfd_bc_keras.losses import EXPERT_LOSSES, TARGETS
 from dqfd_bc_keras.runs import train
@@ -55,7 +55,7 @@ def main(argv=None) -> int:
     chosen = {k: v for k, v in flags.items() if v is not None}
     task = cli.chosen_task(args)
     config = Config.for_task(task, **({**QUICK, **chosen} if args.quick else chosen)).with_overrides(args.set)
-    out = args.out or f"runs/{config.task.replace('/', '-').replace(':', '-')}-{config.expert_loss}-seed{config.seed}"
+    out = args.out or f"runs/{task_slug(config.task)}-{config.expert_loss}-seed{config.seed}"
     dataset = demos.load_source(args.demos, task=config.task, timeout=config.timeout) if args.demos else None
     if not args.quiet:
         print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "

@@ -263,12 +263,22 @@ def env_task(env_id: str) -> TaskSpec:
     return TaskSpec(env_id, env_id, None, spec.max_episode_steps, solved_return=threshold)
 
 
+def task_slug(name: str) -> str:
+    """`name` as one path component: an env id's namespace slash and module colon become dashes."""
+    return name.replace("/", "-").replace(":", "-")
+
+
 def step_limit(name: str, max_steps: int | None = None) -> int:
     """The step limit in force: `max_steps`, else the task's; an error if neither exists."""
     limit = get_task(name).max_steps if max_steps is None else max_steps
     if limit is None:
         raise ConfigError(f"{name} has no time limit of its own: set one with --set max_steps=N")
     return limit
+
+
+def _rendering(render_mode: str | None) -> dict[str, str]:
+    """`render_mode` for `gym.make` only when asked for: a user's env need not take the argument."""
+    return {} if render_mode is None else {"render_mode": render_mode}
 
 
 def make_task(
@@ -279,7 +289,7 @@ def make_task(
 ) -> gym.Env:
     """Build the task env `name` with the paper's settings; `max_steps` overrides the limit."""
     spec, limit = get_task(name), step_limit(name, max_steps)
-    env = gym.make(spec.env_id, max_episode_steps=-1, render_mode=render_mode)
+    env = gym.make(spec.env_id, max_episode_steps=-1, **_rendering(render_mode))
     if spec.fall_penalty is not None:
         env = FallPenalty(env, spec.fall_penalty)
     if spec.goal_reward is not None:
@@ -299,7 +309,7 @@ def make_plain_env(
     """
     spec = get_task(name)
     own_limit = None if spec.max_steps is not None else step_limit(name, max_steps)
-    env = gym.make(spec.env_id, max_episode_steps=own_limit, render_mode=render_mode)
+    env = gym.make(spec.env_id, max_episode_steps=own_limit, **_rendering(render_mode))
     if timeout == "time-aware":
         env = TimeFeature(env, step_limit(name, max_steps))
     return env

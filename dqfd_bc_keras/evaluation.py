@@ -20,7 +20,7 @@ import numpy as np
 
 from .bc import BCModel
 from .config import Config
-from .envs import TIMEOUT_MODES, get_task, make_plain_env, make_task
+from .envs import TIMEOUT_MODES, get_task, make_plain_env, make_task, task_slug
 from .errors import ConfigError, ModelFileError
 
 POLICY_FILES = {"q": "q_network.keras", "bc": "bc_model.keras"}
@@ -174,8 +174,11 @@ def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str 
     directory = Path(directory)
     if directory.is_file():
         raise ConfigError(f"--video {directory}: is a file, not a directory")
+    prefix = task_slug(task)
+    if any(directory.glob(f"{prefix}-episode-*.mp4")):
+        raise ConfigError(f"--video {directory}: already holds {prefix} videos, which would be overwritten; "
+                          "choose another directory")
     env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array")
-    prefix = get_task(task).name.replace("/", "-").replace(":", "-")
     env = gym.wrappers.RecordVideo(env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix,
                                    disable_logger=True)
     _play(env, policy, episodes, seed)

@@ -12,7 +12,7 @@ A Minari episode holds T actions and T + 1 observations with Gymnasium's flags, 
 
 Minari keeps the plain env's rewards, so tasks with shaped rewards (cartpole's fall penalty,
 mountaincar-goals' goal reward) are refused both ways: use the plain env id (`CartPole-v1`).
-Minari is optional (`pip install -r requirements-minari.txt`); it is imported only here, lazily.
+Minari is optional (`pip install -r requirements-extras.txt`); it is imported only here, lazily.
 
     python -m dqfd_bc_keras.demos export demos.npz --minari mountaincar/imperfect-v0
     python train.py --env CartPole-v1 --demos minari:cartpole/expert-v0
@@ -44,7 +44,7 @@ def _minari() -> ModuleType:
         import minari
     except ImportError as error:
         raise ConfigError(f"Minari datasets need the optional dependency minari ({error}): "
-                          "pip install -r requirements-minari.txt") from None
+                          "pip install -r requirements-extras.txt") from None
     return minari
 
 

@@ -91,15 +91,25 @@ def arms() -> list[ArmSteps]:
 def test_table_marks_the_goal_on_the_point_estimate_and_states_the_anchor():
     lines = table(arms())
     bayes, none, sb3, mountaincar = lines[2:6]
-    assert bayes.startswith("| cartpole bayes | 2,000 | [2,000, 2,000] | 3/3 | 2/3 | 14.0× [")
-    assert bayes.endswith("| 10× met |")
-    assert none.startswith("| cartpole none | ∞ (not reached) |") and "| 1/3 | 0/3 |" in none
+    assert bayes.startswith("| cartpole bayes | 2,000 | [2,000, 2,000] | 3/3 | 2/3 (500.0) | 14.0× [")
+    assert bayes.endswith("| 10×: met |")
+    assert none.startswith("| cartpole none | ∞ (not reached) |") and "| 1/3 | 0/3 (0.0) |" in none
     assert sb3.startswith(f"| cartpole {SB3_METHOD} | 28,000; independent check ≈ 28,000 |")
     assert sb3.endswith("| — | — |")
     assert mountaincar.endswith("| — | — |")  # no SB3 arm on MountainCar: no ratio
     assert any("open-ended" in line for line in lines) and any("Undefined" in line for line in lines)
     [row] = [r for r in rows(arms()) if r["arm"] == "cartpole bayes"]
     assert row["ratio"][0] == 14.0 and row["ratio"][2] == INF and row["target_met"]
+
+
+def test_new_tasks_have_the_5x_goal_and_their_published_anchor():
+    """Issue H: 5× on Acrobot; SB3's row shows rl-zoo3's published final return beside its median."""
+    acrobot = [ArmSteps("acrobot", "bayes", [4000.0] * 3, [-80.0, -90.0, -85.0], -100.0),
+               ArmSteps("acrobot", SB3_METHOD, [24_000.0] * 3, [-75.0, -77.0, -90.0], -100.0, anchor_final=-76.6)]
+    ours, sb3 = table(acrobot)[2:4]
+    assert ours.endswith("| 3/3 (-85.0) | 6.0× [6.0×, 6.0×] | 5×: met |")
+    assert "| 3/3 (-77.0; published ≈ -76.6) |" in sb3
+    assert ArmSteps("acrobot", "ce", [None], [0.0], -100.0).target == 5.0
 
 
 def test_section_reads_the_file_and_quotes_no_numbers_of_its_own(tmp_path):

@@ -217,3 +217,17 @@ def test_cli_errors_are_one_line_and_exit_2(cases, capsys, case, problem):
     stdout, stderr = capsys.readouterr()
     assert (code, stdout) == (2, "")
     assert len(stderr.splitlines()) == 1 and problem in stderr, stderr
+
+
+def test_video_records_one_mp4_per_episode_and_never_overwrites(tmp_path):
+    pytest.importorskip("moviepy")
+    from dqfd_bc_keras.evaluation import record_video
+
+    policy, settings = load_policy(REPO / "models" / "mountaincar")
+    files = record_video(policy, settings.task, tmp_path, episodes=2, seed=0)
+    assert [f.name for f in files] == ["mountaincar-episode-0.mp4", "mountaincar-episode-1.mp4"]
+    assert all(f.read_bytes()[4:8] == b"ftyp" for f in files)  # an MP4 container
+    before = files[0].read_bytes()
+    with pytest.raises(ConfigError, match="already holds mountaincar videos"):
+        record_video(policy, settings.task, tmp_path, episodes=1, seed=5)
+    assert files[0].read_bytes() == before

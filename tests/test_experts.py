@@ -29,12 +29,42 @@ def test_mountaincar_strong_solves_and_imperfect_is_worse() -> None:
     assert imperfect.mean() < -110.0
 
 
+@pytest.mark.parametrize(("family", "solved", "strong_band", "imperfect_band"), [
+    ("acrobot", -100.0, (-90.0, -70.0), (-130.0, -100.0)),
+    ("lunarlander", 200.0, (200.0, 280.0), (50.0, 200.0)),
+])
+def test_new_experts_quality_bands_over_100_episodes(family, solved, strong_band, imperfect_band) -> None:
+    """The bands around the figures in the rules' docstrings (100 episodes, seeds 0–99): the strong
+    expert solves the env on average, the imperfect one does not."""
+    strong = expert_returns(family, "strong", episodes=100, seed=0)
+    imperfect = expert_returns(family, "imperfect", episodes=100, seed=0)
+    assert strong_band[0] <= strong.mean() <= strong_band[1] and strong.mean() >= solved
+    assert imperfect_band[0] <= imperfect.mean() < imperfect_band[1] and imperfect.mean() < solved
+
+
+def test_lunarlander_strong_is_gymnasiums_heuristic() -> None:
+    pytest.importorskip("Box2D")
+    from types import SimpleNamespace
+
+    from gymnasium.envs.box2d.lunar_lander import heuristic
+
+    env = SimpleNamespace(unwrapped=SimpleNamespace(continuous=False))
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        obs = rng.normal(size=8)
+        obs[6:] = rng.random(2) < 0.2  # legs touching
+        assert RULES["lunarlander", "strong"](obs) == heuristic(env, obs)
+
+
+OBS_DIM = {"cartpole": 4, "mountaincar": 2, "acrobot": 6, "lunarlander": 8}
+
+
 @pytest.mark.parametrize("family", FAMILIES)
 @pytest.mark.parametrize("name", EXPERT_NAMES)
 def test_epsilon_zero_equals_rule_and_ignores_extra_feature(family: str, name: str) -> None:
     rng = np.random.default_rng(1)
     expert = make_expert(family, name, epsilon=0.0, seed=0)
-    width = 4 if family == "cartpole" else 2
+    width = OBS_DIM[family]
     for _ in range(50):
         obs = rng.uniform(-0.5, 0.5, size=width).astype(np.float32)
         action = expert(obs)
@@ -67,7 +97,7 @@ def test_same_seed_gives_same_actions_and_returns() -> None:
 @pytest.mark.parametrize(
     ("family", "name", "epsilon", "match"),
     [
-        ("pong", "strong", 0.0, r"'pong'.*cartpole, mountaincar"),
+        ("pong", "strong", 0.0, r"'pong'.*cartpole, mountaincar, acrobot, lunarlander"),
         ("cartpole", "perfect", 0.0, r"'perfect'.*strong, imperfect"),
         ("cartpole", "strong", 1.5, r"1\.5"),
         ("mountaincar", "strong", -0.1, r"-0\.1"),

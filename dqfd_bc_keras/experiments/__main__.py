@@ -6,8 +6,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..cli import ArgumentParser, positive_int, run
-from .suites import ALL, BACKENDS, SUITES, run_suite
+from ..cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run
+from .suites import ALL, BACKENDS, SUITES, on_task, run_suite
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
@@ -23,6 +23,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     go.add_argument("--out", required=True, help="suite directory")
     go.add_argument("--backend", choices=BACKENDS, default="local")
     go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
+    add_task_arguments(go)  # the suite's arms on this task instead of their own
+    go.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a Config field for every arm, e.g. expert=my_rules:swing on an env without scripted experts")
     go.add_argument("--restart-broken", action="store_true",
                     help="start over every run whose checkpoint cannot be resumed (default: report it as failed)")
     exp = commands.add_parser(
@@ -48,9 +51,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help=f"exit {EXIT_SKIPPED} if any run was skipped (a file missing, truncated or unreadable)")
     args = parser.parse_args(argv)
     if args.command == "run":
+        task, moved = chosen_task(args), chosen_task(args) is not None or args.set
         for suite in ALL if args.suite == "all" else (args.suite,):
-            run_suite(suite, args.seeds, args.out, args.workers, args.backend, args.address,
-                      progress=lambda line: print(line, flush=True), restart_broken=args.restart_broken)
+            arms = on_task(SUITES[suite], task, args.set) if moved else SUITES[suite]
+            run_suite(arms, args.seeds, args.out, args.workers, args.backend, args.address,
+                      progress=lambda line: print(line, flush=True), name=f"{suite} on {task}" if task else suite,
+                      restart_broken=args.restart_broken)
     elif args.command == "export":
         from .data import export_archive
 

@@ -25,6 +25,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from ..config import QUICK, Config
+from ..envs import task_slug
 from ..errors import BrokenRunError, ConfigError
 from ..files import write_text
 from .claims import CLAIMS, PAPER_READING_STEPS
@@ -49,7 +50,7 @@ class Arm:
 
     @property
     def name(self) -> str:
-        return "-".join(filter(None, (self.task, self.timeout, self.expert_loss, self.label)))
+        return "-".join(filter(None, (task_slug(self.task), self.timeout, self.expert_loss, self.label)))
 
     def config(self, seed: int) -> Config:
         return Config.for_task(self.task, timeout=self.timeout, expert_loss=self.expert_loss, seed=seed,
@@ -69,6 +70,21 @@ def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides:
     label = "-".join(f"{_SHORT.get(k, k)}{v:g}" if isinstance(v, float) else f"{_SHORT.get(k, k)}{v}"
                      for k, v in changed.items())
     return Arm(task, timeout, expert_loss, tuple(changed.items()), label, seeds)
+
+
+def on_task(arms: Sequence[Arm], task: str | None, assignments: Sequence[str] = ()) -> list[Arm]:
+    """`arms` moved to `task` (a preset or any Gymnasium env id; None: their own) with the Config
+    `key=value` `assignments` added (e.g. `expert=module:function`); arms that become equal run once."""
+    keys = [text.partition("=")[0].strip().replace("-", "_") for text in assignments]
+    for key in set(keys) & {"timeout", "expert_loss", "seed"}:
+        raise ConfigError(f"--set {key}: {key} is an arm's own (seeds: --seeds)")
+    moved = []
+    for a in arms:
+        target = a.task if task is None else task
+        parsed = Config.for_task(target, **dict(a.overrides)).with_overrides(list(assignments)).to_dict()
+        moved.append(arm(target, a.timeout, a.expert_loss, a.seeds, **{**dict(a.overrides),
+                                                                       **{k: parsed[k] for k in keys}}))
+    return list(dict.fromkeys(moved))
 
 
 PAPER_SETTINGS = (("C1", "cartpole", "naive"), ("C1", "cartpole-200", "naive"), ("C3", "cartpole", "bootstrap"),
