@@ -16,7 +16,7 @@ from dqfd_bc_keras.evaluation import GreedyPolicy, evaluate
 MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
-@pytest.mark.parametrize("name", ["cartpole", "mountaincar"])
+@pytest.mark.parametrize("name", ["cartpole", "mountaincar", "acrobot", "lunarlander"])
 def test_shipped_model_plays_as_its_eval_json_says(name):
     folder = MODELS / name
     config = Config.from_dict(json.loads((folder / "config.json").read_text()))
