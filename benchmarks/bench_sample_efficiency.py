@@ -46,7 +46,7 @@ from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
 from dqfd_bc_keras.experiments.claims import first_reaching  # noqa: E402
 from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, ArmSteps,  # noqa: E402
-                                                  interaction_evals, load, rows, save, table)
+                                                  interaction_evals, load, rows, save, table, teacher_table)
 from dqfd_bc_keras.experiments.suites import EFFICIENCY_TASKS, PROTOCOL, SUITES, Arm, run_suite  # noqa: E402
 from dqfd_bc_keras.files import write_text  # noqa: E402
 from dqfd_bc_keras.seeds import eval_seed  # noqa: E402
@@ -237,7 +237,7 @@ def main(argv=None) -> int:
             steps += [s for s in kept if (s.task, s.method) not in fresh]
         steps.sort(key=lambda s: (s.task, s.method == SB3_METHOD))  # stable: ours in the suite's order, then SB3
         save(out / EFFICIENCY_FILE, PROTOCOL, steps)
-    print(json.dumps(rows(steps)) if args.json else "\n".join(table(steps)))
+    print(json.dumps(rows(steps)) if args.json else "\n".join([*table(steps), "", *teacher_table(steps)]))
     return 0
 
 

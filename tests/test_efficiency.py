@@ -9,8 +9,10 @@ from dqfd_bc_keras.training import METRIC_FIELDS
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.data import load_runs
-from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, ArmSteps, efficiency_section,
-                                                  interaction_evals, load, ratio_ci, rows, save, summarise, table)
+from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, TEACHER, ArmSteps,
+                                                  efficiency_section, interaction_evals, load, ratio_ci, rows, save,
+                                                  summarise, table, teacher_table, teacher_verdict)
+from dqfd_bc_keras.experts import expert_returns
 
 INF = np.inf
 
@@ -110,6 +112,22 @@ def test_new_tasks_have_the_5x_goal_and_their_published_anchor():
     assert ours.endswith("| 3/3 (-85.0) | 6.0× [6.0×, 6.0×] | 5×: met |")
     assert "| 3/3 (-77.0; published ≈ -76.6) |" in sb3
     assert ArmSteps("acrobot", "ce", [None], [0.0], -100.0).target == 5.0
+
+
+def test_teacher_rule_reads_the_ci_of_the_median():
+    assert teacher_verdict([-80.0] * 5, -112.68) == (-80.0, -80.0, -80.0, "beats its teacher")
+    assert teacher_verdict([-150.0] * 5, -112.68)[3] == "does not"
+    # median −100, but resampled medians reach −500 (3 of 5 draws at −500 happen): inconclusive
+    assert teacher_verdict([-500.0, -500.0, -100.0, -90.0, -80.0], -112.68)[3] == "inconclusive"
+    lines = teacher_table([ArmSteps("acrobot", "bayes", [1000.0], [-80.0], -100.0),
+                           ArmSteps("acrobot", SB3_METHOD, [1000.0], [-90.0], -100.0)])
+    assert lines[2] == "| acrobot bayes | -112.68 | -80.0 [-80.0, -80.0] | beats its teacher |" and len(lines) == 3
+    assert teacher_table(arms()) == []  # no teacher rule on the paper's tasks
+
+
+@pytest.mark.parametrize("task", sorted(TEACHER))
+def test_teacher_means_are_the_measured_ones(task):
+    assert round(expert_returns(task, "imperfect", episodes=100, seed=0).mean(), 2) == TEACHER[task]
 
 
 def test_section_reads_the_file_and_quotes_no_numbers_of_its_own(tmp_path):
