@@ -148,10 +148,10 @@ def test_sb3_part_alone_reuses_its_runs_and_keeps_our_arms(tmp_path, capsys):
             json.dumps({**module.sb3_settings(task, seed, budget, 1000), "evals": evals}))
     ours = ArmSteps("cartpole", "bayes", [2500.0, 2500.0], [500.0, 500.0], 475.0)
     save(tmp_path / EFFICIENCY_FILE, module.PROTOCOL, [ours])
-    assert module.main(["--parts", "sb3", "--seeds", "2", "--out", str(tmp_path)]) == 0
+    assert module.main(["--parts", "sb3", "--seeds", "2", "--tasks", "cartpole,mountaincar", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "0 to run" in printed and "25,000; independent check ≈ 28,000" in printed
-    assert "| cartpole bayes | 2,500 | [2,500, 2,500] | 2/2 | 2/2 | 10.0× [8.0×, 12.0×] | 10× met |" in printed
+    assert "| cartpole bayes | 2,500 | [2,500, 2,500] | 2/2 | 2/2 (500.0) | 10.0× [8.0×, 12.0×] | 10×: met |" in printed
     _, arms = load(tmp_path / EFFICIENCY_FILE)
     assert [a.label for a in arms] == ["cartpole bayes", f"cartpole {module.SB3_METHOD}",
                                        f"mountaincar {module.SB3_METHOD}"]
@@ -180,3 +180,10 @@ def test_learning_before_after_quick_same_code_same_seed_learns_the_same(tmp_pat
     again = bench("learning_before_after.py", "--no-run", "--out", tmp_path, "--figure", tmp_path / "c.png", "--json")
     assert again == summary and (tmp_path / "wall.jsonl").read_text() == logged
     assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_sample_efficiency_refuses_an_unknown_task(capsys):
+    module = load_bench("bench_sample_efficiency.py")
+    with pytest.raises(SystemExit) as exit:
+        module.main(["--tasks", "cartpole,pong", "--no-run"])
+    assert exit.value.code == 2 and "unknown task(s) ['pong']" in capsys.readouterr().err
