@@ -180,7 +180,8 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
     if m.timeout != "bootstrap":
         raise ConfigError(f"{where}: the dataset was recorded with timeout={m.timeout!r}, so its flags at the "
                           "time limit do not mean what Gymnasium's do; record it again with --timeout bootstrap")
-    _refuse_shaped(get_task(m.task), where)
+    _refuse_shaped(get_task(m.task), where)  # also imports the env's module (`module:Env-v0`)
+    env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
     directory = _dataset_dir(dataset_id)
     if directory.exists() and not force:
         raise ConfigError(f"{where}: a Minari dataset of that id exists at {directory}; pass --force to replace it")
@@ -208,13 +209,15 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
         with warnings.catch_warnings():  # the nags about author, email, code link and eval env we do not know
             warnings.filterwarnings("ignore", message=r".*is set to None", category=UserWarning)
             minari.create_dataset_from_buffers(
-                dataset_id, buffers, env=m.env_id, algorithm_name=m.expert, description=description,
+                dataset_id, buffers, env=env_spec, algorithm_name=m.expert, description=description,
                 data_format=DATA_FORMAT,
             )
-    except BaseException:
+    except BaseException as error:
         shutil.rmtree(directory, ignore_errors=True)
         if backup is not None:
             backup.rename(directory)
+        if isinstance(error, Exception):
+            raise ConfigError(f"{where}: Minari could not write it ({one_line(error)})") from error
         raise
     if backup is not None:
         shutil.rmtree(backup, ignore_errors=True)

@@ -201,3 +201,48 @@ def test_without_minari_says_how_to_install(monkeypatch, mountaincar):
         with pytest.raises(ConfigError, match=r"pip install -r requirements-extras.txt") as error:
             call()
         assert "\n" not in str(error.value)
+
+
+def test_cli_export_then_train_from_the_minari_dataset(cache, tmp_path):
+    """A user's path: record a plain env with a rule, publish it with `demos export`, train on it
+    with `train.py --demos minari:ID` (all subprocesses, the same local cache)."""
+    import json
+    import os
+    import subprocess
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "MINARI_DATASETS_PATH": str(cache),
+           "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")])}
+
+    def run(*args):
+        return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, cwd=repo, env=env,
+                              timeout=300)
+
+    demos = tmp_path / "chain.npz"
+    assert run("-m", "dqfd_bc_keras.demos", "record", "--env", "toy_envs:ToyChain-v0", "--policy",
+               "toy_envs:go_right", "--episodes", "20", "--out", demos).returncode == 0
+    done = run("-m", "dqfd_bc_keras.demos", "export", demos, "--minari", "toy/chain-v0")
+    assert done.returncode == 0 and "wrote Minari dataset toy/chain-v0" in done.stdout, done.stderr
+    again = run("-m", "dqfd_bc_keras.demos", "export", demos, "--minari", "toy/chain-v0")
+    assert again.returncode == 2 and "pass --force to replace it" in again.stderr
+    out = tmp_path / "run"
+    done = run("train.py", "--env", "toy_envs:ToyChain-v0", "--demos", "minari:toy/chain-v0", "--quick", "--quiet",
+               "--out", out)
+    assert done.returncode == 0, done.stderr
+    assert json.loads((out / "demonstrations.json").read_text())["expert"] == "minari:toy/chain-v0"
+    assert json.loads((out / "eval.json").read_text())["mean_return"] == 1.0
+
+
+def test_an_env_minari_cannot_serialise_is_refused_in_one_line(cache):
+    """Minari stores the env's spec as JSON: an env registered with a callable entry point (not a
+    "module:Class" string) cannot be, and the export says so without leaving a dataset behind."""
+    import toy_envs
+
+    if "ToyChainCallable-v0" not in gym.registry:
+        gym.register("ToyChainCallable-v0", entry_point=toy_envs.Chain, max_episode_steps=20)
+    env = envs.make_task("ToyChainCallable-v0")
+    dataset = rollout(env, toy_envs.go_right, [0], task="ToyChainCallable-v0", source="rule")
+    with pytest.raises(ConfigError, match="Minari could not write it .*does not support serialising callables"):
+        to_minari(dataset, "toy/callable-v0")
+    assert not (cache / "toy" / "callable-v0").exists()

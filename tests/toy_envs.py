@@ -58,10 +58,10 @@ def out_of_range(obs: np.ndarray) -> int:
 
 NOT_CALLABLE = 3
 
-gym.register("ToyChain-v0", entry_point=Chain, max_episode_steps=20, reward_threshold=1.0)
-gym.register("ToyChainNoLimit-v0", entry_point=Chain)
-gym.register("ToyImage-v0", entry_point=Unsupported, kwargs={
+gym.register("ToyChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, reward_threshold=1.0)
+gym.register("ToyChainNoLimit-v0", entry_point="toy_envs:Chain")
+gym.register("ToyImage-v0", entry_point="toy_envs:Unsupported", kwargs={
     "observation_space": gym.spaces.Box(0, 255, (8, 8, 3), np.uint8), "action_space": gym.spaces.Discrete(2)})
-gym.register("ToyDict-v0", entry_point=Unsupported, kwargs={
+gym.register("ToyDict-v0", entry_point="toy_envs:Unsupported", kwargs={
     "observation_space": gym.spaces.Dict({"x": gym.spaces.Box(-1.0, 1.0, (2,), np.float32)}),
     "action_space": gym.spaces.Discrete(2)})
