@@ -60,7 +60,7 @@ def acrobot_strong(obs: np.ndarray) -> int:
 
 def acrobot_imperfect(obs: np.ndarray) -> int:
     """Torque +1 iff ω2 + 0.3·ω1 > 0: the same pump with the first link's term of the wrong sign,
-    so the swing builds more slowly and sometimes stalls (−112.7 ± 38.1)."""
+    which swings up more slowly on average (−112.7 ± 38.1, min −281)."""
     return 2 if obs[5] + 0.3 * obs[4] > 0.0 else 0
 
 
@@ -89,8 +89,8 @@ def lunarlander_strong(obs: np.ndarray) -> int:
 
 
 def lunarlander_imperfect(obs: np.ndarray) -> int:
-    """The heuristic with an over-eager altitude loop (gain 0.7 for 0.5): it fires the main
-    engine too often, drifts and lands hard or late (129.0 ± 135.0, 44% at or above 200)."""
+    """The heuristic with an over-eager altitude loop (gain 0.7 for 0.5), which fires the main
+    engine more than it should (129.0 ± 135.0 over 100 episodes, 44% at or above 200)."""
     return lunar_lander_rule(obs, hover_gain=0.7)
 
 
