@@ -107,6 +107,8 @@ def test_suites_move_to_any_env_with_their_settings():
     config = moved[0].config(0)
     assert config.total_steps == 600 and config.expert == "toy_envs:go_right"
     assert moved[0].name == "toy_envs-ToyChain-v0-bootstrap-bayes-" + moved[0].label
+    assert moved[0].name.endswith("-toy_envs-go_right")  # one path component, whatever the values
+    assert "/" not in on_task(SUITES["quick"], None, ["expert=models/cartpole/q_network.keras"])[0].name
     assert "/" not in task_slug("ALE/Pong-v5") and ":" not in task_slug(CHAIN)
     with pytest.raises(ConfigError, match="expert_loss is an arm's own"):
         on_task(SUITES["quick"], CHAIN, ["expert_loss=ce"])

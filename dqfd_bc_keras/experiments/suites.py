@@ -69,7 +69,7 @@ def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides:
     changed = {k: v for k, v in overrides.items() if preset[k] != v}
     label = "-".join(f"{_SHORT.get(k, k)}{v:g}" if isinstance(v, float) else f"{_SHORT.get(k, k)}{v}"
                      for k, v in changed.items())
-    return Arm(task, timeout, expert_loss, tuple(changed.items()), label, seeds)
+    return Arm(task, timeout, expert_loss, tuple(changed.items()), task_slug(label), seeds)
 
 
 def on_task(arms: Sequence[Arm], task: str | None, assignments: Sequence[str] = ()) -> list[Arm]:
