@@ -31,7 +31,7 @@ def check_interleaved(report, sides):
     for side, figure in sides:
         s = report["sides"][side][figure]
         assert len(s["per_round"]) == 2 and 0 < s["min"] <= s["median"] <= s["max"]
-        assert s["median"] == pytest.approx(statistics.median(s["per_round"]))
+        assert s["median"] == pytest.approx(statistics.median(s["per_round"]), abs=1e-3)  # rounded to 3 decimals
     if report["sides"]["sb3"] is None:  # SB3 not installed: reported absent, no ratio
         assert report["ratio"] is None
         return
