@@ -21,8 +21,7 @@ from .envs import get_task, make_plain_env
 from .errors import ConfigError
 
 FAMILIES = ("cartpole", "mountaincar", "acrobot", "lunarlander")
-PLAIN_ENV_ID = {"cartpole": "CartPole-v1", "mountaincar": "MountainCar-v0", "acrobot": "Acrobot-v1",
-                "lunarlander": "LunarLander-v3"}
+"""Each family is named after the preset whose plain env its rules play."""
 EXPERT_NAMES = ("strong", "imperfect")
 
 Rule = Callable[[np.ndarray], int]
@@ -186,7 +185,7 @@ def expert_returns(
 ) -> np.ndarray:
     """Undiscounted returns of the expert on the plain env; episode i is reset with seed + i."""
     expert = make_expert(family, name, epsilon, seed)
-    env = gym.make(PLAIN_ENV_ID[family])
+    env = gym.make(get_task(family).env_id)
     returns = np.zeros(episodes, dtype=np.float64)
     try:
         for i in range(episodes):
@@ -213,7 +212,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for name in EXPERT_NAMES:
             r = expert_returns(family, name, args.episodes, args.seed, args.epsilon)
             print(
-                f"| {family} | {name} | {PLAIN_ENV_ID[family]} | {args.episodes} "
+                f"| {family} | {name} | {get_task(family).env_id} | {args.episodes} "
                 f"| {r.mean():.2f} ± {r.std():.2f} | {r.min():.0f} | {r.max():.0f} |"
             )
     return 0
