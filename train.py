@@ -14,10 +14,10 @@ import sys
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
-from dqfd_bc_keras.config import QUICK, Config
+from dqfd_bc_keras.config import METHODS, QUICK, Config
 from dqfd_bc_keras.envs import TIMEOUT_MODES, task_slug
 from dqfd_bc_keras.experts import EXPERT_NAMES
-from dqfd_bc_keras.losses import EXPERT_LOSSES, TARGETS
+from dqfd_bc_keras.losses import TARGETS
 from dqfd_bc_keras.runs import train
 
 
@@ -27,7 +27,8 @@ def parse(argv):
                                 epilog="Every Config field can be set with --set key=value "
                                        "(see dqfd_bc_keras/config.py for the list and the defaults).")
     cli.add_task_arguments(parser, default="cartpole")
-    parser.add_argument("--expert-loss", choices=(*EXPERT_LOSSES, "none"), help="J_E (default: bayes; none = plain DQN)")
+    parser.add_argument("--expert-loss", choices=METHODS,
+                        help="J_E (default: bayes; none = plain DQN; sqil = SQIL's rewards, no J_E)")
     parser.add_argument("--target", choices=TARGETS, help="bootstrap target (default: dqn)")
     parser.add_argument("--timeout", choices=TIMEOUT_MODES, help="time-limit handling (default: bootstrap)")
     parser.add_argument("--demos", help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari "

@@ -113,8 +113,14 @@ class DQfDAgent(keras.Model):
             return tf.fill([n, self.n_actions], 1.0 / self.n_actions), tf.fill([n], self.config.sigma0_sq)
         return self.bc_model.predictive(obs)
 
+    @property
+    def sqil(self) -> bool:
+        """SQIL learns from rewards 1 on demonstrations and 0 on its own data, in balanced batches."""
+        return self.config.expert_loss == "sqil"
+
     def set_demos(self, obs, actions, rewards, next_obs, terminated, truncated) -> None:
         """Fill D_demo with these transitions (with the BC model's view of each state)."""
+        rewards = np.ones_like(rewards) if self.sqil else rewards
         pi_bc, sigma_sq = self.expert_view(tf.constant(obs, tf.float32))
         self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated,
                                                pi_bc, sigma_sq))
@@ -122,6 +128,7 @@ class DQfDAgent(keras.Model):
     def store(self, obs, action, reward, next_obs, terminated, truncated) -> None:
         """Append one self-generated transition to D_replay (graph-compatible)."""
         pi_bc, sigma_sq = self.expert_targets(tf.reshape(tf.cast(obs, tf.float32), [1, -1]))
+        reward = 0.0 * tf.cast(reward, tf.float32) if self.sqil else reward
         self.replay.store(self.replay.rows(obs[None], action, reward, next_obs[None], terminated, truncated,
                                            pi_bc, sigma_sq)[0])
 
@@ -136,7 +143,7 @@ class DQfDAgent(keras.Model):
     def expert_loss(self, q: tf.Tensor, batch: Batch) -> tf.Tensor:
         """J_E, importance-weighted: margin on demonstrations only, the others on every row."""
         c = self.config
-        if c.expert_loss == "none":
+        if c.expert_loss in ("none", "sqil"):
             return tf.constant(0.0)
         if c.expert_loss == "margin":
             per_sample = losses.margin_loss(q, batch.actions, c.margin)
@@ -186,7 +193,11 @@ class DQfDAgent(keras.Model):
         return delta
 
     def learn_step(self) -> None:
-        """Sample a prioritized batch → train_step → write back |δ| as the new priorities."""
+        """Sample a prioritized batch → train_step → write back |δ| as the new priorities
+        (SQIL: a balanced uniform batch, and no priorities)."""
+        if self.sqil:
+            self.train_step(self.replay.sample_balanced(self.config.batch_size))
+            return
         batch = self.replay.sample(self.config.batch_size, self.beta())
         delta = self.train_step(batch)
         self.replay.update_priorities(batch.indices, tf.abs(delta))
@@ -207,10 +218,8 @@ class DQfDAgent(keras.Model):
 
     def pretrain(self, steps: int, steps_per_call: int = 100) -> dict[str, float]:
         """k gradient steps on D_demo alone (Algorithm 1, step 2), then capture θ_prior."""
-        demos = int(self.replay.demo_size.numpy())
-        if demos < self.config.batch_size:
-            raise ConfigError(f"batch_size={self.config.batch_size} is larger than the {demos} "
-                              "demonstration transitions")
+        # Batches are drawn with replacement: one short demonstration (fewer transitions than a
+        # batch, as a noisy expert's can be) is still a dataset to learn from.
         if int(self.replay.agent_size.numpy()) != 0:
             raise ConfigError("pre-training samples D_demo alone, but the replay already holds agent data")
         result: dict[str, tf.Tensor] = {}

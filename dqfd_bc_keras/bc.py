@@ -2,9 +2,10 @@
 
 Two ways to fit it, one `train_step`:
 - MLE (for `ce` and `bc_margin`, as in DQfD-BC): plain cross entropy, no dropout;
-- MAP (for `bayes`): cross entropy + a Gaussian weight prior ‖w‖²/(2·s²·N), with dropout kept
-  active at prediction time (MC dropout), so `predictive` returns the mean policy π̄_bc and a
-  variance σ²(s) = σ0² + mean_a Var_k[π_bc^k(a|s)] over K stochastic passes.
+- MAP (for `bayes`): cross entropy + a Gaussian weight prior ‖w‖²/(2·s²·N), and `predictive`
+  returns the mean policy π̄_bc and a variance σ²(s) = σ0² + the epistemic part from one of
+  `uncertainty.UNCERTAINTIES`: MC dropout (the paper's: dropout kept active for K passes), an
+  ensemble of K members on bootstrap resamples, or the distance to the demonstrations.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import tensorflow as tf
 from .config import Config
 from .networks import dense_stack, normalization
 from .optimizers import FusedAdam
+from .uncertainty import NearestDemoVariance, UNCERTAINTIES, bootstrap_counts, ensemble_stack, policy_variance
 
 
 @keras.saving.register_keras_serializable(package="dqfd_bc_keras")
@@ -36,24 +38,32 @@ class BCModel(keras.Model):
         mc_dropout: bool = True,
         obs_mean: Sequence[float] | None = None,
         obs_std: Sequence[float] | None = None,
+        uncertainty: str = "mc_dropout",
+        members: int = 5,
         **kwargs,
     ) -> None:
         """`prior_scale=None` fits by MLE; a number s fits by MAP with the prior N(0, s²I).
 
         `obs_mean`/`obs_std` standardise the input (the demonstrations' statistics).
+        `uncertainty` picks σ²'s estimator; `members` is K of the ensemble (one network otherwise).
         `mc_dropout=False` predicts with one deterministic pass even when trained with dropout
         (the ablation "σ² fixed at σ0²").
         """
         super().__init__(**kwargs)
+        if uncertainty not in UNCERTAINTIES:
+            raise ValueError(f"uncertainty={uncertainty!r} is not one of {UNCERTAINTIES}")
         self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
         self.hidden, self.dropout = tuple(int(h) for h in hidden), float(dropout)
         self.prior_scale = None if prior_scale is None else float(prior_scale)
         self.mc_passes, self.sigma0_sq, self.mc_dropout = int(mc_passes), float(sigma0_sq), bool(mc_dropout)
         self.obs_mean = None if obs_mean is None else [float(x) for x in obs_mean]
         self.obs_std = None if obs_std is None else [float(x) for x in obs_std]
-        self.stack = dense_stack(self.hidden, self.n_actions, self.dropout)
-        if obs_mean is not None:
-            self.stack.insert(0, normalization(self.obs_mean, self.obs_std))
+        self.uncertainty, self.members = uncertainty, int(members) if uncertainty == "ensemble" else 1
+        self.standardize = [] if obs_mean is None else [normalization(self.obs_mean, self.obs_std)]
+        self.stack = (ensemble_stack(self.members, self.hidden, self.n_actions) if self.ensemble
+                      else dense_stack(self.hidden, self.n_actions, self.dropout))
+        self.distance = (NearestDemoVariance(self.obs_dim, self.n_actions, name="nearest_demo_variance")
+                         if uncertainty == "distance" else None)
         # N of the prior's 1/N scaling: the size of the dataset being fitted (set by `fit_demos`).
         self.n_data = self.add_weight(shape=(), initializer="ones", trainable=False, name="n_data")
         self.loss_tracker = keras.metrics.Mean(name="loss")
@@ -63,15 +73,35 @@ class BCModel(keras.Model):
 
     def build(self, input_shape) -> None:
         shape = tuple(input_shape)
+        for layer in self.standardize:
+            layer.build(shape)
+        shape = (self.members, *shape) if self.ensemble else shape
         for layer in self.stack:
             layer.build(shape)
             shape = layer.compute_output_shape(shape)
         super().build(input_shape)
 
     def call(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
-        x = obs
+        """Logits of π̄_bc: the network's, or for an ensemble log of the members' mean policy."""
+        logits = self.member_logits(obs, training)
+        if not self.ensemble:
+            return logits
+        return tf.math.log(tf.reduce_mean(tf.nn.softmax(logits), axis=0) + 1e-12)
+
+    def member_logits(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
+        """(K, B, A) logits of each ensemble member, or (B, A) of the one network."""
+        x = self.standardized(obs)
+        if self.ensemble:
+            x = tf.broadcast_to(x[None], [self.members, tf.shape(x)[0], self.obs_dim])
         for layer in self.stack:
             x = layer(x, training=training)
+        return x
+
+    def standardized(self, obs: tf.Tensor) -> tf.Tensor:
+        """The states in the demonstrations' standard units (as given without statistics)."""
+        x = tf.cast(obs, tf.float32)
+        for layer in self.standardize:
+            x = layer(x)
         return x
 
     @property
@@ -79,25 +109,38 @@ class BCModel(keras.Model):
         return self.prior_scale is not None
 
     @property
+    def ensemble(self) -> bool:
+        return self.uncertainty == "ensemble"
+
+    @property
     def metrics(self) -> list[keras.metrics.Metric]:
         return [self.loss_tracker, self.ce_tracker, self.accuracy]
 
     def prior_loss(self) -> tf.Tensor:
-        """‖w‖²/(2·s²·N) over every weight (MAP), or 0 (MLE)."""
+        """‖w‖²/(2·s²·N) over every weight (MAP), or 0 (MLE); an ensemble's members each have
+        their own prior, so this is their sum."""
         if not self.map_fit:
             return tf.constant(0.0)
         squared = tf.add_n([tf.reduce_sum(tf.square(w)) for w in self.trainable_weights])
         return squared / (2.0 * self.prior_scale**2 * self.n_data)
 
     def train_step(self, data):
-        obs, actions = data
+        """One step on mean cross entropy + prior; an ensemble's data carries (K, B) bootstrap
+        counts, and its loss is the sum of the members' losses (each member its own gradient)."""
+        obs, actions, counts = data if len(data) == 3 else (*data, None)
         with tf.GradientTape() as tape:
-            logits = self(obs, training=True)
-            ce = self.cross_entropy(actions, logits)
-            loss = ce + self.prior_loss()
+            logits = self.member_logits(obs, training=True)
+            if self.ensemble:
+                per_pair = tf.nn.sparse_softmax_cross_entropy_with_logits(
+                    tf.broadcast_to(tf.cast(actions, tf.int32)[None], tf.shape(logits)[:2]), logits)
+                ce = tf.reduce_mean(per_pair)
+                loss = tf.reduce_sum(tf.reduce_mean(counts * per_pair, axis=1)) + self.prior_loss()
+            else:
+                ce = self.cross_entropy(actions, logits)
+                loss = ce + self.prior_loss()
         grads = tape.gradient(loss, self.trainable_weights)
         self.optimizer.apply(grads, self.trainable_weights)
-        return self._record(actions, logits, ce, loss)
+        return self._record(actions, self(obs) if self.ensemble else logits, ce, loss)
 
     def test_step(self, data):
         obs, actions = data
@@ -117,20 +160,26 @@ class BCModel(keras.Model):
         return {m.name: m.result() for m in self.metrics}
 
     def predictive(self, obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
-        """(π̄_bc (B, A), σ² (B,)): the mean and variance of K MC-dropout passes, in one graph.
+        """(π̄_bc (B, A), σ² (B,)), σ² = σ0² + the estimator's epistemic variance, in one graph:
 
-        Without dropout (the MLE model) every pass is the same: π̄_bc = π_bc and σ² = σ0²; so it
-        is with `mc_dropout=False`.
+        mc_dropout  the mean and variance of K dropout passes;
+        ensemble    the mean and variance of the K members;
+        distance    one deterministic pass, and the nearest-demonstration variance.
+        Without dropout (the MLE model) every MC pass is the same: π̄_bc = π_bc and σ² = σ0²; so
+        it is with `mc_dropout=False`.
         """
+        if self.ensemble:
+            probs = tf.nn.softmax(self.member_logits(obs))
+            return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
+        if self.distance is not None:
+            return tf.nn.softmax(self(obs)), self.sigma0_sq + self.distance(self.standardized(obs))
         if self.dropout == 0.0 or not self.mc_dropout:
             probs = tf.nn.softmax(self(obs, training=False))
             return probs, tf.fill(tf.shape(probs)[:1], tf.constant(self.sigma0_sq, probs.dtype))
         batch = tf.shape(obs)[0]
         logits = self(tf.tile(obs, [self.mc_passes, 1]), training=True)
         probs = tf.reshape(tf.nn.softmax(logits), [self.mc_passes, batch, self.n_actions])
-        pi_bar = tf.reduce_mean(probs, axis=0)
-        epistemic = tf.reduce_mean(tf.math.reduce_variance(probs, axis=0), axis=1)
-        return pi_bar, self.sigma0_sq + epistemic
+        return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
 
     def fit_demos(
         self, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int = 64, seed: int = 0
@@ -140,9 +189,13 @@ class BCModel(keras.Model):
         Each epoch visits every pair once in a fresh random order (from `seed` and the epoch),
         in batches of `batch_size` (the last one smaller), through `train_step`; all epochs run
         in one graph call. Keras's `fit` spent ~1.5 s per call here on its data pipeline and
-        callbacks, for a few hundred half-millisecond steps. Returns the last epoch's metrics.
+        callbacks, for a few hundred half-millisecond steps. Each fit draws an ensemble's
+        bootstrap resamples afresh and a distance estimator's reference states. Returns the
+        last epoch's metrics.
         """
         self.n_data.assign(float(len(obs)))
+        if self.distance is not None:
+            self.distance.set_references(self.standardized(obs).numpy(), seed)
         if epochs > 0:
             self._fit(tf.constant(obs, tf.float32), tf.constant(actions, tf.int32), tf.constant(epochs),
                       tf.constant(min(batch_size, len(obs))), tf.constant(seed, tf.int64))
@@ -154,6 +207,7 @@ class BCModel(keras.Model):
     def _fit(self, obs, actions, epochs, batch_size, seed) -> None:
         n = tf.shape(obs)[0]
         batches = (n + batch_size - 1) // batch_size
+        counts = bootstrap_counts(self.members, n, seed) if self.ensemble else None
 
         def epoch(e):
             for metric in self.metrics:
@@ -162,7 +216,9 @@ class BCModel(keras.Model):
 
             def batch(b):
                 rows = order[b * batch_size: tf.minimum((b + 1) * batch_size, n)]
-                with tf.control_dependencies([self.train_step((tf.gather(obs, rows), tf.gather(actions, rows)))["loss"]]):
+                data = (tf.gather(obs, rows), tf.gather(actions, rows))
+                data += (tf.gather(counts, rows, axis=1),) if self.ensemble else ()
+                with tf.control_dependencies([self.train_step(data)["loss"]]):
                     return b + 1
 
             with tf.control_dependencies([tf.while_loop(lambda b: b < batches, batch, [tf.constant(0)])]):
@@ -176,19 +232,25 @@ class BCModel(keras.Model):
             "obs_dim": self.obs_dim, "n_actions": self.n_actions, "hidden": list(self.hidden),
             "dropout": self.dropout, "prior_scale": self.prior_scale, "mc_passes": self.mc_passes,
             "sigma0_sq": self.sigma0_sq, "mc_dropout": self.mc_dropout, "obs_mean": self.obs_mean, "obs_std": self.obs_std,
+            "uncertainty": self.uncertainty, "members": self.members,
         }
 
 
 def build_bc_model(
     config: Config, obs_dim: int, n_actions: int, obs_scale: tuple[np.ndarray, np.ndarray] | None = None
 ) -> BCModel:
-    """The BC model `config.expert_loss` calls for: MAP with dropout for bayes, MLE otherwise."""
+    """The BC model `config.expert_loss` calls for: MLE for ce and bc_margin; MAP for bayes,
+    with `config.uncertainty`'s estimator (dropout for mc_dropout and distance, whose π̄_bc is
+    then the paper's MAP network's; none in an ensemble's members)."""
     bayesian = config.bayesian_bc
+    uncertainty = config.uncertainty if bayesian else "mc_dropout"
     mean, std = (None, None) if obs_scale is None else obs_scale
     model = BCModel(
-        obs_dim, n_actions, hidden=config.bc_hidden, dropout=config.bc_dropout if bayesian else 0.0,
+        obs_dim, n_actions, hidden=config.bc_hidden,
+        dropout=config.bc_dropout if bayesian and uncertainty != "ensemble" else 0.0,
         prior_scale=config.bc_prior_scale if bayesian else None, mc_passes=config.mc_passes,
-        sigma0_sq=config.sigma0_sq, mc_dropout=config.mc_dropout, obs_mean=mean, obs_std=std, name="bc_model",
+        sigma0_sq=config.sigma0_sq, mc_dropout=config.mc_dropout, obs_mean=mean, obs_std=std,
+        uncertainty=uncertainty, members=config.ensemble_members, name="bc_model",
     )
     model.compile(optimizer=FusedAdam(config.bc_learning_rate))
     return model

@@ -16,7 +16,10 @@ from .envs import TIMEOUT_MODES, get_task, step_limit
 from .errors import ConfigError
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 from .seeds import MAX_SEED
+from .uncertainty import UNCERTAINTIES
 
+METHODS = (*EXPERT_LOSSES, "none", "sqil")
+"""What `expert_loss` may name: an expert loss J_E, plain DQN, or SQIL."""
 PRIOR_CENTERS = ("pretrained", "zero")
 DYNAMIC_MODES = ("episodes", "rollouts", "off")
 """How D_demo grows (§5): the agent's own training episodes, M extra greedy roll-outs, or not at all."""
@@ -44,7 +47,9 @@ class Config:
 
     # --- the loss J = J_DQ + λ1·J_n + λ2·J_E + λ3·J_L2 (§2) ----------------------------------
     expert_loss: str = "bayes"
-    """J_E: margin (DQfD) | bc_margin (DQfD-BC) | ce (DQfD-BC) | bayes (the paper) | none (plain DQN)."""
+    """J_E: margin (DQfD) | bc_margin (DQfD-BC) | ce (DQfD-BC) | bayes (the paper) | none (plain DQN)
+    | sqil (no J_E: SQIL's rewards, 1 on demonstrations and 0 on the agent's, half of each batch
+    from D_demo; Reddy et al. 2020, on our DQN)."""
     target: str = "dqn"
     """Bootstrap target: dqn (the paper's) | double (DQfD's)."""
     td_loss: str = "squared"
@@ -78,6 +83,11 @@ class Config:
     mc_dropout: bool = True
     """σ²(s) from K MC-dropout passes of π_bc (False: an ablation, π̄_bc from one deterministic pass
     and σ² = σ0² everywhere)."""
+    uncertainty: str = "mc_dropout"
+    """The estimator of σ²(s) − σ0² (uncertainty.py): mc_dropout (the paper's) | ensemble (K BC
+    members on bootstrap resamples of D_demo) | distance (to the nearest demonstrated state). Ours."""
+    ensemble_members: int = 5
+    """K of the `ensemble` estimator (Lakshminarayanan et al. 2017's 5)."""
 
     # --- networks and optimisation (ours: the paper gives none) ----------------------------
     hidden: tuple[int, ...] = (64, 64)
@@ -123,6 +133,8 @@ class Config:
     expert: str = "imperfect"
     """Who demonstrates when no dataset is given: a preset's scripted expert (strong | imperfect),
     a rule `module:function` (obs → action), or a saved `.keras` Q-network or BC model."""
+    expert_epsilon: float = 0.0
+    """Probability that the demonstrator acts uniformly at random instead (a noisy expert)."""
     demo_episodes: int = 5
     """Episodes recorded from `expert` (seeds seed·1000 + i)."""
     dynamic_demos: str = "episodes"
@@ -239,8 +251,9 @@ class Config:
         """Raise ConfigError for the first value the algorithm cannot use; return self."""
         get_task(self.task)
         choices = {
-            "timeout": TIMEOUT_MODES, "expert_loss": (*EXPERT_LOSSES, "none"), "target": TARGETS,
+            "timeout": TIMEOUT_MODES, "expert_loss": METHODS, "target": TARGETS,
             "td_loss": TD_LOSSES, "prior_center": PRIOR_CENTERS, "dynamic_demos": DYNAMIC_MODES,
+            "uncertainty": UNCERTAINTIES,
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
@@ -255,6 +268,10 @@ class Config:
             ("n_step", self.n_step >= 1, "≥ 1"),
             ("batch_size", self.batch_size >= 1, "≥ 1"),
             ("mc_passes", self.mc_passes >= 1, "≥ 1"),
+            ("ensemble_members", self.ensemble_members >= 2, "≥ 2 (a variance needs two members)"),
+            ("mc_dropout", self.mc_dropout or self.uncertainty == "mc_dropout",
+             "True when uncertainty is not mc_dropout (False ablates the MC-dropout estimator)"),
+            ("expert_epsilon", 0.0 <= self.expert_epsilon <= 1.0, "in [0, 1]"),
             ("sigma0_sq", self.sigma0_sq > 0, "> 0"),
             ("temperature", self.temperature > 0, "> 0"),
             ("prior_scale", self.prior_scale > 0, "> 0"),

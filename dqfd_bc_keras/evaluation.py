@@ -22,6 +22,7 @@ from .bc import BCModel
 from .config import Config
 from .envs import TIMEOUT_MODES, get_task, make_plain_env, make_task, task_slug
 from .errors import ConfigError, ModelFileError
+from .uncertainty import EnsembleDense
 
 POLICY_FILES = {"q": "q_network.keras", "bc": "bc_model.keras"}
 """The model each policy kind plays, as saved in a run directory."""
@@ -43,7 +44,7 @@ class GreedyPolicy:
         """From a Q-network (functional, `networks.build_q_network`) or a `BCModel` (logits)."""
         kind = model_kind(model)
         ops: list[tuple[str, np.ndarray, np.ndarray]] = []
-        for layer in model.stack if kind == "bc" else model.layers:
+        for layer in model.standardize + model.stack if kind == "bc" else model.layers:
             if isinstance(layer, (keras.layers.InputLayer, keras.layers.Dropout)):
                 continue  # dropout is the identity at inference
             if isinstance(layer, keras.layers.Normalization) and not layer.invert:
@@ -52,7 +53,7 @@ class GreedyPolicy:
                 std = np.maximum(np.sqrt(var), np.float32(keras.config.epsilon()))  # as Keras does
                 ops.append(("scale", mean, std))
                 continue
-            if not isinstance(layer, keras.layers.Dense):
+            if not isinstance(layer, (keras.layers.Dense, EnsembleDense)):
                 raise ModelFileError(f"unsupported layer {layer.name!r} ({type(layer).__name__}) "
                                      f"in model {model.name!r}")
             activation = keras.activations.serialize(layer.activation)
@@ -60,14 +61,16 @@ class GreedyPolicy:
                 raise ModelFileError(f"unsupported activation {activation!r} of layer {layer.name!r} "
                                      f"in model {model.name!r}")
             kernel = keras.ops.convert_to_numpy(layer.kernel).astype(np.float32)
-            bias = (keras.ops.convert_to_numpy(layer.bias).astype(np.float32) if layer.use_bias
+            bias = (keras.ops.convert_to_numpy(layer.bias).astype(np.float32) if getattr(layer, "use_bias", True)
                     else np.zeros(kernel.shape[1], np.float32))
             ops.append((activation, kernel, bias))
         return cls(ops, kind)
 
     def values(self, obs: np.ndarray) -> np.ndarray:
-        """The model's output for a batch (B, d) or one state (d,): Q-values, or BC logits."""
-        x = np.asarray(obs, dtype=np.float32)
+        """The model's output for a batch (B, d) or one state (d,): Q-values, or BC logits
+        (an ensemble's: log of its members' mean policy, (K, in, out) kernels)."""
+        obs = np.asarray(obs, dtype=np.float32)
+        x = np.atleast_2d(obs)
         for op, a, b in self.layers:
             if op == "scale":
                 x = (x - a) / b
@@ -75,7 +78,10 @@ class GreedyPolicy:
                 x = x @ a + b
                 if op == "relu":
                     x = np.maximum(x, 0.0)
-        return x
+        if x.ndim == 3:  # (K, B, A) members' logits
+            probs = np.exp(x - x.max(axis=2, keepdims=True))
+            x = np.log((probs / probs.sum(axis=2, keepdims=True)).mean(axis=0) + 1e-12)
+        return x if obs.ndim > 1 else x[0]
 
     def __call__(self, obs: np.ndarray) -> int:
         """The greedy action for one state (d,)."""

@@ -210,7 +210,19 @@ class PrioritizedReplay(tf.Module):
         total = self.tree.total
         indices = self.tree.find(self.rng.uniform([batch_size]) * total)
         weights = tf.pow(tf.cast(self.size, tf.float32) * self.tree.leaves(indices) / total, -beta)
-        weights /= tf.reduce_max(weights)
+        return self._batch(indices, weights / tf.reduce_max(weights))
+
+    def sample_balanced(self, batch_size: int) -> Batch:
+        """SQIL's batch: the first half uniformly from D_demo, the second from D_replay (all from
+        D_demo while D_replay is empty), weights 1."""
+        u = self.rng.uniform([batch_size])
+        from_agent = tf.logical_and(tf.range(batch_size) >= batch_size // 2, self.agent_size > 0)
+        indices = tf.where(from_agent, self.demo_capacity + tf.cast(u * tf.cast(self.agent_size, tf.float32), tf.int32),
+                           tf.cast(u * tf.cast(self.demo_size, tf.float32), tf.int32))
+        return self._batch(indices, tf.ones([batch_size]))
+
+    def _batch(self, indices: tf.Tensor, weights: tf.Tensor) -> Batch:
+        """The stored rows `indices` as a batch with these importance weights."""
         row = tf.gather(self.table, indices)
         n_returns, n_next_obs, n_discount = tf.split(tf.gather(self.n_step_view, indices),
                                                      [1, self.obs_dim, 1], axis=1)

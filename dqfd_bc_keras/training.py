@@ -151,6 +151,7 @@ def demonstrations(config: Config, dataset: demo_io.DemoDataset | None) -> demo_
     if dataset is not None:
         return dataset
     return demo_io.record(config.task, config.expert, config.demo_episodes, seed=demo_seed(config.seed),
+                          epsilon=config.expert_epsilon,
                           timeout=config.timeout, max_steps=config.max_steps)
 
 

@@ -200,13 +200,38 @@ def test_incompatible_settings_fail_early_naming_the_value(change, match):
         dataclasses.replace(Config.for_task("cartpole"), **change)
 
 
-def test_batch_larger_than_the_demonstrations_is_refused(demos, bc_models):
+def test_a_batch_larger_than_the_demonstrations_draws_them_with_replacement(demos, bc_models):
+    """One short demonstration (a noisy expert's) is still learnt from: rows repeat in a batch."""
     agent = agent_for("margin", demos, bc_models, batch_size=4096)
-    with pytest.raises(ConfigError, match="batch_size=4096 is larger than the 2500 demonstration transitions"):
-        agent.pretrain(1)
+    batch = agent.replay.sample(4096, agent.beta())
+    assert len(np.unique(batch.indices.numpy())) < 2500 and np.all(batch.indices.numpy() < 2500)
+    assert np.isfinite(agent.pretrain(1)["loss"])
 
 
 def test_a_bc_loss_without_a_bc_model_is_refused(demos):
     with pytest.raises(ConfigError, match="expert_loss='ce' needs a fitted BC model"):
         make_agent(Config.for_task("cartpole", expert_loss="ce"), demos, None)
     assert isinstance(make_agent(Config.for_task("cartpole", expert_loss="margin"), demos, None), DQfDAgent)
+
+
+def test_sqil_rewards_demonstrations_1_and_its_own_data_0_in_balanced_batches(demos):
+    """SQIL (Reddy et al. 2020) on our DQN: the env's rewards are replaced, half of each batch is
+    demonstrations, sampled uniformly (no priorities), and no expert loss is added."""
+    keras.utils.set_random_seed(0)
+    agent = make_agent(Config.for_task("cartpole", expert_loss="sqil"), demos, None)
+    replay = agent.replay
+    assert agent.bc_model is None and np.all(replay.table[:2500, replay.REWARD].numpy() == 1.0)
+    early = replay.sample_balanced(64)  # D_replay empty: every row a demonstration
+    assert np.all(early.is_demo.numpy() == 1.0) and np.all(early.weights.numpy() == 1.0)
+    for t in range(100):
+        agent.store(tf.constant(demos.obs[t]), tf.constant(1), tf.constant(1.0), tf.constant(demos.next_obs[t]),
+                    tf.constant(False), tf.constant(False))
+    agent_rows = replay.demo_capacity + np.arange(100)
+    assert np.all(tf.gather(replay.table, agent_rows)[:, replay.REWARD].numpy() == 0.0)
+    batch = replay.sample_balanced(64)
+    np.testing.assert_array_equal(batch.is_demo.numpy(), [1.0] * 32 + [0.0] * 32)
+    assert set(batch.indices.numpy()[32:]) <= set(agent_rows) and np.all(batch.rewards.numpy()[32:] == 0.0)
+    priorities = replay.tree.leaf.numpy().copy()
+    losses = {k: float(v) for k, v in agent.learn(5).items()}
+    assert losses["expert"] == 0.0 and np.isfinite(losses["loss"])
+    np.testing.assert_array_equal(replay.tree.leaf.numpy(), priorities)  # SQIL writes no priorities
