@@ -49,8 +49,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     rep.add_argument("--figures", help="directory for the PNG figures (default: figures/ beside the markdown)")
     rep.add_argument("--strict", action="store_true",
                      help=f"exit {EXIT_SKIPPED} if any run was skipped (a file missing, truncated or unreadable)")
+    cal = commands.add_parser(
+        "calibrate", help="each σ² estimator on demonstrated, agent, random and far states",
+        description="Fits the bayes BC model with each estimator (3 seeds of each task's demonstrations) and "
+                    "writes mean σ² − σ0² per kind of state, the off/on-demo ratios and the pre-registered pick "
+                    "of the best other estimator to OUT (JSON).")
+    cal.add_argument("--out", required=True, help="JSON file to write")
+    cal.add_argument("--figure", help="PNG file for the figure")
+    cal.add_argument("--quick", action="store_true", help="one seed, one episode, CartPole only (seconds)")
     args = parser.parse_args(argv)
-    if args.command == "run":
+    if args.command == "calibrate":
+        from .calibration import main as calibrate
+
+        calibrate(args.out, args.figure, args.quick)
+    elif args.command == "run":
         task, moved = chosen_task(args), chosen_task(args) is not None or args.set
         for suite in ALL if args.suite == "all" else (args.suite,):
             arms = on_task(SUITES[suite], task, args.set) if moved else SUITES[suite]
