@@ -59,7 +59,7 @@ class Arm:
 
 _SHORT = {"sigma0_sq": "sigma", "expert": "", "eval_every": "eval", "dynamic_demos": "dyn",
           "early_stop_window": "stopwindow", "total_steps": "steps", "bayes_prior": "prior",
-          "mc_dropout": "mcdropout"}
+          "mc_dropout": "mcdropout", "uncertainty": "", "expert_epsilon": "eps", "demo_episodes": "demos"}
 
 
 def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides: object) -> Arm:
@@ -157,6 +157,43 @@ def _sensitivity() -> list[Arm]:
     return arms
 
 
+BEST_OTHER_ESTIMATOR = "distance"
+"""`calibration.best_other` of docs/data/calibration.json (PREREGISTRATION §8), picked before any run with it."""
+OTHER_ESTIMATORS = (BEST_OTHER_ESTIMATOR, "ensemble")
+GRID_TASK = "cartpole"
+GRID_TEACHERS = (("strong", 0.0), ("imperfect", 0.0), ("strong", 0.2), ("strong", 0.5))
+"""(expert, ε): the strong and imperfect scripted experts, and the strong one acting at random w.p. ε."""
+GRID_EPISODES = (1, 5, 20)
+GRID_SEEDS = 5
+GRID_METHODS = (("margin", ()), ("ce", ()), ("bayes", ()), ("bayes", (("uncertainty", BEST_OTHER_ESTIMATOR),)),
+                ("sqil", ()))
+"""(expert loss, further Config fields) of the grid's learners with demonstrations."""
+
+
+def grid_cells() -> list[dict[str, object]]:
+    """The Config fields of each cell: teacher × demonstrated episodes."""
+    return [{"expert": expert, "expert_epsilon": epsilon, "demo_episodes": episodes}
+            for expert, epsilon in GRID_TEACHERS for episodes in GRID_EPISODES]
+
+
+def _demos() -> list[Arm]:
+    """When demonstrations help or hurt (PREREGISTRATION §8): every method on every cell, and plain
+    DQN once; BC alone is `imitation.py`'s, without RL."""
+    arms = [arm(GRID_TASK, "bootstrap", "none", GRID_SEEDS, **PROTOCOL)]
+    return arms + [arm(GRID_TASK, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
+                   for cell in grid_cells() for loss, extra in GRID_METHODS]
+
+
+def _estimators() -> list[Arm]:
+    """bayes with the other estimators on the verdicts' settings (C3, C4, MountainCar's efficiency),
+    in the pre-registered order: the best one first."""
+    return [a for u in OTHER_ESTIMATORS for a in (
+        arm("cartpole", "bootstrap", "bayes", claim_seeds("C3", "cartpole"), uncertainty=u),
+        arm("mountaincar-goals", "bootstrap", "bayes", claim_seeds("C4", "mountaincar-goals"), uncertainty=u),
+        arm("mountaincar", "bootstrap", "bayes", 10, uncertainty=u, demo_episodes=EFFICIENCY_TASKS["mountaincar"],
+            **PROTOCOL))]
+
+
 SUITES: dict[str, list[Arm]] = {
     "dynamic": _dynamic(),
     "efficiency": _efficiency(),
@@ -164,9 +201,11 @@ SUITES: dict[str, list[Arm]] = {
     "ablations": _ablations(),
     "baselines": [arm(t, m, loss) for _, t, m in PAPER_SETTINGS for loss in ("none", "margin", "bc_margin")],
     "sensitivity": _sensitivity(),
+    "demos": _demos(),
+    "estimators": _estimators(),
     "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick", 2) for loss in ("bayes", "ce")],
 }
-ALL = ("dynamic", "efficiency", "paper", "ablations", "baselines", "sensitivity")
+ALL = ("dynamic", "efficiency", "paper", "ablations", "baselines", "sensitivity", "estimators", "demos")
 """`run all`: every suite of RESULTS.md, in this order, into one directory (shared arms run once)."""
 
 
