@@ -57,9 +57,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     cal.add_argument("--out", required=True, help="JSON file to write")
     cal.add_argument("--figure", help="PNG file for the figure")
     cal.add_argument("--quick", action="store_true", help="one seed, one episode, CartPole only (seconds)")
+    grid = commands.add_parser(
+        "grid", help="the demonstration quality × quantity grid: runs, BC alone, GRID.md and heatmaps",
+        description="Runs every missing run of the grid (suite `demos`) and of BC alone into OUT, then writes "
+                    "OUT/GRID.md and OUT/figures/grid-*.png (docs/PREREGISTRATION.md §8).")
+    grid.add_argument("--out", required=True, help="suite directory")
+    grid.add_argument("--quick", action="store_true", help="2 cells, 1 seed, the QUICK budget (about a minute)")
+    grid.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: 5)")
+    grid.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     args = parser.parse_args(argv)
-    if args.command == "calibrate":
-        from .calibration import main as calibrate
+    if args.command == "grid":
+        from .grid import run_grid
+
+        run_grid(args.out, args.quick, args.seeds, args.workers, progress=lambda line: print(line, flush=True))
+    elif args.command == "calibrate":
+        from .estimators import main as calibrate
 
         calibrate(args.out, args.figure, args.quick)
     elif args.command == "run":

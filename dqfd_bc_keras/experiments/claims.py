@@ -34,7 +34,7 @@ GOALS_MARGIN = 0.25
 EARLY_EPISODES = 30
 """C4's "early in training": the first 30 training episodes."""
 BAYES_ONLY = ("sigma0_sq", "mc_passes", "prior_scale", "prior_center", "bc_dropout", "bc_prior_scale", "bayes_prior",
-              "mc_dropout")
+              "mc_dropout", "uncertainty", "ensemble_members")
 """Config fields only the bayes loss reads: a bayes arm pairs with the ce arm equal in every other field."""
 BC_ONLY, BC_LOSSES = ("dynamic_demos", "dynamic_window", "dynamic_rollouts", "bc_refit_epochs"), ("bc_margin", "ce", "bayes")
 """Config fields only the losses with a BC model read: they do not name a margin or none arm."""

@@ -37,8 +37,9 @@ REQUIRED = RUN_FILES[:4]
 COLUMNS = {"metrics.csv": ("episode", "env_step", "return", "plain_return", "length", "goals", "wall_time"),
            "evals.csv": ("env_step", "interactions", "mean_return")}
 """The columns the lab reads by name; further ones are kept and may be read by name too."""
-BENCHMARK_FILES = ("efficiency.json", "sb3-dqn")
-"""What benchmarks/bench_sample_efficiency.py writes into the suite directory: its table and SB3's runs."""
+BENCHMARK_FILES = ("efficiency.json", "sb3-dqn", "calibration.json", "bc-alone")
+"""Files the report reads besides the runs: benchmarks/bench_sample_efficiency.py's table and SB3's
+runs, `calibrate`'s measurements and BC alone's results (`imitation.py`)."""
 ARCHIVE_SUFFIX = ".tar.xz"
 
 

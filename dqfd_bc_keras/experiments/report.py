@@ -28,6 +28,8 @@ from ..files import write_text
 from .plans import PLANNED_SEEDS
 from .data import ARCHIVE_SUFFIX, Demonstrations, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
+from .estimators import estimators_section
+from .grid import grid_section
 from .stats import CensoredSummary, Summary
 
 
@@ -306,6 +308,8 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
         directory = directory.resolve()
         arms = group_arms(load_runs(directory, skipped))
         efficiency, sweeps = efficiency_section(directory), _sweeps(directory)
+        estimators = estimators_section(arms, directory, figures_dir, out_markdown.parent)
+        grid = grid_section(arms, directory, figures_dir, out_markdown.parent)
     for error in skipped:
         warn(f"{Path(source) / error.file}: {error.problem}; run skipped")
     claims, sensitivity = _claim_rows(arms)
@@ -347,8 +351,9 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
             *(sensitivity or ["| — | no sensitivity arms | | | | |"]), ""]
     doc += ["## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
             "## Ablations", "", *_ablations(arms), ""]
-    doc += ["## Sample efficiency", "", *efficiency, "", "## Demonstrations", "", _demos_text(), "",
-            "## Wall time", "", *sweeps, ""]
+    doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators (issue I)", "", *estimators,
+            "", "## Demonstration quality × quantity (issue I)", "", *grid, "",
+            "## Demonstrations", "", _demos_text(), "", "## Wall time", "", *sweeps, ""]
     # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
     text = "\n".join(doc).replace(str(directory), suite_name)
     write_text(out_markdown.with_name(PER_SEED), _per_seed(arms))

@@ -14,6 +14,7 @@ code and rules commits it ran under), and every sweep a line in `OUT/sweeps.json
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -170,18 +171,31 @@ GRID_METHODS = (("margin", ()), ("ce", ()), ("bayes", ()), ("bayes", (("uncertai
 """(expert loss, further Config fields) of the grid's learners with demonstrations."""
 
 
-def grid_cells() -> list[dict[str, object]]:
+QUICK_GRID = ((("strong", 0.5), ("imperfect", 0.0)), (1,))
+"""`--quick`: two bad teachers × one episode, one seed, the QUICK budget (the tests' grid)."""
+
+
+def grid_cells(quick: bool = False) -> list[dict[str, object]]:
     """The Config fields of each cell: teacher × demonstrated episodes."""
-    return [{"expert": expert, "expert_epsilon": epsilon, "demo_episodes": episodes}
-            for expert, epsilon in GRID_TEACHERS for episodes in GRID_EPISODES]
+    teachers, episodes = QUICK_GRID if quick else (GRID_TEACHERS, GRID_EPISODES)
+    return [{"expert": expert, "expert_epsilon": epsilon, "demo_episodes": n} for expert, epsilon in teachers
+            for n in episodes]
 
 
-def _demos() -> list[Arm]:
+def quick(a: Arm) -> Arm:
+    """Arm `a` on the QUICK budget (its own fields kept), one seed, labelled `quick`."""
+    fields = dict(a.overrides)
+    return dataclasses.replace(a, overrides=(*a.overrides, *((k, v) for k, v in QUICK.items() if k not in fields)),
+                               label="-".join(filter(None, (a.label, "quick"))), seeds=1)
+
+
+def grid_arms(quick_budget: bool = False) -> list[Arm]:
     """When demonstrations help or hurt (PREREGISTRATION §8): every method on every cell, and plain
     DQN once; BC alone is `imitation.py`'s, without RL."""
     arms = [arm(GRID_TASK, "bootstrap", "none", GRID_SEEDS, **PROTOCOL)]
-    return arms + [arm(GRID_TASK, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
-                   for cell in grid_cells() for loss, extra in GRID_METHODS]
+    arms += [arm(GRID_TASK, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
+             for cell in grid_cells(quick_budget) for loss, extra in GRID_METHODS]
+    return [quick(a) for a in arms] if quick_budget else arms
 
 
 def _estimators() -> list[Arm]:
@@ -201,7 +215,7 @@ SUITES: dict[str, list[Arm]] = {
     "ablations": _ablations(),
     "baselines": [arm(t, m, loss) for _, t, m in PAPER_SETTINGS for loss in ("none", "margin", "bc_margin")],
     "sensitivity": _sensitivity(),
-    "demos": _demos(),
+    "demos": grid_arms(),
     "estimators": _estimators(),
     "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick", 2) for loss in ("bayes", "ce")],
 }

@@ -1,7 +1,9 @@
-"""Does σ² know where the demonstrations are? Each estimator's σ²(s) − σ0² on four kinds of state.
+"""The estimators of σ² (issue I): does σ² know where the demonstrations are, and does the
+Bayesian loss with a working estimator change the verdicts?
 
-    python -m dqfd_bc_keras.experiments calibrate --out calibration.json --figure calibration.png
+    python -m dqfd_bc_keras.experiments calibrate --out results/calibration.json --figure calibration.png
 
+Calibration: each estimator's σ²(s) − σ0² on four kinds of state.
 For each task, the bayes BC model is fitted on the training run's demonstrations (seed s: the
 preset's imperfect expert, episodes as `train.py --seed s` records them) with each estimator,
 and σ² − σ0² is averaged over the states of
@@ -18,7 +20,9 @@ the goal (issue I) is a ratio ≥ 5. The largest value any of them can take is
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,6 +38,10 @@ from ..evaluation import GreedyPolicy, load_model
 from ..files import write_text
 from ..seeds import demo_seed
 from ..uncertainty import UNCERTAINTIES, max_policy_variance
+from .claims import CLAIMS, ArmRuns, judge
+from .efficiency import ratio_ci
+from .stats import CensoredSummary, Summary
+from .suites import SUITES
 
 TASKS = ("cartpole", "mountaincar")
 STATE_SETS = ("held-out demos", "trained agent", "random policy", "3–6 std away")
@@ -163,3 +171,64 @@ def main(out: str, figure_path: str | None = None, quick: bool = False) -> dict:
     print("\n".join(table(summary)))
     print(f"best other estimator (PREREGISTRATION §8): {summary['best_other']}")
     return summary
+
+
+# --- the RESULTS.md section ------------------------------------------------------------------
+CALIBRATION_FILE = "calibration.json"
+"""`calibrate --out SUITE/calibration.json` writes it into the suite directory; the report reads it."""
+
+
+def _find(arms: list[ArmRuns], config: Config) -> ArmRuns | None:
+    fields = {k: v for k, v in config.to_dict().items() if k != "seed"}
+    return next((a for a in arms if a.config == fields), None)
+
+
+def verdict_rows(arms: list[ArmRuns]) -> list[str]:
+    """Per estimator arm of the `estimators` suite that ran: its claim's verdict against ce beside
+    MC dropout's, interactions to threshold and ce's median ÷ its median."""
+    rows = []
+    for estimator in SUITES["estimators"]:
+        config = estimator.config(0)
+        found = _find(arms, config)
+        if found is None:
+            continue
+        mc = _find(arms, dataclasses.replace(config, uncertainty="mc_dropout"))
+        ce = _find(arms, dataclasses.replace(config, expert_loss="ce", uncertainty="mc_dropout"))
+        claim = next((c for c in CLAIMS for s in c.settings if c.id in ("C3", "C4") and s.task == config.task), None)
+        verdicts = ["—", "—"] if claim is None else [
+            judge(claim, bayes, ce).verdict if bayes is not None else "not run" for bayes in (found, mc)]
+        steps = CensoredSummary.of(found.values("interactions_to_threshold")).format(0)
+        if ce is not None:
+            point, low, high = ratio_ci(ce.values("interactions_to_threshold"), found.values("interactions_to_threshold"))
+            ratio = f"{point:.2f} [{low:.2f}, {high:.2f}]"
+        else:
+            ratio = "—"
+        rows.append(f"| {found.setting} | {config.uncertainty} | {len(found.runs)}, {len(ce.runs) if ce else 0} | "
+                    f"{claim.id if claim else 'efficiency'}: **{verdicts[0]}** | {verdicts[1]} | {steps} | {ratio} | "
+                    f"{Summary.of(found.values('final_eval')).format()} |")
+    return rows
+
+
+def estimators_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdown_dir: Path) -> list[str]:
+    """Calibration (table, figure, the goal) and the verdicts with each estimator."""
+    path = suite_dir / CALIBRATION_FILE
+    if not path.is_file():
+        return [f"Not run: `python -m dqfd_bc_keras.experiments calibrate --out {suite_dir}/{CALIBRATION_FILE}` "
+                "measures the estimators, `run estimators` trains with them."]
+    summary = json.loads(path.read_text())
+    figure(summary, figures_dir / "calibration.png")
+    link = os.path.relpath(figures_dir / "calibration.png", markdown_dir)
+    rows = verdict_rows(arms)
+    return [f"σ²(s) − σ0² of the bayes BC model with each estimator (uncertainty.py), mean over {summary['seeds']} "
+            f"fits on each task's demonstrations, on {summary['episodes']} episodes of each kind of state; the goal "
+            f"(docs/PREREGISTRATION.md §8) is ≥ {summary['goal_ratio']:g} × the held-out value on random-policy "
+            "states and on states 3–6 std away. The largest value any estimator can take is (1 − 1/A)/A "
+            "(0.25 for CartPole's two actions, 0.22 for MountainCar's three).", "", *table(summary), "",
+            f"Best other estimator (the pre-registered pick): **{summary['best_other']}**.", "",
+            f"![calibration]({link})", "",
+            "With each estimator, bayes against ce under the claims' rules (§4) and the seeds of §5, and on the "
+            "sample-efficiency protocol (§3): interactions to threshold median [95% CI] (∞ = never), ce's median ÷ "
+            "this arm's [95% CI] (> 1: this arm is faster), final evaluation.", "",
+            "| setting | estimator | seeds (bayes, ce) | verdict | MC dropout's verdict | interactions to threshold "
+            "| ce ÷ it | final eval |", "| --- | --- | --- | --- | --- | --- | --- | --- |",
+            *(rows or ["| — | no estimator arms have run | | | | | | |"])]

@@ -1,0 +1,247 @@
+"""When do demonstrations help or hurt? The quality × quantity grid (issue I; PREREGISTRATION §8).
+
+    python -m dqfd_bc_keras.experiments grid --out results          # runs, BC alone, GRID.md, heatmaps
+    python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 2 cells, 1 seed, QUICK budget
+
+Per cell (teacher × demonstrated episodes) and method: the median over seeds of counted
+interactions until a greedy evaluation reaches the solved threshold (∞: never), and of the final
+evaluation minus the teacher's 100-episode mean. Against plain DQN (no demonstrations) a method
+*helps* in a cell if the 95% bootstrap CI of DQN's median ÷ its median lies wholly above 1,
+*hurts* if wholly below; it *escapes* a teacher below the threshold if its median final return
+lies above the teacher's mean with the CI of that median wholly above (§7's teacher rule).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..envs import get_task
+from ..files import write_text
+from .claims import ArmRuns, interactions_to_threshold
+from .efficiency import ratio_ci, teacher_verdict
+from .imitation import imitation_arms, load_imitation
+from .suites import GRID_TASK, Arm, grid_arms, grid_cells, run_suite
+
+TEACHER_RETURNS = {("strong", 0.0): 500.0, ("imperfect", 0.0): 198.06, ("strong", 0.2): 495.54,
+                   ("strong", 0.5): 169.67}
+"""Each CartPole teacher's mean plain return over 100 episodes (seeds 0–99; `python -m
+dqfd_bc_keras.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
+BC_ALONE, DQN = "BC alone", "DQN (no demos)"
+GRID_FILE = "GRID.md"
+
+
+@dataclass(frozen=True)
+class Cell:
+    expert: str
+    epsilon: float
+    episodes: int
+
+    @property
+    def teacher(self) -> str:
+        return self.expert if self.epsilon == 0 else f"{self.expert} ε={self.epsilon:g}"
+
+    @property
+    def name(self) -> str:
+        return f"{self.teacher} × {self.episodes}"
+
+    @property
+    def teacher_return(self) -> float:
+        return TEACHER_RETURNS[self.expert, self.epsilon]
+
+
+@dataclass
+class Entry:
+    """One method on one cell: per seed, interactions to threshold (inf: never) and final return."""
+
+    steps: np.ndarray
+    final: np.ndarray
+
+
+def method_name(a: Arm) -> str:
+    fields = dict(a.overrides)
+    if a.expert_loss == "bayes":
+        return f"bayes ({fields.get('uncertainty', 'mc_dropout')})"
+    return {"none": DQN, "sqil": "SQIL", "bc-alone": BC_ALONE}.get(a.expert_loss, a.expert_loss)
+
+
+def _cell(a: Arm) -> Cell:
+    config = dataclasses.replace(a, expert_loss="ce").config(0)
+    return Cell(config.expert, config.expert_epsilon, config.demo_episodes)
+
+
+def collect(arms: list[ArmRuns], suite_dir: Path, quick: bool = False) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
+    """The grid's cells and {method: {cell: Entry}} from the suite's arms and BC alone's files."""
+    cells = [Cell(c["expert"], float(c["expert_epsilon"]), int(c["demo_episodes"])) for c in grid_cells(quick)]
+    by_config = {_key(a.config): a for a in arms}
+    table: dict[str, dict[Cell, Entry]] = {}
+    for a in grid_arms(quick):
+        found = by_config.get(_key(a.config(0).to_dict()))
+        runs = [r for r in found.runs if r.config.seed < a.seeds] if found else []  # the grid's seeds only
+        if not runs:
+            continue
+        entry = Entry(np.array([interactions_to_threshold(r) for r in runs], float),
+                      np.array([r.final["mean_return"] for r in runs], float))
+        targets = cells if a.expert_loss == "none" else [_cell(a)]
+        for cell in targets:
+            table.setdefault(method_name(a), {})[cell] = entry
+    imitation = load_imitation(suite_dir)
+    for a in imitation_arms(quick):
+        if imitation.get(a.name):
+            finals = np.array([r["mean_return"] for r in imitation[a.name]], float)
+            table.setdefault(BC_ALONE, {})[_cell(a)] = Entry(np.full(finals.size, np.nan), finals)
+    return cells, table
+
+
+def _key(config: dict) -> str:
+    return repr(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in config.items() if k != "seed"))
+
+
+def effect(entry: Entry, dqn: Entry) -> str:
+    """helps | hurts | unclear: the CI of DQN's median interactions ÷ this method's, against 1."""
+    _, low, high = ratio_ci(dqn.steps, entry.steps)
+    return "helps" if low > 1 else "hurts" if high < 1 else "unclear"
+
+
+def escapes(entry: Entry, cell: Cell) -> bool:
+    return teacher_verdict(entry.final, cell.teacher_return)[3] == "beats its teacher"
+
+
+def _steps(x: float) -> str:
+    return "never" if not np.isfinite(x) else f"{x / 1000:.1f}k" if x >= 1000 else f"{x:.0f}"
+
+
+def tables(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]:
+    """Two markdown tables (rows: methods, columns: cells) and the per-method counts."""
+    header = ["| method | " + " | ".join(c.name for c in cells) + " |", "| --- |" + " ---: |" * len(cells)]
+    dqn = table.get(DQN, {})
+    steps, final = list(header), list(header)
+    for method, entries in table.items():
+        row_steps, row_final = [], []
+        for cell in cells:
+            entry = entries.get(cell)
+            if entry is None:
+                row_steps.append("—")
+                row_final.append("—")
+                continue
+            mark = ""
+            if method not in (DQN, BC_ALONE) and cell in dqn:
+                mark = {"helps": " ↑", "hurts": " ↓", "unclear": ""}[effect(entry, dqn[cell])]
+            reached = int(np.isfinite(entry.steps).sum())
+            row_steps.append("—" if method == BC_ALONE else f"{_steps(np.median(entry.steps))}{mark} ({reached}/{entry.steps.size})")
+            escape = " ✓" if cell.teacher_return < _threshold() and escapes(entry, cell) else ""
+            row_final.append(f"{np.median(entry.final) - cell.teacher_return:+.0f}{escape}")
+        steps.append(f"| {method} | " + " | ".join(row_steps) + " |")
+        final.append(f"| {method} | " + " | ".join(row_final) + " |")
+    return ["Median counted interactions to the threshold (seeds that reached it / seeds); ↑ helps, ↓ hurts "
+            "against plain DQN:", "", *steps, "",
+            "Median final return (eval.json, 20 episodes) minus the teacher's 100-episode mean "
+            f"({', '.join(f'{c.teacher} {c.teacher_return:g}' for c in _teachers(cells))}); ✓ escapes a teacher "
+            "below the threshold:", "", *final]
+
+
+def _teachers(cells: list[Cell]) -> list[Cell]:
+    return list({c.teacher: c for c in cells}.values())
+
+
+def _threshold() -> float:
+    return float(get_task(GRID_TASK).solved_return)
+
+
+def answers(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]:
+    """Per method: cells where it helps, hurts, and where it escapes a bad teacher (by §8's rules)."""
+    dqn, lines = table.get(DQN, {}), []
+    bad = [c for c in cells if c.teacher_return < _threshold()]
+    for method, entries in table.items():
+        if method == DQN:
+            continue
+        judged = [c for c in cells if c in entries and c in dqn]
+        verdicts = {c: effect(entries[c], dqn[c]) for c in judged} if method != BC_ALONE else {}
+        helps = [c.name for c in judged if verdicts.get(c) == "helps"]
+        hurts = [c.name for c in judged if verdicts.get(c) == "hurts"]
+        escaped = [c.name for c in bad if c in entries and escapes(entries[c], c)]
+        speed = (f"helps in {len(helps)} of {len(judged)} cells{_list(helps)}, hurts in {len(hurts)}{_list(hurts)}; "
+                 if method != BC_ALONE else "")
+        lines.append(f"- **{method}**: {speed}escapes a teacher below {_threshold():g} in "
+                     f"{len(escaped)} of {sum(c in entries for c in bad)} cells{_list(escaped)}.")
+    return lines
+
+
+def _list(names: list[str]) -> str:
+    return f" ({', '.join(names)})" if names else ""
+
+
+def heatmaps(cells: list[Cell], table: dict[str, dict[Cell, Entry]], path_steps: Path, path_final: Path,
+             seeds: int) -> None:
+    """The two tables as heatmaps: log10 interactions (white: never) and final − teacher."""
+    from .figures import _figure
+
+    methods = list(table)
+    x = [c.name.replace(" × ", "\n× ") for c in cells]
+    steps = np.array([[np.median(table[m][c].steps) if c in table[m] and m != BC_ALONE else np.nan for c in cells]
+                      for m in methods])
+    final = np.array([[np.median(table[m][c].final) - c.teacher_return if c in table[m] else np.nan for c in cells]
+                      for m in methods])
+    for path, values, title, cmap, text in (
+        (path_steps, steps, "median counted interactions to 475", "viridis_r", _steps),
+        (path_final, final, "median final return − teacher's mean", "RdBu", lambda v: f"{v:+.0f}"),
+    ):
+        with _figure(path, figsize=(1.1 * len(cells) + 3, 0.55 * len(methods) + 2)) as (fig, ax):
+            shown = np.where(np.isfinite(values), values, np.nan)
+            if path == path_steps:
+                shown = np.log10(np.maximum(shown, 1.0))
+                image = ax.imshow(shown, cmap=cmap, aspect="auto")
+                fig.colorbar(image, ax=ax, label="log10 interactions")
+            else:
+                bound = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 1.0
+                image = ax.imshow(shown, cmap=cmap, vmin=-bound, vmax=bound, aspect="auto")
+                fig.colorbar(image, ax=ax, label="return − teacher")
+            for i in range(len(methods)):
+                for j in range(len(cells)):
+                    v = values[i, j]
+                    label = ("never" if v == np.inf else "—") if not np.isfinite(v) else text(v)
+                    ax.text(j, i, label, ha="center", va="center", fontsize=7)
+            ax.set_xticks(range(len(cells)), x, fontsize=7)
+            ax.set_yticks(range(len(methods)), methods, fontsize=8)
+            ax.set_title(f"CartPole, teacher × demonstrated episodes: {title} ({seeds} seeds per cell)")
+
+
+def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdown_dir: Path,
+                 quick: bool = False) -> list[str]:
+    """The section of RESULTS.md (and GRID.md): tables, heatmaps and the per-method answers."""
+    cells, table = collect(arms, suite_dir, quick)
+    if len(table) < 2:
+        return ["Not run: `python -m dqfd_bc_keras.experiments grid --out results` runs it."]
+    seeds = max(e.final.size for entries in table.values() for e in entries.values())
+    names = ("grid-interactions.png", "grid-final.png")
+    heatmaps(cells, table, *(figures_dir / n for n in names), seeds)
+    links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
+    return [f"{GRID_TASK}, preset defaults (50k steps, early stop, E's protocol); every method with demonstrations "
+            f"has up to {seeds} seeds per cell, plain DQN one set for all cells; BC alone is the MLE BC model on the "
+            "cell's demonstrations, played greedily without RL (no interaction beyond the demonstrations). "
+            "Rules: docs/PREREGISTRATION.md §8.", "", *tables(cells, table), "", *links, "",
+            "Per method, by those rules:", "", *answers(cells, table)]
+
+
+def run_grid(out: str | Path, quick: bool = False, seeds: int | None = None, workers: int = 2,
+             progress: Callable[[str], None] = print) -> Path:
+    """Every missing run of the grid and of BC alone into `out`, then OUT/GRID.md and its heatmaps."""
+    from .claims import group_arms
+    from .data import load_runs
+
+    out = Path(out)
+    run_suite(grid_arms(quick), seeds, out, workers, progress=progress, name="demos (quick)" if quick else "demos")
+    from .imitation import run_imitation
+
+    run_imitation(out, quick, progress)
+    arms = group_arms(load_runs(out))
+    section = grid_section(arms, out, out / "figures", out, quick)
+    write_text(out / GRID_FILE, "\n".join(["# Demonstration quality × quantity", "", *section, ""]))
+    progress(f"wrote {out / GRID_FILE}")
+    return out / GRID_FILE
+
