@@ -213,8 +213,8 @@ def estimators_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, 
     """Calibration (table, figure, the goal) and the verdicts with each estimator."""
     path = suite_dir / CALIBRATION_FILE
     if not path.is_file():
-        return [f"Not run: `python -m dqfd_bc_keras.experiments calibrate --out {suite_dir}/{CALIBRATION_FILE}` "
-                "measures the estimators, `run estimators` trains with them."]
+        return [f"Not run: `python -m dqfd_bc_keras.experiments calibrate --out SUITE/{CALIBRATION_FILE}` measures "
+                "the estimators into the suite directory SUITE, `run estimators --out SUITE` trains with them."]
     summary = json.loads(path.read_text())
     figure(summary, figures_dir / "calibration.png")
     link = os.path.relpath(figures_dir / "calibration.png", markdown_dir)

@@ -221,7 +221,8 @@ def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdo
     names = ("grid-interactions.png", "grid-final.png")
     heatmaps(cells, table, *(figures_dir / n for n in names), seeds)
     links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
-    return [f"{GRID_TASK}, preset defaults (50k steps, early stop, E's protocol); every method with demonstrations "
+    budget = "the QUICK budget (a test, not a result)" if quick else "preset defaults (50k steps, early stop, E's protocol)"
+    return [f"{GRID_TASK}, {budget}; every method with demonstrations "
             f"has up to {seeds} seeds per cell, plain DQN one set for all cells; BC alone is the MLE BC model on the "
             "cell's demonstrations, played greedily without RL (no interaction beyond the demonstrations). "
             "Rules: docs/PREREGISTRATION.md §8.", "", *tables(cells, table), "", *links, "",
