@@ -37,6 +37,8 @@ ARCHIVE = "docs/data/results.tar.xz"
 """Where the per-run data behind docs/RESULTS.md are committed."""
 REGENERATE = (f"python -m dqfd_bc_keras.experiments report {ARCHIVE} --docs",
               "python -m dqfd_bc_keras.experiments run all --out results && "
+              "python -m dqfd_bc_keras.experiments calibrate --out results/calibration.json && "
+              "python -m dqfd_bc_keras.experiments grid --out results && "
               "python benchmarks/bench_sample_efficiency.py --out results && "
               f"python -m dqfd_bc_keras.experiments export results --out {ARCHIVE}")
 """This report from the committed per-run data (no training), and every run, the benchmark and the
