@@ -47,7 +47,8 @@ from dqfd_bc_keras.experiments.claims import first_reaching  # noqa: E402
 from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, ArmSteps,  # noqa: E402
                                                   interaction_evals, load, rows, save, table, teacher_table)
-from dqfd_bc_keras.experiments.suites import EFFICIENCY_TASKS, PROTOCOL, SUITES, Arm, run_suite  # noqa: E402
+from dqfd_bc_keras.experiments.suites import EFFICIENCY_TASKS, PROTOCOL, SUITES, Arm  # noqa: E402
+from dqfd_bc_keras.experiments.sweep import run_suite  # noqa: E402
 from dqfd_bc_keras.files import write_text  # noqa: E402
 from dqfd_bc_keras.seeds import eval_seed  # noqa: E402
 

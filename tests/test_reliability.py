@@ -21,7 +21,8 @@ from dqfd_bc_keras import cli, runs
 from dqfd_bc_keras.config import QUICK, Config
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError, RunDirectoryError
 from dqfd_bc_keras.files import DirectoryLock
-from dqfd_bc_keras.experiments.suites import Arm, run_suite
+from dqfd_bc_keras.experiments.suites import Arm
+from dqfd_bc_keras.experiments.sweep import run_suite
 from dqfd_bc_keras.training import TrainingState
 
 REPO = Path(__file__).resolve().parents[1]

@@ -8,7 +8,8 @@ from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.plans import planned_seeds
-from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, run_suite, suite_arms, sweep_jobs
+from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, suite_arms
+from dqfd_bc_keras.experiments.sweep import run_suite, sweep_jobs
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -74,13 +75,13 @@ def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
 
 
 def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
-    from dqfd_bc_keras.experiments import suites
+    from dqfd_bc_keras.experiments import sweep
 
     def cut_after_one(jobs, workers):
-        yield suites.Outcome(jobs[0], 3, 300, 10.0, 1.0)
+        yield sweep.Outcome(jobs[0], 3, 300, 10.0, 1.0)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(suites, "_local", cut_after_one)
+    monkeypatch.setattr(sweep, "_local", cut_after_one)
     with pytest.raises(KeyboardInterrupt):
         run_suite("quick", 2, tmp_path, progress=lambda line: None)
     [logged] = [json.loads(line) for line in (tmp_path / "sweeps.jsonl").read_text().splitlines()]

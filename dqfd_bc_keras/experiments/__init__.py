@@ -3,12 +3,16 @@
 It reads run directories (what `runs.train` writes) and never re-records demonstrations;
 nothing in the learning core imports it.
 
-    suites.py   declared arms × seeds, run on a local process pool or Ray
+    suites.py   declared arms × seeds (the grid of demonstration quality × quantity among them)
+    sweep.py    running a suite on a local process pool or Ray, provenance
     data.py     run directories read into `FinishedRun`s; the compact per-run archive
     claims.py   per-run metrics, the claims C1–C4 and their verdict rules
     plans.py    seeds per arm of each claim setting, planned by power
     efficiency.py  sample efficiency against SB3: steps to threshold, ratios
     stats.py    bootstrap CIs, IQM, tests, TOST equivalence, power
     figures.py  learning curves over seeds, the paper's single runs
+    estimators.py  σ² estimators: calibration on four kinds of state, verdicts with each
+    grid.py     the quality × quantity grid: help / hurt / escape, heatmaps
+    imitation.py   BC alone on each grid cell (no RL)
     report.py   RESULTS.md from a suite directory or an archive
 """

@@ -7,7 +7,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run
-from .suites import ALL, BACKENDS, SUITES, on_task, run_suite
+from .suites import ALL, SUITES, on_task
+from .sweep import BACKENDS, run_suite
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""

@@ -26,7 +26,8 @@ from ..files import write_text
 from .claims import ArmRuns, interactions_to_threshold
 from .efficiency import ratio_ci, teacher_verdict
 from .imitation import imitation_arms, load_imitation
-from .suites import GRID_TASK, Arm, grid_arms, grid_cells, run_suite
+from .suites import GRID_TASK, Arm, grid_arms, grid_cells
+from .sweep import run_suite
 
 TEACHER_RETURNS = {("strong", 0.0): 500.0, ("imperfect", 0.0): 198.06, ("strong", 0.2): 495.54,
                    ("strong", 0.5): 169.67}
