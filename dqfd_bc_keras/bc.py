@@ -84,9 +84,12 @@ class BCModel(keras.Model):
     def call(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
         """Logits of π̄_bc: the network's, or for an ensemble log of the members' mean policy."""
         logits = self.member_logits(obs, training)
-        if not self.ensemble:
-            return logits
-        return tf.math.log(tf.reduce_mean(tf.nn.softmax(logits), axis=0) + 1e-12)
+        return self._mean_policy_logits(logits) if self.ensemble else logits
+
+    @staticmethod
+    def _mean_policy_logits(member_logits: tf.Tensor) -> tf.Tensor:
+        """log mean_k softmax(logits_k): (K, B, A) → (B, A), the ensemble's π̄_bc as logits."""
+        return tf.math.log(tf.reduce_mean(tf.nn.softmax(member_logits), axis=0) + 1e-12)
 
     def member_logits(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
         """(K, B, A) logits of each ensemble member, or (B, A) of the one network."""
@@ -140,7 +143,7 @@ class BCModel(keras.Model):
                 loss = ce + self.prior_loss()
         grads = tape.gradient(loss, self.trainable_weights)
         self.optimizer.apply(grads, self.trainable_weights)
-        return self._record(actions, self(obs) if self.ensemble else logits, ce, loss)
+        return self._record(actions, self._mean_policy_logits(logits) if self.ensemble else logits, ce, loss)
 
     def test_step(self, data):
         obs, actions = data
