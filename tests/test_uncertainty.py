@@ -150,3 +150,25 @@ def test_bad_estimator_settings_are_refused(change, match):
 def test_only_the_bayes_loss_uses_the_estimator(demos):
     ce = build_bc_model(Config.for_task("cartpole", expert_loss="ce", uncertainty="ensemble"), 4, 2, demos.obs_scale())
     assert ce.uncertainty == "mc_dropout" and ce.members == 1 and not ce.map_fit
+
+
+@pytest.mark.parametrize("uncertainty", ["ensemble", "distance"])
+def test_a_run_checkpoint_restores_the_estimator_for_a_resume(demos, held_out, tmp_path, uncertainty):
+    """A resumed run rebuilds π_bc unfitted and reads its variables (members, references) back."""
+    config = Config.for_task("cartpole", uncertainty=uncertainty)
+
+    def agent(fit: bool):
+        keras.utils.set_random_seed(1 if fit else 2)
+        bc = build_bc_model(config, 4, 2, demos.obs_scale())
+        if fit:
+            bc.fit_demos(demos.obs, demos.actions, epochs=2, seed=5)
+        else:
+            bc.optimizer.build(bc.trainable_variables)
+        return make_agent(config, demos, bc)
+
+    saved, resumed = agent(fit=True), agent(fit=False)
+    obs = tf.constant(held_out.obs[:64])
+    assert not np.allclose(saved.bc_model.predictive(obs)[1], resumed.bc_model.predictive(obs)[1])
+    resumed.checkpoint().read(saved.checkpoint().write(str(tmp_path / "ckpt"))).expect_partial()
+    for original, restored in zip(saved.bc_model.predictive(obs), resumed.bc_model.predictive(obs)):
+        np.testing.assert_allclose(restored, original, rtol=1e-6)
