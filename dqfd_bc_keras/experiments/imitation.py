@@ -24,6 +24,7 @@ from ..files import write_text
 from ..seeds import final_eval_seed
 from ..training import demonstrations, fit_bc
 from .suites import Arm, grid_arms
+from .sweep import provenance
 
 IMITATION_DIR = "bc-alone"
 """The folder of the suite directory that holds BC alone's results (exported with the runs)."""
@@ -46,7 +47,7 @@ def imitate(a: Arm, seed: int) -> dict:
     return {"config": {k: v for k, v in config.to_dict().items() if k in ("task", "expert", "expert_epsilon",
                                                                           "demo_episodes", "bc_epochs", "seed")},
             "demo_transitions": len(data.obs), "demonstrator_return": float(np.mean(data.meta.plain_returns)),
-            "train_accuracy": accuracy, **result.to_dict()}
+            "train_accuracy": accuracy, **result.to_dict(), "provenance": provenance()}
 
 
 def run_imitation(out: str | Path, quick_budget: bool = False, progress: Callable[[str], None] = print) -> int:
