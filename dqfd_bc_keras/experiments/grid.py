@@ -139,8 +139,9 @@ def tables(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]:
             row_final.append(f"{np.median(entry.final) - cell.teacher_return:+.0f}{escape}")
         steps.append(f"| {method} | " + " | ".join(row_steps) + " |")
         final.append(f"| {method} | " + " | ".join(row_final) + " |")
-    return ["Median counted interactions to the threshold (seeds that reached it / seeds); ↑ helps, ↓ hurts "
-            "against plain DQN:", "", *steps, "",
+    return ["Median counted interactions to the threshold (seeds that reached it / seeds); 0: the evaluation "
+            "after pre-training, before any interaction, already reached it; ↑ helps, ↓ hurts against plain DQN:",
+            "", *steps, "",
             "Median final return (eval.json, 20 episodes) minus the teacher's 100-episode mean "
             f"({', '.join(f'{c.teacher} {c.teacher_return:g}' for c in _teachers(cells))}); ✓ escapes a teacher "
             "below the threshold:", "", *final]
@@ -179,37 +180,34 @@ def _list(names: list[str]) -> str:
 
 def heatmaps(cells: list[Cell], table: dict[str, dict[Cell, Entry]], path_steps: Path, path_final: Path,
              seeds: int) -> None:
-    """The two tables as heatmaps: log10 interactions (white: never) and final − teacher."""
-    from .figures import _figure
-
+    """The two tables as heatmaps: log10 interactions (blank: never, or BC alone) and final − teacher."""
     methods = list(table)
-    x = [c.name.replace(" × ", "\n× ") for c in cells]
     steps = np.array([[np.median(table[m][c].steps) if c in table[m] and m != BC_ALONE else np.nan for c in cells]
                       for m in methods])
     final = np.array([[np.median(table[m][c].final) - c.teacher_return if c in table[m] else np.nan for c in cells]
                       for m in methods])
-    for path, values, title, cmap, text in (
-        (path_steps, steps, "median counted interactions to 475", "viridis_r", _steps),
-        (path_final, final, "median final return − teacher's mean", "RdBu", lambda v: f"{v:+.0f}"),
-    ):
-        with _figure(path, figsize=(1.1 * len(cells) + 3, 0.55 * len(methods) + 2)) as (fig, ax):
-            shown = np.where(np.isfinite(values), values, np.nan)
-            if path == path_steps:
-                shown = np.log10(np.maximum(shown, 1.0))
-                image = ax.imshow(shown, cmap=cmap, aspect="auto")
-                fig.colorbar(image, ax=ax, label="log10 interactions")
-            else:
-                bound = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 1.0
-                image = ax.imshow(shown, cmap=cmap, vmin=-bound, vmax=bound, aspect="auto")
-                fig.colorbar(image, ax=ax, label="return − teacher")
-            for i in range(len(methods)):
-                for j in range(len(cells)):
-                    v = values[i, j]
-                    label = ("never" if v == np.inf else "—") if not np.isfinite(v) else text(v)
-                    ax.text(j, i, label, ha="center", va="center", fontsize=7)
-            ax.set_xticks(range(len(cells)), x, fontsize=7)
-            ax.set_yticks(range(len(methods)), methods, fontsize=8)
-            ax.set_title(f"CartPole, teacher × demonstrated episodes: {title} ({seeds} seeds per cell)")
+    bound = float(np.nanmax(np.abs(final))) if np.isfinite(final).any() else 1.0
+    _heatmap(path_steps, cells, methods, steps, np.log10(np.maximum(np.where(np.isfinite(steps), steps, np.nan), 1.0)),
+             dict(cmap="viridis_r"), "log10 interactions", _steps,
+             f"median counted interactions to {_threshold():g} ({seeds} seeds per cell)")
+    _heatmap(path_final, cells, methods, final, final, dict(cmap="RdBu", vmin=-bound, vmax=bound), "return − teacher",
+             lambda v: f"{v:+.0f}", f"median final return − the teacher's mean ({seeds} seeds per cell)")
+
+
+def _heatmap(path: Path, cells: list[Cell], methods: list[str], values: np.ndarray, shown: np.ndarray, colors: dict,
+             label: str, text: Callable[[float], str], title: str) -> None:
+    """`shown` coloured, `values` written in each square (∞: never; nan: —)."""
+    from .figures import _figure
+
+    with _figure(path, figsize=(1.1 * len(cells) + 3, 0.55 * len(methods) + 2)) as (fig, ax):
+        fig.colorbar(ax.imshow(shown, aspect="auto", **colors), ax=ax, label=label)
+        for i, j in np.ndindex(values.shape):
+            v = values[i, j]
+            ax.text(j, i, text(v) if np.isfinite(v) else "never" if v == np.inf else "—", ha="center", va="center",
+                    fontsize=7)
+        ax.set_xticks(range(len(cells)), [c.name.replace(" × ", "\n× ") for c in cells], fontsize=7)
+        ax.set_yticks(range(len(methods)), methods, fontsize=8)
+        ax.set_title(f"CartPole, teacher × demonstrated episodes: {title}")
 
 
 def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdown_dir: Path,
