@@ -26,7 +26,7 @@ from ..files import write_text
 from .claims import ArmRuns, interactions_to_threshold
 from .efficiency import ratio_ci, teacher_verdict
 from .imitation import imitation_arms, load_imitation
-from .suites import GRID_TASK, Arm, grid_arms, grid_cells
+from .suites import GRID_TASK, SUITES, Arm, grid_arms, grid_cells
 from .sweep import run_suite
 
 TEACHER_RETURNS = {("strong", 0.0): 500.0, ("imperfect", 0.0): 198.06, ("strong", 0.2): 495.54,
@@ -97,6 +97,13 @@ def collect(arms: list[ArmRuns], suite_dir: Path, quick: bool = False) -> tuple[
             finals = np.array([r["mean_return"] for r in imitation[a.name]], float)
             table.setdefault(BC_ALONE, {})[_cell(a)] = Entry(np.full(finals.size, np.nan), finals)
     return cells, table
+
+
+def grid_only(config: dict) -> bool:
+    """Whether an arm's config (without the seed) is one only the grid runs: such arms are drawn
+    as the grid's heatmaps, not as curves among a setting's variants."""
+    others = {_key(a.config(0).to_dict()) for name, arms in SUITES.items() if name != "demos" for a in arms}
+    return _key(config) in {_key(a.config(0).to_dict()) for a in grid_arms()} - others
 
 
 def _key(config: dict) -> str:

@@ -29,7 +29,7 @@ from .plans import PLANNED_SEEDS
 from .data import ARCHIVE_SUFFIX, Demonstrations, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
 from .estimators import estimators_section
-from .grid import grid_section
+from .grid import grid_only, grid_section
 from .stats import CensoredSummary, Summary
 
 
@@ -159,8 +159,8 @@ def _per_seed(arms: list[ArmRuns]) -> str:
 def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list[str]:
     """Per setting: learning curves of the preset arms (the paper's and the baselines'); the best,
     average and worst run of each arm of its reference bayes–ce pair (of every arm if it has
-    none); and, where a setting has variants (sensitivity), their curves beside the reference
-    pair. A goal-count setting adds the first EARLY_EPISODES episodes (C4's "early") zoomed in.
+    none); and, where a setting has variants (sensitivity, estimators), their curves beside the
+    reference pair (the grid's own arms are its heatmaps). A goal-count setting adds the first EARLY_EPISODES episodes (C4's "early") zoomed in.
     Returns the markdown links."""
     links = []
     for setting in sorted({a.setting for a in arms}):
@@ -179,7 +179,7 @@ def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list
         cases = [a.name for a in pair if a.name in main] or main
         paths = figures.setting_figures(setting, {n: runs[n] for n in main}, cases, score, ylabel, stem, window,
                                         zoom)
-        variants = [a.name for a in members if a.name not in main]
+        variants = [a.name for a in members if a.name not in main and not grid_only(a.config)]
         if variants:
             path = stem.with_name(f"{stem.name}-variants.png")
             shown = [a.name for a in pair if a.name in main] + variants
