@@ -1,7 +1,7 @@
 """When do demonstrations help or hurt? The quality × quantity grid (issue I; PREREGISTRATION §8).
 
     python -m dqfd_bc_keras.experiments grid --out results          # runs, BC alone, GRID.md, heatmaps
-    python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 2 cells, 1 seed, QUICK budget
+    python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 1 cell, 1 seed, QUICK budget
 
 Per cell (teacher × demonstrated episodes) and method: the median over seeds of counted
 interactions until a greedy evaluation reaches the solved threshold (∞: never), and of the final
@@ -14,6 +14,7 @@ lies above the teacher's mean with the CI of that median wholly above (§7's tea
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,9 +24,10 @@ import numpy as np
 
 from ..envs import get_task
 from ..files import write_text
-from .claims import ArmRuns, interactions_to_threshold
+from .claims import ArmRuns, group_arms, interactions_to_threshold
+from .data import load_runs
 from .efficiency import ratio_ci, teacher_verdict
-from .imitation import imitation_arms, load_imitation
+from .imitation import imitation_arms, load_imitation, run_imitation
 from .suites import GRID_TASK, SUITES, Arm, grid_arms, grid_cells
 from .sweep import run_suite
 
@@ -102,8 +104,13 @@ def collect(arms: list[ArmRuns], suite_dir: Path, quick: bool = False) -> tuple[
 def grid_only(config: dict) -> bool:
     """Whether an arm's config (without the seed) is one only the grid runs: such arms are drawn
     as the grid's heatmaps, not as curves among a setting's variants."""
+    return _key(config) in _grid_only_keys()
+
+
+@functools.cache
+def _grid_only_keys() -> frozenset[str]:
     others = {_key(a.config(0).to_dict()) for name, arms in SUITES.items() if name != "demos" for a in arms}
-    return _key(config) in {_key(a.config(0).to_dict()) for a in grid_arms()} - others
+    return frozenset({_key(a.config(0).to_dict()) for a in grid_arms()} - others)
 
 
 def _key(config: dict) -> str:
@@ -238,13 +245,8 @@ def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdo
 def run_grid(out: str | Path, quick: bool = False, seeds: int | None = None, workers: int = 2,
              progress: Callable[[str], None] = print) -> Path:
     """Every missing run of the grid and of BC alone into `out`, then OUT/GRID.md and its heatmaps."""
-    from .claims import group_arms
-    from .data import load_runs
-
     out = Path(out)
     run_suite(grid_arms(quick), seeds, out, workers, progress=progress, name="demos (quick)" if quick else "demos")
-    from .imitation import run_imitation
-
     run_imitation(out, quick, progress)
     arms = group_arms(load_runs(out))
     section = grid_section(arms, out, out / "figures", out, quick)
