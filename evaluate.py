@@ -4,6 +4,7 @@
     python evaluate.py runs/cartpole-bayes-0 --policy bc     # its BC model instead
     python evaluate.py model.keras --task cartpole --json    # a bare model file: name its task
     python evaluate.py models/acrobot --episodes 3 --video videos/   # also MP4s (needs moviepy)
+    python evaluate.py model.keras --env my_envs:Maze-v0 --max-steps 200 --env-kwargs size=9
 """
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level, custom Keras objects)
@@ -12,7 +13,7 @@ import json
 import sys
 from collections.abc import Sequence
 
-from dqfd_bc_keras.cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run, seed
+from dqfd_bc_keras.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
 from dqfd_bc_keras.evaluation import POLICY_FILES, evaluate, load_policy, record_video
 from dqfd_bc_keras.files import write_text
 
@@ -31,12 +32,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "(needs moviepy: requirements-extras.txt)")
     args = parser.parse_args(argv)
 
-    policy, settings = load_policy(args.target, args.policy, chosen_task(args))
+    env = env_settings(args)
+    policy, settings = load_policy(args.target, args.policy, chosen_task(args), env.get("max_steps"),
+                                   env.get("env_kwargs"))
     if args.video:
         files = record_video(policy, settings.task, args.video, args.episodes, args.seed, settings.timeout,
-                             settings.max_steps)
+                             settings.max_steps, settings.env_kwargs)
         print(f"recorded {len(files)} episode(s) in {args.video}", file=sys.stderr)
-    result = evaluate(policy, settings.task, args.episodes, args.seed, settings.timeout, settings.max_steps)
+    result = evaluate(policy, settings.task, args.episodes, args.seed, settings.timeout, settings.max_steps,
+                      settings.env_kwargs)
     report = {**result.to_dict(), "model": str(settings.model_path)}
     if args.out:
         write_text(args.out, json.dumps(report, indent=2) + "\n")

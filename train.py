@@ -3,6 +3,7 @@
     python train.py                                  # cartpole, bayes, 5 imperfect-expert episodes
     python train.py --task mountaincar-goals --expert-loss ce --seed 3
     python train.py --env Acrobot-v1 --expert my_rules:swing       # any Gymnasium env, your demonstrator
+    python train.py --env flappy_bird_gymnasium:FlappyBird-v0 --env-kwargs use_lidar=false --max-steps 1000 ...
     python train.py --env CartPole-v1 --demos minari:cartpole/expert-v0   # a local Minari dataset
     python train.py --demos demos.npz --set sigma0_sq=1.0 --set total_steps=20000
     python train.py --out runs/x --resume            # continue a killed run from its checkpoint
@@ -14,12 +15,11 @@ import sys
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
-from dqfd_bc_keras.config import METHODS, QUICK, Config
+from dqfd_bc_keras.config import METHODS, QUICK, Config, parse_assignments
 from dqfd_bc_keras.envs import TIMEOUT_MODES, task_slug
 from dqfd_bc_keras.experts import EXPERT_NAMES
 from dqfd_bc_keras.losses import TARGETS
-from dqfd_bc_keras.runs import train
-
+from dqfd_bc_keras.runs import saved_config, train
 
 
 def parse(argv):
@@ -54,10 +54,17 @@ def main(argv=None) -> int:
              "expert": args.expert, "demo_episodes": args.demo_episodes, "total_steps": args.steps,
              "seed": args.seed}
     chosen = {k: v for k, v in flags.items() if v is not None}
+    # Every override before the one validation: --max-steps or --set max_steps=N makes an env
+    # without a time limit usable.
+    overrides = {**(QUICK if args.quick else {}), **chosen, **cli.env_settings(args), **parse_assignments(args.set)}
     task = cli.chosen_task(args)
-    config = Config.for_task(task, **({**QUICK, **chosen} if args.quick else chosen)).with_overrides(args.set)
-    out = args.out or f"runs/{task_slug(config.task)}-{config.expert_loss}-seed{config.seed}"
-    dataset = demos.load_source(args.demos, task=config.task, timeout=config.timeout) if args.demos else None
+    defaults = Config.__dataclass_fields__
+    out = args.out or (f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
+                       f"-seed{overrides.get('seed', defaults['seed'].default)}")
+    # A resumed run is the run in `out`: its config.json holds its task, env kwargs and limit.
+    config = saved_config(out) if args.resume else Config.for_task(task, **overrides)
+    dataset = (demos.load_source(args.demos, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
+               if args.demos else None)
     if not args.quiet:
         print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
               f"config: {out}/config.json", flush=True)

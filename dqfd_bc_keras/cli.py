@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 
-from .errors import DqfdError
+from .errors import DqfdError, DqfdWarning
 from .seeds import MAX_SEED
 
 EXIT_USAGE = 2
@@ -22,8 +24,9 @@ class ArgumentParser(argparse.ArgumentParser):
 
 
 def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = None, required: bool = False) -> None:
-    """`--task PRESET` or `--env ID` (any Gymnasium env with a flat Box observation and Discrete
-    actions; `module:Env-v0` imports `module` first); read the choice with `chosen_task`."""
+    """`--task PRESET` or `--env ID` (any Gymnasium env with Discrete actions; `module:Env-v0`
+    imports `module` first), with `--max-steps N` and `--env-kwargs KEY=VALUE …`; read the
+    choice with `chosen_task` and the env settings with `env_settings`."""
     from .envs import TASKS
 
     group = parser.add_mutually_exclusive_group(required=required)
@@ -31,12 +34,38 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
                        help="task preset" + (f" (default: {default})" if default else ""))
     group.add_argument("--env", metavar="ID", help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
                        "or my_module:MyEnv-v0 (generic defaults; see config.EnvConfig)")
+    parser.add_argument("--max-steps", type=positive_int, metavar="N",
+                        help="episode step limit (required for an env registered without one)")
+    parser.add_argument("--env-kwargs", nargs="+", action="extend", type=env_kwarg, metavar="KEY=VALUE",
+                        help="keyword arguments of the env's constructor, values as JSON (use_lidar=false, "
+                             'obs_type=\'"ram"\', config=\'{"lanes_count": 3}\'), else a plain string')
     parser.set_defaults(default_task=default)
 
 
 def chosen_task(args: argparse.Namespace) -> str | None:
     """The task of `add_task_arguments`' flags: --env, else --task, else the default."""
     return args.env or args.task or args.default_task
+
+
+def env_settings(args: argparse.Namespace) -> dict[str, object]:
+    """The Config fields given by `--max-steps` and `--env-kwargs` (only those given)."""
+    settings: dict[str, object] = {}
+    if args.max_steps is not None:
+        settings["max_steps"] = args.max_steps
+    if args.env_kwargs:
+        settings["env_kwargs"] = dict(args.env_kwargs)
+    return settings
+
+
+def env_kwarg(text: str) -> tuple[str, object]:
+    """argparse type of `--env-kwargs`: KEY=VALUE, the value parsed as JSON, else kept as a string."""
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip().isidentifier():
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a Python identifier, got {text!r}")
+    try:
+        return key.strip(), json.loads(value)
+    except json.JSONDecodeError:
+        return key.strip(), value
 
 
 def positive_int(text: str) -> int:
@@ -64,11 +93,23 @@ def _terminate(signum: int, frame: object) -> None:
     raise Terminated
 
 
+_default_showwarning = warnings.showwarning
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Our own warnings as one line on stderr; everyone else's as Python prints them."""
+    if issubclass(category, DqfdWarning):
+        print(f"warning: {message}", file=sys.stderr)
+    else:
+        _default_showwarning(message, category, filename, lineno, file, line)
+
+
 def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
     """Call `main`, turning every failure a user can meet into one line on stderr: a user error
     or an OS error (full disk, read-only path, a directory where a file belongs) exits 2,
     Ctrl-C 130 and SIGTERM 143."""
     signal.signal(signal.SIGTERM, _terminate)
+    warnings.showwarning = _show_warning
     try:
         return main(argv)
     except DqfdError as error:

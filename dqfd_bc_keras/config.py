@@ -9,10 +9,12 @@ and the field's comment says so. `Config.for_task(name)` gives a task preset's d
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
-from .envs import TIMEOUT_MODES, get_task, step_limit
+from .envs import TASKS, TIMEOUT_MODES, get_task, step_limit, task_spaces
 from .errors import ConfigError
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 from .seeds import MAX_SEED
@@ -38,8 +40,11 @@ class Config:
 
     # --- task -------------------------------------------------------------------------------
     task: str = "cartpole"
-    """Task preset (envs.TASKS), or the id of any Gymnasium env with a flat Box observation and
-    Discrete actions (`module:Env-v0` imports `module` first)."""
+    """Task preset (envs.TASKS), or the id of any Gymnasium env with Discrete actions and an
+    observation that `observations` flattens (`module:Env-v0` imports `module` first)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments of the env's constructor (`gym.make(id, **env_kwargs)`), JSON values; part
+    of the task: every env of the run, its demonstrations and its evaluations are made with them."""
     timeout: str = "bootstrap"
     """Time-limit mode: bootstrap | naive | time-aware."""
     max_steps: int | None = None
@@ -195,8 +200,10 @@ class Config:
 
     @classmethod
     def from_dict(cls, fields: dict) -> Config:
-        """The inverse of `to_dict` (a saved config.json); unknown keys are an error."""
+        """The inverse of `to_dict` (a saved config.json, whose derived `observation` record is
+        skipped); unknown keys are an error."""
         known = {f.name for f in dataclasses.fields(cls)}
+        fields = {k: v for k, v in fields.items() if k not in DERIVED_KEYS}
         unknown = sorted(set(fields) - known)
         if unknown:
             raise ConfigError(f"unknown config field(s) {unknown}")
@@ -204,21 +211,8 @@ class Config:
         return cls.for_task(values.pop("task", "cartpole"), **values)
 
     def with_overrides(self, assignments: list[str]) -> Config:
-        """A copy with `key=value` assignments applied (values typed by the field), validated.
-
-        Tuples are comma lists (`hidden=128,128`); `none` sets an optional field to None.
-        """
-        types = {f.name: f.type for f in dataclasses.fields(self)}
-        changes: dict[str, object] = {}
-        for assignment in assignments:
-            key, sep, text = assignment.partition("=")
-            key = key.strip().replace("-", "_")
-            if key == "task":
-                raise ConfigError("the task is chosen with --task or --env: each has its own preset defaults")
-            if not sep or key not in types:
-                raise ConfigError(f"--set {assignment!r}: expected key=value with a key among {sorted(types)}")
-            changes[key] = _parse(key, types[key], text.strip())
-        fields = {**self.to_dict(), **changes}
+        """A copy with `key=value` assignments applied (values typed by the field), validated."""
+        fields = {**self.to_dict(), **parse_assignments(assignments)}
         return self.for_task(fields.pop("task"), **fields)
 
     @property
@@ -250,6 +244,10 @@ class Config:
     def validate(self) -> Config:
         """Raise ConfigError for the first value the algorithm cannot use; return self."""
         get_task(self.task)
+        if not isinstance(self.env_kwargs, dict) or not all(isinstance(k, str) for k in self.env_kwargs):
+            raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
+        if self.task not in TASKS or self.env_kwargs:  # a preset's own spaces are known; an env's are checked
+            task_spaces(self.task, self.env_kwargs)
         choices = {
             "timeout": TIMEOUT_MODES, "expert_loss": METHODS, "target": TARGETS,
             "td_loss": TD_LOSSES, "prior_center": PRIOR_CENTERS, "dynamic_demos": DYNAMIC_MODES,
@@ -388,12 +386,52 @@ PRESETS: dict[str, type[Config]] = {
 }
 
 
+def preset_defaults(task: str) -> dict[str, object]:
+    """The defaults of `task`'s preset (EnvConfig's for any env), without validating them: an env
+    without a time limit has no valid defaults until `max_steps` is given."""
+    fields = dataclasses.fields(PRESETS.get(task, EnvConfig))
+    values = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory() for f in fields}
+    return {**values, "task": task}
+
+
+DERIVED_KEYS = ("observation",)
+"""Keys of a config.json that record what the run found (the observation layout), not settings."""
+
+
+def parse_assignments(assignments: list[str]) -> dict[str, object]:
+    """`key=value` assignments (`--set`) as Config fields, each value typed by its field.
+
+    Tuples are comma lists (`hidden=128,128`); `none` sets an optional field to None;
+    `env_kwargs` takes a JSON object. Applied before any validation, so an override can make a
+    task usable (`max_steps` on an env without a time limit).
+    """
+    types = {f.name: f.type for f in dataclasses.fields(Config)}
+    changes: dict[str, object] = {}
+    for assignment in assignments:
+        key, sep, text = assignment.partition("=")
+        key = key.strip().replace("-", "_")
+        if key == "task":
+            raise ConfigError("the task is chosen with --task or --env: each has its own preset defaults")
+        if not sep or key not in types:
+            raise ConfigError(f"--set {assignment!r}: expected key=value with a key among {sorted(types)}")
+        changes[key] = _parse(key, types[key], text.strip())
+    return changes
+
+
 def _parse(key: str, annotation: str, text: str) -> object:
     """`text` as the type named by the dataclass annotation `annotation`."""
     optional = annotation.endswith("| None")
     if optional and text.lower() == "none":
         return None
     base = annotation.removesuffix(" | None")
+    if base.startswith("dict"):
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            value = None
+        if not isinstance(value, dict):
+            raise ConfigError(f"--set {key}={text!r}: expected a JSON object, e.g. {key}='{{\"use_lidar\": false}}'")
+        return value
     try:
         if base == "bool":
             if text.lower() not in ("true", "false", "1", "0"):

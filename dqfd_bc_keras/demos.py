@@ -7,13 +7,19 @@ File format (version 1), readable with `numpy.load(path, allow_pickle=False)`:
     obs (N, d) float32   actions (N,) int64   rewards (N,) float32   next_obs (N, d) float32
     terminated (N,) bool   truncated (N,) bool   episode_ids (N,) int64
     meta  0-d str: JSON {format_version, task, env_id, timeout, obs_dim, n_actions, expert,
-                         epsilon, seed, episode_returns, plain_returns}
+                         epsilon, seed, episode_returns, plain_returns, env_kwargs, observation}
+
+`obs` are the flat vectors the networks take (`observations`: a Dict or a grid is flattened);
+`meta.observation` names the env's own space. `env_kwargs` and `observation` are optional
+(files written before they existed load as {} and "").
 
 Transitions are stored in time order, episode after episode, and every episode is complete
 (its last transition is terminated or truncated), so n-step returns can be read off directly.
 
     python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
     python -m dqfd_bc_keras.demos record --env Acrobot-v1 --policy my_rules:swing --out acrobot.npz
+    python -m dqfd_bc_keras.demos record --env flappy_bird_gymnasium:FlappyBird-v0 --env-kwargs use_lidar=false \
+        --max-steps 1000 --policy my_rules:flap --out flappy.npz
     python -m dqfd_bc_keras.demos inspect demos.npz
     python -m dqfd_bc_keras.demos export demos.npz --minari mountaincar/imperfect-v0
 """
@@ -31,8 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run
-from .envs import TIMEOUT_MODES, get_task, make_task
+from typing import Any
+
+from .cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
+from .envs import TIMEOUT_MODES, get_task, make_task, task_spaces
 from .errors import ConfigError, DemoFileError
 from .experts import EXPERT_NAMES, make_demonstrator
 from .files import atomic_path
@@ -68,6 +76,10 @@ class DemoMeta:
     plain_returns: list[float]
     """Return of each episode under the plain env's rewards (what the field reports)."""
     format_version: int = FORMAT_VERSION
+    env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """The keyword arguments the env was made with."""
+    observation: str = ""
+    """The env's own observation space and how it was flattened ("" in files that predate it)."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +126,8 @@ class DemoDataset:
         return "\n".join([
             f"task         {m.task} ({m.env_id}, timeout={m.timeout}, obs_dim={m.obs_dim}, "
             f"n_actions={m.n_actions})",
+            *([f"env kwargs   {json.dumps(m.env_kwargs)}"] if m.env_kwargs else []),
+            *([f"observation  {m.observation}"] if m.observation else []),
             f"expert       {m.expert} (epsilon={m.epsilon:g}, seed={m.seed})",
             f"episodes     {self.n_episodes}",
             f"transitions  {len(self)}",
@@ -131,15 +145,17 @@ def record(
     epsilon: float = 0.0,
     timeout: str = "bootstrap",
     max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> DemoDataset:
     """Run the demonstrator `expert` (`experts.make_demonstrator`: strong | imperfect |
-    module:function | model.keras) for `episodes` episodes of `task`; episode i resets with seed + i."""
+    module:function | model.keras) for `episodes` episodes of `task` made with `env_kwargs`,
+    `max_steps` steps at most; episode i resets with seed + i."""
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
-    policy = make_demonstrator(expert, task, epsilon=epsilon, seed=seed)
-    env = make_task(task, timeout=timeout, max_steps=max_steps)
+    policy = make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
+    env = make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs)
     dataset = rollout(env, policy, [seed + i for i in range(episodes)], task=task, source=expert,
-                      epsilon=epsilon, seed=seed)
+                      epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
     env.close()
     return dataset
 
@@ -151,8 +167,10 @@ class EpisodeRecorder:
     episodes (dynamic demonstrations), so every D_demo episode has the same layout and meta.
     """
 
-    def __init__(self, env, *, task: str, source: str, epsilon: float = 0.0, seed: int = 0) -> None:
+    def __init__(self, env, *, task: str, source: str, epsilon: float = 0.0, seed: int = 0,
+                 env_kwargs: dict[str, Any] | None = None) -> None:
         self.task, self.source, self.epsilon, self.seed = task, source, float(epsilon), int(seed)
+        self.env_kwargs = dict(env_kwargs or {})
         self.obs_dim, self.n_actions = int(env.observation_space.shape[0]), int(env.action_space.n)
         self.timeout = env.get_wrapper_attr("mode")
         self.clear()
@@ -196,6 +214,7 @@ class EpisodeRecorder:
             task=self.task, env_id=get_task(self.task).env_id, timeout=self.timeout, obs_dim=self.obs_dim,
             n_actions=self.n_actions, expert=self.source, epsilon=self.epsilon, seed=self.seed,
             episode_returns=list(self.returns), plain_returns=list(self.plain_returns),
+            env_kwargs=dict(self.env_kwargs), observation=task_spaces(self.task, self.env_kwargs).layout.text(),
         )
         arrays = {name: np.asarray(self.columns[name][:end], dtype=dtype) for name, (dtype, _) in ARRAYS.items()}
         return DemoDataset(**arrays, meta=meta)
@@ -203,14 +222,14 @@ class EpisodeRecorder:
 
 def rollout(
     env, policy: Callable[[np.ndarray], int], seeds: Sequence[int], *, task: str, source: str,
-    epsilon: float = 0.0, seed: int = 0,
+    epsilon: float = 0.0, seed: int = 0, env_kwargs: dict[str, Any] | None = None,
 ) -> DemoDataset:
     """One complete episode of `policy` on the task env `env` per seed, as a dataset.
 
     `source` names the demonstrator in the metadata (a scripted expert, or the agent's
-    greedy policy for dynamic demonstrations).
+    greedy policy for dynamic demonstrations); `env_kwargs` are those `env` was made with.
     """
-    recorder = EpisodeRecorder(env, task=task, source=source, epsilon=epsilon, seed=seed)
+    recorder = EpisodeRecorder(env, task=task, source=source, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
     for episode_seed in seeds:
         obs, _ = env.reset(seed=int(episode_seed))
         recorder.reset(obs)
@@ -256,8 +275,10 @@ def _not_a_file(path: Path) -> str:
     return "is a directory, not an .npz file" if path.is_dir() else "is not a regular file"
 
 
-def load(path: str | Path, task: str | None = None, timeout: str | None = None) -> DemoDataset:
-    """Read and validate a dataset; with `task`/`timeout`, also check it was recorded for them.
+def load(path: str | Path, task: str | None = None, timeout: str | None = None,
+         env_kwargs: dict[str, Any] | None = None) -> DemoDataset:
+    """Read and validate a dataset; with `task`/`timeout`, also check it was recorded for them
+    (with `task`, on an env made with `env_kwargs`: none when not given).
 
     Raises `DemoFileError` naming the file and the problem for anything a learner could trip
     on later: not an npz, pickled objects, missing keys, wrong shapes or dtypes, non-finite
@@ -283,6 +304,9 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None) 
     _validate(path, dataset)
     if task is not None and meta.task != task:
         raise DemoFileError(path, f"was recorded on task {meta.task!r}, not on the requested {task!r}")
+    if task is not None and meta.env_kwargs != dict(env_kwargs or {}):
+        raise DemoFileError(path, f"was recorded with env kwargs {json.dumps(meta.env_kwargs)}, not the "
+                                  f"requested {json.dumps(dict(env_kwargs or {}))}")
     if timeout is not None and meta.timeout != timeout:
         raise DemoFileError(
             path, f"was recorded with timeout={meta.timeout!r}, not the requested {timeout!r} "
@@ -290,14 +314,14 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None) 
     return dataset
 
 
-def load_source(source: str, task: str, timeout: str) -> DemoDataset:
-    """Demonstrations for `task` from `source`: a `.npz` file of ours or `minari:DATASET_ID`
-    (a dataset in the local Minari cache, converted by `minari_io.from_minari`)."""
+def load_source(source: str, task: str, timeout: str, env_kwargs: dict[str, Any] | None = None) -> DemoDataset:
+    """Demonstrations for `task` (made with `env_kwargs`) from `source`: a `.npz` file of ours or
+    `minari:DATASET_ID` (a dataset in the local Minari cache, converted by `minari_io.from_minari`)."""
     if source.startswith("minari:"):
         from .minari_io import from_minari  # optional dependency
 
-        return from_minari(source.removeprefix("minari:"), task, timeout)
-    return load(source, task=task, timeout=timeout)
+        return from_minari(source.removeprefix("minari:"), task, timeout, env_kwargs)
+    return load(source, task=task, timeout=timeout, env_kwargs=env_kwargs)
 
 
 def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
@@ -312,10 +336,13 @@ def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
     if fields.get("format_version") != FORMAT_VERSION:
         raise DemoFileError(path, f"format_version {fields.get('format_version')!r} is not {FORMAT_VERSION}")
     names = {field.name for field in dataclasses.fields(DemoMeta)}
-    missing = sorted(names - fields.keys())
+    optional = {"env_kwargs", "observation"}
+    missing = sorted(names - optional - fields.keys())
     if missing:
         raise DemoFileError(path, f"meta lacks {missing}")
-    meta = DemoMeta(**{key: fields[key] for key in names})
+    meta = DemoMeta(**{key: fields[key] for key in names if key in fields})
+    if not isinstance(meta.env_kwargs, dict) or not isinstance(meta.observation, str):
+        raise DemoFileError(path, "meta's env_kwargs must be a JSON object and its observation a string")
     try:
         get_task(meta.task)
     except ConfigError as error:
@@ -385,7 +412,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "record":
         if not args.out.endswith(".npz"):
             raise ConfigError(f"--out must end in .npz, got {args.out!r}")
-        dataset = record(chosen_task(args), args.expert, args.episodes, args.seed, args.epsilon, args.timeout)
+        env = env_settings(args)
+        dataset = record(chosen_task(args), args.expert, args.episodes, args.seed, args.epsilon, args.timeout,
+                         env.get("max_steps"), env.get("env_kwargs"))
         save(dataset, args.out, force=args.force)
         print(f"wrote {args.out}")
     elif args.command == "export":

@@ -1,12 +1,16 @@
 """Tasks: the paper's (ALGORITHM.md §6) and ours as presets, or any Gymnasium env by its id.
 
 A task is a preset name (`TASKS`: cartpole, cartpole-200, mountaincar, mountaincar-goals,
-acrobot, lunarlander) or the id of any registered Gymnasium env with a flat `Box`
-observation and a `Discrete` action space (`"module:Env-v0"` imports `module` first, as
-`gym.make` does); `get_task` turns either into a `TaskSpec`.
+acrobot, lunarlander) or the id of any registered Gymnasium env with a `Discrete` action
+space and an observation space that `observations` can flatten (`"module:Env-v0"` imports
+`module` first, as `gym.make` does); `get_task` turns either into a `TaskSpec`. Keyword
+arguments for the env's constructor (`env_kwargs`, e.g. FlappyBird's `use_lidar=False`) go
+with the task everywhere an env is made; `task_spaces` checks them and the spaces once.
 
-A task env is built from the plain Gymnasium env with no time limit of its own, then
+A task env is built from the plain Gymnasium env (made with `env_kwargs`) with no time limit
+of its own, then
 
+    FlattenObservation (observations that are not a flat Box)        the networks' input
     FallPenalty (CartPole) or GoalCount (MountainCar goal variant)   reward shaping
     TimeLimitMode                                                    the step limit, in one of three modes
 
@@ -23,7 +27,12 @@ return next to the shaped one; `evaluation` always scores on the plain env itsel
 
 from __future__ import annotations
 
+import difflib
 import functools
+import importlib
+import inspect
+import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, SupportsFloat
 
@@ -31,6 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 from .errors import ConfigError
+from .observations import FlattenObservation, ObservationLayout, is_flat, observation_layout
 
 TIMEOUT_MODES = ("bootstrap", "naive", "time-aware")
 """How the step limit reaches the learner: `bootstrap` truncates (Gymnasium semantics, the
@@ -229,7 +239,11 @@ TASKS: dict[str, TaskSpec] = {
     )
 }
 
-SUPPORTED_SPACES = "a flat Box observation (one dimension) and a Discrete action space starting at 0"
+SUPPORTED_SPACES = ("a Discrete action space starting at 0 and an observation of Box, Discrete, MultiDiscrete or "
+                    "MultiBinary parts (Dicts and Tuples of them are flattened; images are not supported yet)")
+
+RESERVED_KWARGS = {"render_mode": "is chosen by the command (evaluate.py --video)",
+                   "max_episode_steps": "is the step limit: use --max-steps N"}
 
 
 def get_task(name: str) -> TaskSpec:
@@ -243,24 +257,119 @@ def get_task(name: str) -> TaskSpec:
 def env_task(env_id: str) -> TaskSpec:
     """Any registered Gymnasium env as a task: no shaping, its own time limit and threshold.
 
-    A `ConfigError` of one line for an unknown id and for spaces the networks cannot take
-    (images, continuous actions, Dict observations).
+    A one-line `ConfigError` for an id that is not registered (after importing the module of a
+    `module:Env-v0` id); its spaces are checked by `task_spaces`, with the run's env kwargs.
     """
+    module, _, bare = env_id.rpartition(":")
     try:
-        env = gym.make(env_id, max_episode_steps=-1)
-    except (gym.error.Error, ModuleNotFoundError, ImportError) as error:
+        if module:
+            importlib.import_module(module)
+        spec = gym.spec(bare)
+    except (gym.error.Error, ImportError) as error:
         raise ConfigError(f"unknown task {env_id!r}: neither a preset ({', '.join(sorted(TASKS))}) nor a "
                           f"Gymnasium env id ({type(error).__name__}: {error})") from None
-    obs_space, action_space = env.observation_space, env.action_space
-    spec = gym.registry[env_id.rpartition(":")[2]]  # registered by now, its module imported
-    env.close()
-    flat_box = isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1
-    discrete = isinstance(action_space, gym.spaces.Discrete) and int(action_space.start) == 0
-    if not (flat_box and discrete):
-        raise ConfigError(f"{env_id} has observation space {obs_space} and action space {action_space}; "
-                          f"supported: {SUPPORTED_SPACES}")
     threshold = None if spec.reward_threshold is None else float(spec.reward_threshold)
     return TaskSpec(env_id, env_id, None, spec.max_episode_steps, solved_return=threshold)
+
+
+@dataclass(frozen=True)
+class TaskSpaces:
+    """What the networks see of a task made with given env kwargs: the observation layout and the actions."""
+
+    layout: ObservationLayout
+    n_actions: int
+
+    @property
+    def obs_dim(self) -> int:
+        return self.layout.dim
+
+
+def task_spaces(name: str, env_kwargs: Mapping[str, Any] | None = None) -> TaskSpaces:
+    """The spaces of task `name` made with `env_kwargs`, checked once per process: a one-line
+    `ConfigError` for a keyword the env does not take and for spaces the networks cannot take."""
+    return _task_spaces(name, _kwargs_key(env_kwargs))
+
+
+def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
+    """A `ConfigError` naming the first keyword of `env_kwargs` that env `env_id`'s constructor
+    does not take (with the nearest one it does), checked on its signature before any env is made."""
+    for key, why in RESERVED_KWARGS.items():
+        if key in env_kwargs:
+            raise ConfigError(f"--env-kwargs {key}: not an env kwarg here; it {why}")
+    spec = gym.spec(env_id.rpartition(":")[2])
+    try:
+        creator = spec.entry_point if callable(spec.entry_point) else \
+            gym.envs.registration.load_env_creator(spec.entry_point)
+        parameters = inspect.signature(creator).parameters
+    except (TypeError, ValueError, ImportError, AttributeError):
+        return  # no signature to read: gym.make will say
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return
+    takes = [name for name, p in parameters.items() if p.kind is not inspect.Parameter.VAR_POSITIONAL
+             and name not in ("self", *RESERVED_KWARGS)]
+    for key in env_kwargs:
+        if key not in parameters:
+            near = difflib.get_close_matches(key, takes, n=1)
+            hint = f"did you mean {near[0]!r}? " if near else ""
+            raise ConfigError(f"--env-kwargs {key}: {env_id} takes no keyword argument {key!r} ({hint}it takes: "
+                              f"{', '.join(takes) or 'none'})")
+
+
+def effective_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """The kwargs env `env_id` is made with when given `env_kwargs`: its constructor's defaults,
+    then its registration's, then `env_kwargs`, as JSON values (what a Minari `env_spec` stores);
+    without `render_mode`, which only changes what is drawn."""
+    spec = gym.spec(env_id.rpartition(":")[2])
+    defaults: dict[str, Any] = {}
+    try:
+        creator = spec.entry_point if callable(spec.entry_point) else \
+            gym.envs.registration.load_env_creator(spec.entry_point)
+        defaults = {name: p.default for name, p in inspect.signature(creator).parameters.items()
+                    if p.default is not inspect.Parameter.empty}
+    except (TypeError, ValueError, ImportError, AttributeError):
+        pass
+    merged = {**defaults, **spec.kwargs, **env_kwargs}
+    merged.pop("render_mode", None)
+    return json.loads(json.dumps(merged, default=repr))
+
+
+def _kwargs_key(env_kwargs: Mapping[str, Any] | None) -> str:
+    """`env_kwargs` as one canonical, hashable string (a cache key)."""
+    try:
+        return json.dumps(dict(env_kwargs or {}), sort_keys=True)
+    except TypeError as error:
+        raise ConfigError(f"env kwargs must be JSON values: {error}") from None
+
+
+@functools.cache
+def _task_spaces(name: str, kwargs_key: str) -> TaskSpaces:
+    env = _make(name, json.loads(kwargs_key), max_episode_steps=-1)
+    obs_space, action_space = env.observation_space, env.action_space
+    env.close()
+    if not (isinstance(action_space, gym.spaces.Discrete) and int(action_space.start) == 0):
+        raise ConfigError(f"{name} has action space {action_space}; supported: {SUPPORTED_SPACES}")
+    return TaskSpaces(observation_layout(obs_space, name), int(action_space.n))
+
+
+def _make(name: str, env_kwargs: Mapping[str, Any] | None, **options: Any) -> gym.Env:
+    """`gym.make` of task `name`'s plain env with `env_kwargs`; a bad keyword is one `ConfigError` line."""
+    env_id, env_kwargs = get_task(name).env_id, dict(env_kwargs or {})
+    check_env_kwargs(env_id, env_kwargs)
+    try:
+        return gym.make(env_id, **options, **env_kwargs)
+    except (TypeError, ValueError, AssertionError) as error:
+        if not env_kwargs:
+            raise
+        detail = " ".join(str(error).split())
+        raise ConfigError(f"--env-kwargs {json.dumps(env_kwargs)}: {env_id} refused them ({type(error).__name__}: "
+                          f"{detail})") from None
+
+
+def _observe(env: gym.Env, name: str, env_kwargs: Mapping[str, Any] | None) -> gym.Env:
+    """`env` with its observations flattened, unless they are a flat Box already."""
+    if is_flat(env.observation_space):
+        return env
+    return FlattenObservation(env, task_spaces(name, env_kwargs).layout)
 
 
 def task_slug(name: str) -> str:
@@ -272,7 +381,7 @@ def step_limit(name: str, max_steps: int | None = None) -> int:
     """The step limit in force: `max_steps`, else the task's; an error if neither exists."""
     limit = get_task(name).max_steps if max_steps is None else max_steps
     if limit is None:
-        raise ConfigError(f"{name} has no time limit of its own: set one with --set max_steps=N")
+        raise ConfigError(f"{name} has no time limit of its own: set one with --max-steps N (or --set max_steps=N)")
     return limit
 
 
@@ -286,10 +395,12 @@ def make_task(
     timeout: str = "bootstrap",
     max_steps: int | None = None,
     render_mode: str | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> gym.Env:
-    """Build the task env `name` with the paper's settings; `max_steps` overrides the limit."""
+    """Build the task env `name` with the paper's settings; `max_steps` overrides the limit,
+    `env_kwargs` go to the env's constructor."""
     spec, limit = get_task(name), step_limit(name, max_steps)
-    env = gym.make(spec.env_id, max_episode_steps=-1, **_rendering(render_mode))
+    env = _observe(_make(name, env_kwargs, max_episode_steps=-1, **_rendering(render_mode)), name, env_kwargs)
     if spec.fall_penalty is not None:
         env = FallPenalty(env, spec.fall_penalty)
     if spec.goal_reward is not None:
@@ -299,17 +410,19 @@ def make_task(
 
 
 def make_plain_env(
-    name: str, timeout: str = "bootstrap", max_steps: int | None = None, render_mode: str | None = None
+    name: str, timeout: str = "bootstrap", max_steps: int | None = None, render_mode: str | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> gym.Env:
-    """The unmodified Gymnasium env of task `name`, with its own time limit (an env without
-    one gets the training limit `max_steps`).
+    """The unmodified Gymnasium env of task `name` (made with `env_kwargs`), with its own time
+    limit (an env without one gets the training limit `max_steps`); observations flattened as
+    the networks take them.
 
     With `timeout="time-aware"` the observation also carries the time feature the agent was
     trained with (fraction of the training limit `max_steps` left); rewards and ends are untouched.
     """
     spec = get_task(name)
     own_limit = None if spec.max_steps is not None else step_limit(name, max_steps)
-    env = gym.make(spec.env_id, max_episode_steps=own_limit, **_rendering(render_mode))
+    env = _observe(_make(name, env_kwargs, max_episode_steps=own_limit, **_rendering(render_mode)), name, env_kwargs)
     if timeout == "time-aware":
         env = TimeFeature(env, step_limit(name, max_steps))
     return env

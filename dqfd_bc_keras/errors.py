@@ -44,6 +44,11 @@ class DivergedError(DqfdError):
     good checkpoint."""
 
 
+class DqfdWarning(UserWarning):
+    """Something a user should know that does not stop the run; the command-line tools print it
+    as one line, `warning: …`."""
+
+
 def one_line(error: BaseException) -> str:
     """An exception as one short line: its type and the first line of its message, without
     TensorFlow's op decorations (`{{function_node …}}`, `[Op:SaveV2]`)."""

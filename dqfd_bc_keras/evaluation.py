@@ -11,8 +11,9 @@ import json
 import statistics
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import keras
@@ -20,7 +21,7 @@ import numpy as np
 
 from .bc import BCModel
 from .config import Config
-from .envs import TIMEOUT_MODES, get_task, make_plain_env, make_task, task_slug
+from .envs import TIMEOUT_MODES, get_task, make_plain_env, make_task, task_slug, task_spaces
 from .errors import ConfigError, ModelFileError
 from .uncertainty import EnsembleDense
 
@@ -111,6 +112,7 @@ class EvalResult:
     goals: list[int] | None = None
     """Flags reached per episode (goal-count tasks only)."""
     timeout: str = "bootstrap"
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
 
     @property
     def mean_return(self) -> float:
@@ -129,6 +131,8 @@ class EvalResult:
         }
         if self.goals is not None:
             result.update(goals=self.goals, mean_goals=statistics.fmean(self.goals))
+        if self.env_kwargs:
+            result["env_kwargs"] = self.env_kwargs
         return result
 
     def summary(self) -> str:
@@ -151,26 +155,30 @@ def solved_text(task: str) -> str:
 
 
 def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed: int,
-             timeout: str = "bootstrap", max_steps: int | None = None) -> EvalResult:
+             timeout: str = "bootstrap", max_steps: int | None = None,
+             env_kwargs: dict[str, Any] | None = None) -> EvalResult:
     """Play `episodes` episodes of `policy` on task `task`'s plain env (episode i: seed + i).
 
-    `timeout`/`max_steps` are the training run's: in time-aware mode the observation carries
-    the time feature the agent learned with. Goal-count tasks replay the same seeds on the
-    task env, where the car restarts at the flag, to count the goals.
+    `timeout`/`max_steps`/`env_kwargs` are the training run's: in time-aware mode the
+    observation carries the time feature the agent learned with. Goal-count tasks replay the
+    same seeds on the task env, where the car restarts at the flag, to count the goals.
     """
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
     if timeout not in TIMEOUT_MODES:
         raise ConfigError(f"unknown timeout mode {timeout!r}; expected one of {TIMEOUT_MODES}")
-    returns, lengths, _ = _play(make_plain_env(task, timeout, max_steps), policy, episodes, seed)
+    env = make_plain_env(task, timeout, max_steps, env_kwargs=env_kwargs)
+    returns, lengths, _ = _play(env, policy, episodes, seed)
     goals = None
     if get_task(task).goal_count:
-        goals = _play(make_task(task, timeout, max_steps), policy, episodes, seed)[2]
-    return EvalResult(task, getattr(policy, "kind", "custom"), seed, returns, lengths, goals, timeout)
+        goals = _play(make_task(task, timeout, max_steps, env_kwargs=env_kwargs), policy, episodes, seed)[2]
+    return EvalResult(task, getattr(policy, "kind", "custom"), seed, returns, lengths, goals, timeout,
+                      dict(env_kwargs or {}))
 
 
 def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str | Path, episodes: int, seed: int,
-                 timeout: str = "bootstrap", max_steps: int | None = None) -> list[Path]:
+                 timeout: str = "bootstrap", max_steps: int | None = None,
+                 env_kwargs: dict[str, Any] | None = None) -> list[Path]:
     """Play `episodes` greedy episodes on the plain env (as `evaluate`) and save each as an MP4
     in `directory` with Gymnasium's `RecordVideo` (needs `moviepy`); returns the files."""
     try:
@@ -184,7 +192,7 @@ def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str 
     if any(directory.glob(f"{prefix}-episode-*.mp4")):
         raise ConfigError(f"--video {directory}: already holds {prefix} videos, which would be overwritten; "
                           "choose another directory")
-    env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array")
+    env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array", env_kwargs=env_kwargs)
     env = gym.wrappers.RecordVideo(env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix,
                                    disable_logger=True)
     _play(env, policy, episodes, seed)
@@ -247,16 +255,20 @@ class EvalSettings:
     task: str
     timeout: str = "bootstrap"
     max_steps: int | None = None
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
 
 
-def load_policy(target: str | Path, policy: str | None = None,
-                task: str | None = None) -> tuple[GreedyPolicy, EvalSettings]:
+def load_policy(target: str | Path, policy: str | None = None, task: str | None = None,
+                max_steps: int | None = None,
+                env_kwargs: dict[str, Any] | None = None) -> tuple[GreedyPolicy, EvalSettings]:
     """The greedy policy saved at `target` (a run directory or a `.keras` file) and its settings.
 
     `policy` picks the run directory's model: "q" (`q_network.keras`, the default) or "bc"
     (`bc_model.keras`); a `.keras` file is played as it is, and must be of kind `policy` if
-    that is given. Task, timeout and max_steps come from the `config.json` in the run
-    directory or beside the file; `task` overrides the task, and is required without one.
+    that is given. Task, timeout, max_steps and env kwargs come from the `config.json` in the
+    run directory or beside the file; `task`, `max_steps` and `env_kwargs` override them (a
+    task other than the config's keeps none of its env settings), and `task` is required
+    without one.
     """
     if policy is not None and policy not in POLICY_FILES:
         raise ConfigError(f"policy {policy!r} is not one of {sorted(POLICY_FILES)}")
@@ -277,11 +289,14 @@ def load_policy(target: str | Path, policy: str | None = None,
         raise ModelFileError(f"{model_path}: a {greedy.kind!r} model, not a {policy!r} one")
     if task is None and config is None:
         raise ConfigError(f"{target}: no config.json beside the model says which task it plays; pass --task")
-    settings = (EvalSettings(model_path, task) if config is None
-                else EvalSettings(model_path, task or config.task, config.timeout, config.max_steps))
-    env = make_plain_env(settings.task, settings.timeout, settings.max_steps)
-    check_model_fits(model, env.observation_space.shape[0], int(env.action_space.n), model_path, settings.task)
-    env.close()
+    own = config is not None and task in (None, config.task)  # the config's env settings apply
+    settings = EvalSettings(
+        model_path, task or config.task, config.timeout if config else "bootstrap",
+        max_steps if max_steps is not None else config.max_steps if own else None,
+        dict(env_kwargs) if env_kwargs is not None else dict(config.env_kwargs) if own else {})
+    spaces = task_spaces(settings.task, settings.env_kwargs)
+    time_feature = int(settings.timeout == "time-aware")
+    check_model_fits(model, spaces.obs_dim + time_feature, spaces.n_actions, model_path, settings.task)
     return greedy, settings
 
 

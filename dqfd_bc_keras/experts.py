@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from .cli import ArgumentParser, positive_int, run
-from .envs import get_task, make_plain_env
+from .envs import get_task, task_spaces
 from .errors import ConfigError
 
 FAMILIES = ("cartpole", "mountaincar", "acrobot", "lunarlander")
@@ -151,24 +151,24 @@ def check_demonstrator(spec: str) -> None:
                           "a .keras model file")
 
 
-def make_demonstrator(spec: str, task: str, epsilon: float = 0.0, seed: int | None = None) -> Demonstrator:
-    """The demonstrator `spec` on `task`: a scripted expert of the task's family (strong |
-    imperfect), a rule `module:function` (an importable function obs → action), or the greedy
-    policy of a saved `.keras` Q-network or BC model (checked against the task's spaces)."""
+def make_demonstrator(spec: str, task: str, epsilon: float = 0.0, seed: int | None = None,
+                      env_kwargs: dict | None = None) -> Demonstrator:
+    """The demonstrator `spec` on `task` (made with `env_kwargs`): a scripted expert of the task's
+    family (strong | imperfect), a rule `module:function` (an importable function of the
+    observation as the networks see it, flattened, → action), or the greedy policy of a saved
+    `.keras` Q-network or BC model (checked against the task's spaces)."""
     check_demonstrator(spec)
+    n_actions = task_spaces(task, env_kwargs).n_actions  # first: an env we cannot learn on is the error
     family = get_task(task).family
     if spec in EXPERT_NAMES:
         if family is None:
             raise ConfigError(f"{task} has no scripted {spec} expert: give demonstrations with --demos "
                               "FILE.npz or minari:DATASET_ID, or a demonstrator module:function or model.keras")
         return make_expert(family, spec, epsilon, seed)
-    env = make_plain_env(task)
-    n_actions = int(env.action_space.n)
-    env.close()
     if spec.endswith(".keras"):
         from .evaluation import load_policy  # loads Keras: only when a model demonstrates
 
-        rule: Rule = load_policy(spec, None, task)[0]
+        rule: Rule = load_policy(spec, None, task, env_kwargs=env_kwargs or {})[0]
     else:
         module, _, name = spec.partition(":")
         try:

@@ -29,9 +29,16 @@ from types import ModuleType
 import gymnasium as gym
 import numpy as np
 
+import dataclasses
+import json
+from typing import Any
+
 from .demos import ARRAYS, DemoDataset, DemoMeta, _validate
-from .envs import TIMEOUT_MODES, TaskSpec, get_task
+from .envs import TIMEOUT_MODES, TaskSpec, effective_kwargs, get_task, task_spaces
 from .errors import ConfigError, DemoFileError, one_line
+from .observations import describe
+
+_ABSENT = object()
 
 DATA_FORMAT = "hdf5"
 """Minari's storage format for the datasets we write: its extra needs only h5py, which Keras
@@ -76,25 +83,30 @@ def _refuse_shaped(spec: TaskSpec, what: str) -> None:
 
 
 def _check_spaces(where: Path, dataset_spaces: tuple[gym.Space, gym.Space], task: str,
-                  task_spaces: tuple[gym.Space, gym.Space]) -> None:
-    """The dataset's spaces must be the task env's: a flat Box of its shape and Discrete(n) from 0."""
-    (obs_space, action_space), (task_obs, task_actions) = dataset_spaces, task_spaces
-    obs_ok = isinstance(obs_space, gym.spaces.Box) and obs_space.shape == task_obs.shape
+                  task_obs: gym.Space, n_actions: int) -> None:
+    """The dataset's spaces must be the task env's own: the same kinds and shapes (a Box's
+    bounds may differ) and Discrete(n) from 0."""
+    obs_space, action_space = dataset_spaces
     actions_ok = (isinstance(action_space, gym.spaces.Discrete) and int(action_space.start) == 0
-                  and int(action_space.n) == int(task_actions.n))
-    if not (obs_ok and actions_ok):
-        raise DemoFileError(where, f"mismatched spaces: dataset has {obs_space}/{action_space}, "
-                                   f"task {task} has {task_obs}/{task_actions}")
+                  and int(action_space.n) == n_actions)
+    if describe(obs_space) != describe(task_obs) or not actions_ok:
+        raise DemoFileError(where, f"mismatched spaces: dataset has {describe(obs_space)}/{action_space}, "
+                                   f"task {task} has {describe(task_obs)}/Discrete({n_actions})")
 
 
-def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap") -> DemoDataset:
-    """Read the Minari dataset `dataset_id` from the local cache as demonstrations for `task`.
+def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap",
+                env_kwargs: dict[str, Any] | None = None) -> DemoDataset:
+    """Read the Minari dataset `dataset_id` from the local cache as demonstrations for `task`
+    made with `env_kwargs`.
 
     Never downloads. Refuses, in one line naming the dataset: a missing dataset (and where it
-    looked), another env, other spaces, a shaped-reward task, `timeout="time-aware"` (there is
-    no time feature to add) and incomplete episodes. `naive` records every truncation as a
-    termination, as our naive mode does; `bootstrap` keeps Gymnasium's flags.
+    looked), another env, other env kwargs (compared with the registration's defaults filled
+    in on both sides), other spaces, a shaped-reward task, `timeout="time-aware"` (there is no
+    time feature to add) and incomplete episodes. Observations are flattened as the task's are
+    (`observations`). `naive` records every truncation as a termination, as our naive mode
+    does; `bootstrap` keeps Gymnasium's flags.
     """
+    env_kwargs = dict(env_kwargs or {})
     minari = _minari()
     where = Path(f"minari:{dataset_id}")
     if timeout not in TIMEOUT_MODES:
@@ -118,10 +130,16 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap") -> DemoD
                                    f"{spec.env_id}")
     if _bare_id(source.env_spec.id) != _bare_id(spec.env_id):
         raise DemoFileError(where, f"was recorded on {source.env_spec.id}, but task {task!r} is {spec.env_id}")
-    env = gym.make(spec.env_id, max_episode_steps=-1)
-    task_spaces = (env.observation_space, env.action_space)
-    env.close()
-    _check_spaces(where, (source.observation_space, source.action_space), task, task_spaces)
+    spaces = task_spaces(task, env_kwargs)
+    theirs = effective_kwargs(spec.env_id, dict(source.env_spec.kwargs or {}))
+    ours = effective_kwargs(spec.env_id, env_kwargs)
+    if theirs != ours:  # the keys that differ, with the constructor's and registration's defaults filled in
+        keys = sorted(k for k in {*theirs, *ours} if theirs.get(k, _ABSENT) != ours.get(k, _ABSENT))
+        show = lambda kwargs: json.dumps({k: kwargs.get(k, "(not given)") for k in keys})  # noqa: E731
+        raise DemoFileError(where, f"was recorded with env kwargs {show(theirs)}, but the task is made with "
+                                   f"{show(ours)}")
+    layout = spaces.layout
+    _check_spaces(where, (source.observation_space, source.action_space), task, layout.space, spaces.n_actions)
 
     columns: dict[str, list[np.ndarray]] = {name: [] for name in ARRAYS}
     returns: list[float] = []
@@ -130,13 +148,16 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap") -> DemoD
     except Exception as error:
         raise DemoFileError(where, f"cannot be read ({one_line(error)})") from None
     for index, episode in enumerate(episodes):
-        observations = np.asarray(episode.observations, dtype=np.float32)
         steps = len(episode.rewards)
+        try:
+            observations = layout.flatten(episode.observations, batch=steps + 1)
+        except (KeyError, IndexError, TypeError, ValueError) as error:
+            raise DemoFileError(where, f"episode {index} has {steps} steps and observations that do not fit "
+                                       f"{describe(layout.space)} × {steps + 1} ({one_line(error)})") from None
         terminated = np.asarray(episode.terminations, dtype=bool)
         truncated = np.asarray(episode.truncations, dtype=bool) & ~terminated
-        if steps == 0 or observations.shape != (steps + 1, *task_spaces[0].shape):
-            raise DemoFileError(where, f"episode {index} has {steps} steps and observations of shape "
-                                       f"{observations.shape}; expected ({steps + 1}, {task_spaces[0].shape[0]})")
+        if steps == 0:
+            raise DemoFileError(where, f"episode {index} has no steps")
         if not (terminated[-1] or truncated[-1]):
             raise DemoFileError(where, f"episode {index} is incomplete: its last step is neither terminated "
                                        "nor truncated")
@@ -154,9 +175,9 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap") -> DemoD
         raise DemoFileError(where, "the dataset is empty")
 
     meta = DemoMeta(
-        task=task, env_id=spec.env_id, timeout=timeout, obs_dim=int(task_spaces[0].shape[0]),
-        n_actions=int(task_spaces[1].n), expert=f"minari:{dataset_id}", epsilon=0.0, seed=0,
-        episode_returns=returns, plain_returns=list(returns),
+        task=task, env_id=spec.env_id, timeout=timeout, obs_dim=layout.dim,
+        n_actions=spaces.n_actions, expert=f"minari:{dataset_id}", epsilon=0.0, seed=0,
+        episode_returns=returns, plain_returns=list(returns), env_kwargs=env_kwargs, observation=layout.text(),
     )
     dataset = DemoDataset(**{name: np.concatenate(columns[name]).astype(dtype, copy=False)
                              for name, (dtype, _) in ARRAYS.items()}, meta=meta)
@@ -181,7 +202,11 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
         raise ConfigError(f"{where}: the dataset was recorded with timeout={m.timeout!r}, so its flags at the "
                           "time limit do not mean what Gymnasium's do; record it again with --timeout bootstrap")
     _refuse_shaped(get_task(m.task), where)  # also imports the env's module (`module:Env-v0`)
+    if not task_spaces(m.task, m.env_kwargs).layout.flat:
+        raise ConfigError(f"{where}: the dataset's observations were flattened from {m.observation}; a Minari "
+                          "dataset holds the env's own observations, so record it with Minari's DataCollector")
     env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
+    env_spec = dataclasses.replace(env_spec, kwargs={**env_spec.kwargs, **m.env_kwargs})
     directory = _dataset_dir(dataset_id)
     if directory.exists() and not force:
         raise ConfigError(f"{where}: a Minari dataset of that id exists at {directory}; pass --force to replace it")

@@ -1,12 +1,14 @@
 """A training run on disk: what `train.py` writes, checkpoints, and resuming.
 
-    RUN_DIR/config.json        every hyperparameter (written once, at the start)
+    RUN_DIR/config.json        every hyperparameter (written once, at the start), and under
+                               "observation" the env's observation space and how it was flattened
             metrics.csv        one row per episode (training.METRIC_FIELDS)
             evals.csv          greedy evaluations on the plain env at exactly every eval_every interactions
             demonstrations.json  the initial D_demo: size and returns (runs with demonstrations)
             dynamic_demos.json every dynamic-demonstration update
             tb/                TensorBoard events: returns, evaluations, each loss term
-            checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state)
+            checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state), and
+                               demos_given.npz, D_demo as given before any interaction
             q_network.keras  bc_model.keras  demos.npz  eval.json  learning_curve.png   (at the end)
 
 Every file is written atomically; a checkpoint is a new directory, fsynced, then made current
@@ -31,14 +33,18 @@ import tensorflow as tf
 
 from . import demos as demo_io
 from .config import Config
-from .errors import BrokenRunError, ConfigError, DivergedError, OutputExistsError, RunDirectoryError, one_line
+from .errors import (BrokenRunError, ConfigError, DemoFileError, DivergedError, OutputExistsError, RunDirectoryError,
+                     one_line)
 from .files import DirectoryLock, atomic_path, sync_tree, write_text
-from .envs import get_task
+from .envs import get_task, task_spaces
 from .evaluation import EvalResult
 from .seeds import eval_seed, final_eval_seed
 from .training import (METRIC_FIELDS, Learner, TrainingState, build, run_evaluation, state_from_dict,
                        train_episodes)
 
+GIVEN_DEMOS = "demos_given.npz"
+"""D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
+demonstrations whatever their source (a file, a Minari dataset, a recording)."""
 EVAL_FIELDS = ("env_step", "interactions", "episode", "mean_return", "std_return", "mean_goals")
 
 
@@ -259,23 +265,40 @@ def train(
         return run.finish()
 
 
+def saved_config(out: str | Path) -> Config:
+    """The config of the run in `out`, to resume it: its task, env kwargs and step limit come from
+    there, not from the command line. A one-line error if there is no run to resume."""
+    out = Path(out)
+    check_dir(out, resume=True, force=False)
+    try:
+        return Config.from_dict(json.loads((out / "config.json").read_text()))
+    except (OSError, ValueError) as error:
+        raise BrokenRunError(f"{out / 'config.json'}: cannot be resumed ({one_line(error)}); "
+                             "start the run over with --force") from None
+
+
 def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool) -> RunDirectory:
     """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
     if resume:
-        try:
-            config = Config.from_dict(json.loads((out / "config.json").read_text()))
-        except (OSError, ValueError) as error:
-            raise BrokenRunError(f"{out / 'config.json'}: cannot be resumed ({one_line(error)}); "
-                                 "start the run over with --force") from None
+        config = saved_config(out)
     else:
-        write_text(out / "config.json", json.dumps(config.to_dict(), indent=1))
+        observation = task_spaces(config.task, config.env_kwargs).layout.to_dict()
+        write_text(out / "config.json", json.dumps({**config.to_dict(), "observation": observation}, indent=1))
     if config.deterministic:
         tf.config.experimental.enable_op_determinism()
+    given = out / "checkpoints" / GIVEN_DEMOS
+    if resume and given.is_file():  # the run's own D_demo, not a new recording (nor the --demos of this call)
+        try:
+            dataset = demo_io.load(given, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
+        except DemoFileError as error:
+            raise BrokenRunError(f"{error}; the run cannot be resumed: start the run over with --force") from None
     learner, _ = build(config, dataset, fresh=not resume)
     run = RunDirectory(config, out, learner, TrainingState(), quiet)
     if resume:
         run.restore_checkpoint()
     else:
+        if learner.demos is not None:
+            demo_io.save(learner.demos, given, force=True)
         run.write_demonstrations(learner.demos)
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()

@@ -53,7 +53,8 @@ class Interaction(tf.Module):
         self.env_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="env_steps")
         self.rng = tf.random.Generator.from_seed(config.seed + 1)
         self.episode = EpisodeStats()
-        self.recorder = demo_io.EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed) \
+        self.recorder = demo_io.EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed,
+                                                env_kwargs=config.env_kwargs) \
             if record else None
         obs_dim = agent.obs_dim
         self.play = tf.function(self._play, autograph=False, input_signature=[
@@ -151,8 +152,8 @@ def demonstrations(config: Config, dataset: demo_io.DemoDataset | None) -> demo_
     if dataset is not None:
         return dataset
     return demo_io.record(config.task, config.expert, config.demo_episodes, seed=demo_seed(config.seed),
-                          epsilon=config.expert_epsilon,
-                          timeout=config.timeout, max_steps=config.max_steps)
+                          epsilon=config.expert_epsilon, timeout=config.timeout, max_steps=config.max_steps,
+                          env_kwargs=config.env_kwargs)
 
 
 def fit_bc(config: Config, bc: BCModel, data: demo_io.DemoDataset, epochs: int, fit_index: int) -> float:
@@ -240,7 +241,7 @@ class DynamicDemos:
         if c.dynamic_demos == "rollouts":
             seeds = [episode_seed(c.seed, state.episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
             return demo_io.rollout(self.env, GreedyPolicy.from_model(agent.q_network), seeds, task=c.task,
-                                   source="agent", seed=c.seed).episodes()
+                                   source="agent", seed=c.seed, env_kwargs=c.env_kwargs).episodes()
         chosen = [e for e in self.recent if e.meta.episode_returns[0] >= state.best_average]
         self.recent = []
         return chosen
@@ -270,7 +271,7 @@ class DynamicDemos:
 def run_evaluation(config: Config, agent: DQfDAgent, episodes: int, seed: int) -> EvalResult:
     """Greedy episodes of the current Q-network on the plain env (and goal counts where that applies)."""
     return evaluate(GreedyPolicy.from_model(agent.q_network), config.task, episodes, seed,
-                    timeout=config.timeout, max_steps=config.max_steps)
+                    timeout=config.timeout, max_steps=config.max_steps, env_kwargs=config.env_kwargs)
 
 
 def early_stop(config: Config, returns: list[float]) -> bool:
@@ -308,7 +309,7 @@ def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: boo
     """Steps 1–2: demonstrations, π_bc, the pre-trained agent; returns the learner and
     pre-training's losses. `fresh=False` skips the fits: a resume restores their results."""
     tally = Tally()
-    env = CountInteractions(make_task(config.task, timeout=config.timeout, max_steps=config.max_steps), tally)
+    env = CountInteractions(task_env(config), tally)
     data = demonstrations(config, dataset)
     agent, bc = build_learner(config, data, env, fit=fresh)
     pretrain = fresh and data is not None and config.pretrain_steps > 0
@@ -317,11 +318,15 @@ def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: boo
     agent.reset_metrics()
     dynamic = None
     if bc is not None and config.dynamic_demos != "off":
-        rollout_env = CountInteractions(make_task(config.task, timeout=config.timeout, max_steps=config.max_steps),
-                                        tally)
+        rollout_env = CountInteractions(task_env(config), tally)
         dynamic = DynamicDemos(config, data, rollout_env)
     record = dynamic is not None and config.dynamic_demos == "episodes"
     return Learner(config, agent, bc, Interaction(agent, env, config, record), dynamic, tally, data), losses
+
+
+def task_env(config: Config) -> gym.Env:
+    """The task env of `config`: its env kwargs, time-limit mode and step limit."""
+    return make_task(config.task, timeout=config.timeout, max_steps=config.max_steps, env_kwargs=config.env_kwargs)
 
 
 def check_finite(losses: dict[str, float], where: str) -> None:

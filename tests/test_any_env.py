@@ -10,17 +10,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dqfd_bc_keras import demos
+from dqfd_bc_keras import cli, demos
 from dqfd_bc_keras.config import Config, EnvConfig
-from dqfd_bc_keras.envs import env_task, get_task, make_plain_env, make_task, task_slug
+from dqfd_bc_keras.envs import get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, DqfdError
 from dqfd_bc_keras.evaluation import evaluate, load_policy
 from dqfd_bc_keras.experiments.suites import SUITES, arm, on_task
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "tests")])}
+sys.path.insert(0, str(REPO))  # train.py, imported to call its main in this process
 CHAIN = "toy_envs:ToyChain-v0"
-SUPPORTED = "supported: a flat Box observation (one dimension) and a Discrete action space"
+NO_LIMIT = "toy_envs:ToyChainNoLimit-v0"
+SUPPORTED = "supported: a Discrete action space starting at 0 and an observation of Box"
+IMAGES = "observes images: Box(84, 84, 3) uint8 needs a convolutional network, which is not supported yet"
 
 
 def run(*args, timeout=300):
@@ -31,7 +34,8 @@ def run(*args, timeout=300):
 def one_line_error(done, message):
     assert done.returncode == 2, done.stdout + done.stderr
     assert message in done.stderr
-    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    lines = [line for line in done.stderr.strip().splitlines() if not line.startswith("warning: ")]
+    assert len(lines) == 1, done.stderr  # one line of error (after any one-line warning)
 
 
 def test_a_user_env_is_a_task_with_its_own_limit_threshold_and_no_shaping():
@@ -56,16 +60,17 @@ def test_the_generic_preset_is_written_to_config_json_and_overridable():
     assert config.with_overrides(["eval_every=7"]).eval_every == 7
 
 
-@pytest.mark.parametrize("env_id", ["toy_envs:ToyImage-v0", "toy_envs:ToyDict-v0", "Pendulum-v1"])
-def test_unsupported_spaces_are_refused_by_name(env_id):
-    with pytest.raises(ConfigError, match=re.escape(SUPPORTED)):
-        env_task(env_id)
+@pytest.mark.parametrize("env_id, message", [("toy_envs:ToyImage-v0", IMAGES), ("Pendulum-v1", SUPPORTED),
+                                               ("toy_envs:ToyTextOnly-v0", "which has no numeric part")])
+def test_unsupported_spaces_are_refused_by_name(env_id, message):
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        task_spaces(env_id)
 
 
 def test_an_env_without_a_time_limit_needs_max_steps():
-    with pytest.raises(ConfigError, match="has no time limit of its own: set one with --set max_steps=N"):
-        Config.for_task("toy_envs:ToyChainNoLimit-v0")
-    config = Config.for_task("toy_envs:ToyChainNoLimit-v0", max_steps=9)
+    with pytest.raises(ConfigError, match=re.escape("has no time limit of its own: set one with --max-steps N")):
+        Config.for_task(NO_LIMIT)
+    config = Config.for_task(NO_LIMIT, max_steps=9)
     assert config.limit == 9
     assert make_plain_env(config.task, max_steps=9).spec.max_episode_steps == 9
 
@@ -116,23 +121,10 @@ def test_suites_move_to_any_env_with_their_settings():
         [arm("acrobot", "bootstrap", "ce")]
 
 
-def test_train_and_evaluate_a_user_env_end_to_end(tmp_path):
-    out = tmp_path / "chain"
-    done = run("train.py", "--env", CHAIN, "--expert", "toy_envs:go_right", "--demo-episodes", 20, "--quick", "--quiet", "--out", out)
-    assert done.returncode == 0, done.stderr
-    config = json.loads((out / "config.json").read_text())
-    assert config["task"] == CHAIN and config["expert"] == "toy_envs:go_right"
-    result = json.loads((out / "eval.json").read_text())
-    assert result["env_id"] == CHAIN and result["mean_return"] == 1.0  # learned to walk right
-    done = run("evaluate.py", out, "--episodes", "3", "--json")
-    assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout)["returns"] == [1.0, 1.0, 1.0]
-
-
 @pytest.mark.parametrize("args, message", [
-    (["train.py", "--env", "toy_envs:ToyImage-v0"], SUPPORTED),
+    (["train.py", "--env", "toy_envs:ToyImage-v0"], IMAGES),
     (["train.py", "--env", "Pendulum-v1"], SUPPORTED),
-    (["train.py", "--env", "toy_envs:ToyDict-v0"], SUPPORTED),
+    (["train.py", "--env", "toy_envs:ToyTextOnly-v0"], "which has no numeric part"),
     (["train.py", "--env", "NoSuchEnv-v0"], "unknown task 'NoSuchEnv-v0'"),
     (["train.py", "--env", CHAIN, "--task", "cartpole"], "not allowed with argument"),
     (["train.py", "--env", CHAIN], "has no scripted imperfect expert"),
@@ -144,3 +136,137 @@ def test_train_and_evaluate_a_user_env_end_to_end(tmp_path):
 def test_unsupported_envs_are_refused_in_one_line_with_exit_2(args, message, tmp_path):
     one_line_error(run(*args[:1], *args[1:], *(["--quick", "--out", tmp_path / "r"] if args[0] == "train.py" else [])),
                    message)
+
+
+# --- an env without a time limit, env kwargs, observations to flatten: all through the commands ------------
+
+DICT_NO_LIMIT = "toy_envs:ToyDictChainNoLimit-v0"
+DROPPED = ("warning: toy_envs:ToyDictChainNoLimit-v0: dropping non-numeric observation part(s) mission "
+           "(of Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7)))")
+
+
+def warnings_of(done):
+    return [line for line in done.stderr.splitlines() if line.startswith("warning:")]
+
+
+def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_end(tmp_path):
+    """One user's path through every entry point: a Dict observation with a text part, no time
+    limit, a constructor kwarg that changes the spaces (size=7: 7 states, 6 steps to the goal)."""
+    refused = run("train.py", "--env", NO_LIMIT, "--expert", "toy_envs:go_right", "--quick", "--out", tmp_path / "x")
+    one_line_error(refused, "has no time limit of its own: set one with --max-steps N (or --set max_steps=N)")
+
+    demos_file = tmp_path / "seven.npz"
+    done = run("-m", "dqfd_bc_keras.demos", "record", "--env", DICT_NO_LIMIT, "--env-kwargs", "size=7",
+               "--max-steps", 12, "--policy", "toy_envs:go_right", "--episodes", 20, "--out", demos_file)
+    assert done.returncode == 0, done.stderr
+    assert warnings_of(done) == [DROPPED]
+    assert 'env kwargs   {"size": 7}' in done.stdout
+    assert ("observation  Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7)) flattened to 14 features; "
+            "dropped mission") in done.stdout
+    data = demos.load(demos_file)
+    np.testing.assert_array_equal(data.obs[1], [0, 1, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0])  # cell 1, visits 0 and 1
+
+    one_line_error(run("train.py", "--env", DICT_NO_LIMIT, "--demos", demos_file, "--set", "max_steps=12", "--quick",
+                       "--out", tmp_path / "y"), 'was recorded with env kwargs {"size": 7}, not the requested {}')
+
+    out = tmp_path / "run"
+    done = run("train.py", "--env", DICT_NO_LIMIT, "--env-kwargs", "size=7", "--set", "max_steps=12", "--demos",
+               demos_file, "--quick", "--quiet", "--set", "checkpoint_every=50", "--out", out)
+    assert done.returncode == 0, done.stderr
+    assert warnings_of(done) == [DROPPED]  # once, however many envs the run makes
+    config = json.loads((out / "config.json").read_text())
+    assert (config["env_kwargs"], config["max_steps"]) == ({"size": 7}, 12)
+    assert config["observation"] == {"space": "Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7))",
+                                     "shape": None, "features": 14, "flattened": True, "dropped": ["mission"]}
+    result = json.loads((out / "eval.json").read_text())
+    assert (result["env_kwargs"], result["lengths"], result["mean_return"]) == ({"size": 7}, [6, 6], 1.0)
+
+    evaluated = run("evaluate.py", out, "--episodes", 2, "--json")  # kwargs and limit from config.json
+    assert evaluated.returncode == 0, evaluated.stderr
+    assert json.loads(evaluated.stdout)["lengths"] == [6, 6]
+    with pytest.raises(DqfdError, match="model expects 14 observation features, task .* gives 10"):
+        load_policy(out, env_kwargs={"size": 5})
+    bare = tmp_path / "model.keras"
+    bare.write_bytes((out / "q_network.keras").read_bytes())  # no config.json beside it: everything is given
+    evaluated = run("evaluate.py", bare, "--env", DICT_NO_LIMIT, "--env-kwargs", "size=7", "--max-steps", 3,
+                    "--episodes", 1, "--json")
+    assert evaluated.returncode == 0, evaluated.stderr
+    assert json.loads(evaluated.stdout)["lengths"] == [3]  # the given limit cuts the 6-step walk
+
+    resumed = run("train.py", "--out", out, "--resume", "--quiet")  # no --env, no kwargs, no limit: the run's own
+    assert resumed.returncode == 0, resumed.stderr
+    assert json.loads((out / "config.json").read_text())["env_kwargs"] == {"size": 7}
+
+    sweep = tmp_path / "sweep"
+    done = run("-m", "dqfd_bc_keras.experiments", "run", "quick", "--env", DICT_NO_LIMIT, "--max-steps", 9,
+               "--env-kwargs", "size=6", "--seeds", 1, "--workers", 2, "--set", "expert=toy_envs:go_right",
+               "--out", sweep, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    runs = sorted(sweep.glob("*/seed0"))
+    assert len(runs) == 2 and all(r.parent.name.endswith("-size=6-toy_envs-go_right") for r in runs), runs
+    for run_dir in runs:
+        config = json.loads((run_dir / "config.json").read_text())
+        assert (config["env_kwargs"], config["max_steps"]) == ({"size": 6}, 9)
+        assert all(1 <= n <= 9 for n in json.loads((run_dir / "eval.json").read_text())["lengths"])
+
+
+def test_a_grid_observation_is_flattened_in_c_order(tmp_path):
+    out = tmp_path / "grid"
+    done = run("train.py", "--env", "toy_envs:ToyGridChain-v0", "--expert", "toy_envs:go_right", "--demo-episodes", 20,
+               "--quick", "--quiet", "--out", out)
+    assert done.returncode == 0, done.stderr
+    assert json.loads((out / "config.json").read_text())["observation"] == {
+        "space": "Box(5, 2) float32", "shape": [5, 2], "features": 10, "flattened": True, "dropped": []}
+    assert json.loads((out / "eval.json").read_text())["mean_return"] == 1.0
+    data = demos.load(out / "demos.npz")
+    assert data.meta.observation == "Box(5, 2) float32 flattened to 10 features"
+    np.testing.assert_array_equal(data.obs[0], [1, 0, 0, 1, 0, 1, 0, 1, 0, 1])  # rows (1, 0), then (0, 1) × 4
+
+
+def test_a_bad_env_kwarg_is_one_line_naming_it_and_the_env(tmp_path, capsys):
+    out = tmp_path / "r"
+    one_line_error(run("train.py", "--env", CHAIN, "--env-kwargs", "sise=7", "--quick", "--out", out),
+                   "--env-kwargs sise: toy_envs:ToyChain-v0 takes no keyword argument 'sise' (did you mean 'size'? "
+                   "it takes: size, observe)")
+    assert not out.exists()
+    import train  # the same command in this process: the other refusals
+
+    def exit_code(argv):
+        try:
+            return cli.run(train.main, [*argv, "--quick", "--out", str(out)])
+        except SystemExit as stop:  # argparse's own errors
+            return stop.code
+
+    for argv, message in [
+        (["--env", CHAIN, "--env-kwargs", "render_mode=human"], "--env-kwargs render_mode: not an env kwarg here"),
+        (["--env", CHAIN, "--env-kwargs", "7"], "argument --env-kwargs: expected KEY=VALUE"),
+        (["--env", CHAIN, "--set", "env_kwargs=7"], "--set env_kwargs='7': expected a JSON object"),
+        (["--task", "cartpole", "--env-kwargs", "gravity=1"], "CartPole-v1 takes no keyword argument 'gravity'"),
+    ]:
+        assert exit_code(argv) == 2
+        error = capsys.readouterr().err
+        assert message in error and len(error.strip().splitlines()) == 1, error
+    assert not out.exists()
+
+
+def test_env_kwargs_values_are_json_else_strings():
+    assert cli.env_kwarg("use_lidar=false") == ("use_lidar", False)
+    assert cli.env_kwarg('obs_type="ram"') == ("obs_type", "ram")
+    assert cli.env_kwarg("obs_type=ram") == ("obs_type", "ram")
+    assert cli.env_kwarg('config={"lanes_count": 3}') == ("config", {"lanes_count": 3})
+    assert cli.env_kwarg("size=7") == ("size", 7) and cli.env_kwarg("x=1.5") == ("x", 1.5)
+
+
+def test_old_demonstration_files_without_kwargs_still_load(tmp_path):
+    """Files written before env kwargs existed have no env_kwargs or observation in their meta."""
+    data = demos.record(CHAIN, "toy_envs:go_right", episodes=1)
+    demos.save(data, tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz") as contents:
+        arrays = {key: contents[key] for key in contents.files}
+    meta = json.loads(str(arrays["meta"]))
+    del meta["env_kwargs"], meta["observation"]
+    np.savez(tmp_path / "old.npz", **{**arrays, "meta": np.array(json.dumps(meta))})
+    old = demos.load(tmp_path / "old.npz", task=CHAIN, timeout="bootstrap")
+    assert (old.meta.env_kwargs, old.meta.observation) == ({}, "")
+    with pytest.raises(DqfdError, match=re.escape("was recorded with env kwargs {}, not the requested {\"size\": 7}")):
+        demos.load(tmp_path / "old.npz", task=CHAIN, env_kwargs={"size": 7})

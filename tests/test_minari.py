@@ -169,16 +169,16 @@ def test_refuses_mismatched_spaces():
     write_minari("cartpole/three-v0", [episode(5, obs_dim=3)], observation_space=box3,
                  action_space=gym.spaces.Discrete(2))
     assert minari.load_dataset("cartpole/three-v0").env_spec.id == "CartPole-v1"
-    with pytest.raises(DemoFileError, match=r"minari:cartpole/three-v0: mismatched spaces: dataset has "
-                                            r"Box\(.*\(3,\).*\)/Discrete\(2\), "
-                                            r"task CartPole-v1 has Box\(.*\(4,\).*\)/Discrete\(2\)"):
+    with pytest.raises(DemoFileError, match=re.escape("minari:cartpole/three-v0: mismatched spaces: dataset has "
+                                                      "Box(3,) float32/Discrete(2), task CartPole-v1 has "
+                                                      "Box(4,) float32/Discrete(2)")):
         from_minari("cartpole/three-v0", "CartPole-v1")
     box4 = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
     with pytest.raises(DemoFileError, match=r"mismatched spaces: dataset has .*/Discrete\(3\)"):
-        _check_spaces("x", (box4, gym.spaces.Discrete(3)), "CartPole-v1", (box4, gym.spaces.Discrete(2)))
+        _check_spaces("x", (box4, gym.spaces.Discrete(3)), "CartPole-v1", box4, 2)
     with pytest.raises(DemoFileError, match="mismatched spaces"):
-        _check_spaces("x", (box4, gym.spaces.Discrete(2, start=1)), "CartPole-v1", (box4, gym.spaces.Discrete(2)))
-    _check_spaces("x", (box4, gym.spaces.Discrete(2)), "CartPole-v1", (box4, gym.spaces.Discrete(2)))
+        _check_spaces("x", (box4, gym.spaces.Discrete(2, start=1)), "CartPole-v1", box4, 2)
+    _check_spaces("x", (box4, gym.spaces.Discrete(2)), "CartPole-v1", box4, 2)
 
 
 def test_refuses_incomplete_episodes():
@@ -246,3 +246,38 @@ def test_an_env_minari_cannot_serialise_is_refused_in_one_line(cache):
     with pytest.raises(ConfigError, match="Minari could not write it .*does not support serialising callables"):
         to_minari(dataset, "toy/callable-v0")
     assert not (cache / "toy" / "callable-v0").exists()
+
+
+def test_env_kwargs_are_compared_with_the_datasets_env_spec(cache, tmp_path):
+    """A dataset recorded on ToyChain-v0 made with size=7 (Minari keeps the kwargs in its env_spec):
+    refused without the kwargs or with others, in one line naming both; trained on with them."""
+    import dataclasses
+    import json
+    import os
+    import subprocess
+    from pathlib import Path
+
+    import toy_envs  # noqa: F401  (registers ToyChain-v0)
+
+    spec = dataclasses.replace(gym.spec("ToyChain-v0"), kwargs={"size": 7})
+    walks = [(np.eye(7, dtype=np.float32)[:7], np.ones(6, np.int64), np.r_[np.zeros(5), 1.0].astype(np.float32),
+              np.r_[np.zeros(5, bool), True], np.zeros(6, bool)) for _ in range(20)]
+    write_minari("toy/chain7-v0", walks, env=spec)
+    assert minari.load_dataset("toy/chain7-v0").env_spec.kwargs == {"size": 7}
+    with pytest.raises(DemoFileError, match=re.escape(
+            'minari:toy/chain7-v0: was recorded with env kwargs {"size": 7}, but the task is made with {"size": 6}')):
+        from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0", env_kwargs={"size": 6})
+    with pytest.raises(DemoFileError, match=re.escape("but the task is made with {\"size\": 5}")):  # the default
+        from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0")
+    data = from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0", env_kwargs={"size": 7, "observe": "flat"})
+    assert data.meta.env_kwargs == {"size": 7, "observe": "flat"} and data.obs.shape == (120, 7)
+
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "MINARI_DATASETS_PATH": str(cache),
+           "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")])}
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, "train.py", "--env", "toy_envs:ToyChain-v0", "--env-kwargs", "size=7",
+                           "--demos", "minari:toy/chain7-v0", "--quick", "--quiet", "--out", str(out)],
+                          capture_output=True, text=True, cwd=repo, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert json.loads((out / "eval.json").read_text())["lengths"] == [6, 6]

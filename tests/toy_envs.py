@@ -11,25 +11,43 @@ N_STATES = 5
 
 
 class Chain(gym.Env):
-    """States 0 … 4 as one-hot vectors, start at 0; action 1 steps right, 0 left (floored at 0).
-    Reaching state 4 pays 1 and terminates; every other step pays 0."""
+    """States 0 … size − 1, start at 0; action 1 steps right, 0 left (floored at 0). Reaching
+    the last state pays 1 and terminates; every other step pays 0.
 
-    def __init__(self) -> None:
-        self.observation_space = gym.spaces.Box(0.0, 1.0, (N_STATES,), np.float32)
+    `observe` picks what the agent sees: "flat", the state one-hot (size,); "grid", the one-hot
+    as a (size, 2) Box whose second column is 1 − the first; "dict", {"cell": Discrete(size),
+    "mission": Text, "visits": MultiBinary(size)} (sorted: cell, mission, visits).
+    """
+
+    def __init__(self, size: int = N_STATES, observe: str = "flat") -> None:
+        self.size, self.observe = size, observe
+        self.observation_space = {
+            "flat": gym.spaces.Box(0.0, 1.0, (size,), np.float32),
+            "grid": gym.spaces.Box(0.0, 1.0, (size, 2), np.float32),
+            "dict": gym.spaces.Dict({"cell": gym.spaces.Discrete(size), "mission": gym.spaces.Text(20),
+                                     "visits": gym.spaces.MultiBinary(size)}),
+        }[observe]
         self.action_space = gym.spaces.Discrete(2)
         self.state = 0
 
-    def _obs(self) -> np.ndarray:
-        return np.eye(N_STATES, dtype=np.float32)[self.state]
+    def _obs(self):
+        one_hot = np.eye(self.size, dtype=np.float32)[self.state]
+        if self.observe == "grid":
+            return np.stack([one_hot, 1.0 - one_hot], axis=1)
+        if self.observe == "dict":
+            self.visits[self.state] = 1
+            return {"cell": self.state, "mission": "walk right", "visits": self.visits.copy()}
+        return one_hot
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         self.state = 0
+        self.visits = np.zeros(self.size, np.int8)
         return self._obs(), {}
 
     def step(self, action):
         self.state = max(0, self.state + (1 if action == 1 else -1))
-        done = self.state == N_STATES - 1
+        done = self.state == self.size - 1
         return self._obs(), float(done), done, False, {}
 
 
@@ -52,6 +70,11 @@ def go_right(obs: np.ndarray) -> int:
     return 1
 
 
+def go_left(obs: np.ndarray) -> int:
+    """The chain's worst demonstrator: it never leaves state 0."""
+    return 0
+
+
 def out_of_range(obs: np.ndarray) -> int:
     return 7
 
@@ -60,8 +83,10 @@ NOT_CALLABLE = 3
 
 gym.register("ToyChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, reward_threshold=1.0)
 gym.register("ToyChainNoLimit-v0", entry_point="toy_envs:Chain")
+gym.register("ToyDictChainNoLimit-v0", entry_point="toy_envs:Chain", kwargs={"observe": "dict"})
+gym.register("ToyGridChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "grid"})
+gym.register("ToyDictChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "dict"})
 gym.register("ToyImage-v0", entry_point="toy_envs:Unsupported", kwargs={
-    "observation_space": gym.spaces.Box(0, 255, (8, 8, 3), np.uint8), "action_space": gym.spaces.Discrete(2)})
-gym.register("ToyDict-v0", entry_point="toy_envs:Unsupported", kwargs={
-    "observation_space": gym.spaces.Dict({"x": gym.spaces.Box(-1.0, 1.0, (2,), np.float32)}),
-    "action_space": gym.spaces.Discrete(2)})
+    "observation_space": gym.spaces.Box(0, 255, (84, 84, 3), np.uint8), "action_space": gym.spaces.Discrete(2)})
+gym.register("ToyTextOnly-v0", entry_point="toy_envs:Unsupported", kwargs={
+    "observation_space": gym.spaces.Dict({"mission": gym.spaces.Text(5)}), "action_space": gym.spaces.Discrete(2)})

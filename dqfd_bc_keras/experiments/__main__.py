@@ -6,7 +6,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..cli import ArgumentParser, add_task_arguments, chosen_task, positive_int, run
+import json
+
+from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
 from .suites import ALL, SUITES, on_task
 from .sweep import BACKENDS, run_suite
 
@@ -76,9 +78,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         calibrate(args.out, args.figure, args.quick)
     elif args.command == "run":
-        task, moved = chosen_task(args), chosen_task(args) is not None or args.set
+        assignments = [*(f"{key}={json.dumps(value) if isinstance(value, dict) else value}"
+                         for key, value in env_settings(args).items()), *args.set]
+        task, moved = chosen_task(args), chosen_task(args) is not None or assignments
         for suite in ALL if args.suite == "all" else (args.suite,):
-            arms = on_task(SUITES[suite], task, args.set) if moved else SUITES[suite]
+            arms = on_task(SUITES[suite], task, assignments) if moved else SUITES[suite]
             run_suite(arms, args.seeds, args.out, args.workers, args.backend, args.address,
                       progress=lambda line: print(line, flush=True), name=f"{suite} on {task}" if task else suite,
                       restart_broken=args.restart_broken)

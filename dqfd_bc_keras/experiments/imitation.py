@@ -43,7 +43,8 @@ def imitate(a: Arm, seed: int) -> dict:
     bc = build_bc_model(config, data.meta.obs_dim, data.meta.n_actions, data.obs_scale())
     accuracy = fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
     result = evaluate(GreedyPolicy.from_model(bc), config.task, config.final_eval_episodes,
-                      final_eval_seed(seed), config.timeout, config.max_steps)
+                      final_eval_seed(seed), config.timeout, config.max_steps,
+                      config.env_kwargs)
     return {"config": {k: v for k, v in config.to_dict().items() if k in ("task", "expert", "expert_epsilon",
                                                                           "demo_episodes", "bc_epochs", "seed")},
             "demo_transitions": len(data.obs), "demonstrator_return": float(np.mean(data.meta.plain_returns)),

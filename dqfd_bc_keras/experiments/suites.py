@@ -12,10 +12,13 @@ how many seeds it gets); each (arm, seed) is one `train.py`-equivalent run in
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ..config import QUICK, Config
+from ..config import QUICK, Config, parse_assignments, preset_defaults
 from ..envs import task_slug
 from ..errors import ConfigError
 from .claims import CLAIMS, PAPER_READING_STEPS
@@ -38,6 +41,9 @@ class Arm:
     def name(self) -> str:
         return "-".join(filter(None, (task_slug(self.task), self.timeout, self.expert_loss, self.label)))
 
+    def __hash__(self) -> int:  # an override may be a dict (env_kwargs); equal arms have equal names
+        return hash(self.name)
+
     def config(self, seed: int) -> Config:
         return Config.for_task(self.task, timeout=self.timeout, expert_loss=self.expert_loss, seed=seed,
                                **dict(self.overrides))
@@ -45,16 +51,26 @@ class Arm:
 
 _SHORT = {"sigma0_sq": "sigma", "expert": "", "eval_every": "eval", "dynamic_demos": "dyn",
           "early_stop_window": "stopwindow", "total_steps": "steps", "bayes_prior": "prior",
-          "mc_dropout": "mcdropout", "uncertainty": "", "expert_epsilon": "eps", "demo_episodes": "demos"}
+          "mc_dropout": "mcdropout", "uncertainty": "", "expert_epsilon": "eps", "demo_episodes": "demos",
+          "env_kwargs": ""}
+
+
+def _label(key: str, value: object) -> str:
+    """One override in an arm's name: `sigma0.1`, `demos5`, `use_lidar=false` (a dict of env kwargs;
+    a long one becomes a hash of it)."""
+    if isinstance(value, dict):
+        text = json.dumps(value, sort_keys=True, separators=(",", "="))
+        text = re.sub(r"[^\w.,=+-]", "", text.replace(":", "-"))
+        return text if len(text) <= 48 else "kw" + hashlib.sha1(text.encode()).hexdigest()[:10]
+    return f"{_SHORT.get(key, key)}{value:g}" if isinstance(value, float) else f"{_SHORT.get(key, key)}{value}"
 
 
 def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides: object) -> Arm:
     """An arm that keeps only the overrides differing from the task preset, labelled by them:
     arms equal in config get one name, so suites sharing an `--out` share their runs."""
-    preset = Config.for_task(task).to_dict()
+    preset = preset_defaults(task)
     changed = {k: v for k, v in overrides.items() if preset[k] != v}
-    label = "-".join(f"{_SHORT.get(k, k)}{v:g}" if isinstance(v, float) else f"{_SHORT.get(k, k)}{v}"
-                     for k, v in changed.items())
+    label = "-".join(_label(k, v) for k, v in changed.items())
     return Arm(task, timeout, expert_loss, tuple(changed.items()), task_slug(label), seeds)
 
 
@@ -67,7 +83,7 @@ def on_task(arms: Sequence[Arm], task: str | None, assignments: Sequence[str] = 
     moved = []
     for a in arms:
         target = a.task if task is None else task
-        parsed = Config.for_task(target, **dict(a.overrides)).with_overrides(list(assignments)).to_dict()
+        parsed = Config.for_task(target, **{**dict(a.overrides), **parse_assignments(list(assignments))}).to_dict()
         moved.append(arm(target, a.timeout, a.expert_loss, a.seeds, **{**dict(a.overrides),
                                                                        **{k: parsed[k] for k in keys}}))
     return list(dict.fromkeys(moved))

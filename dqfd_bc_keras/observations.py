@@ -1,0 +1,182 @@
+"""Observations: any supported Gymnasium space as the flat float32 vector the networks take.
+
+A one-dimensional `Box` passes unchanged. Every other supported space is flattened by
+`FlattenObservation`, always in this order (the order of `gymnasium.spaces.flatten`):
+
+    Box of any shape        its values in C order (row by row), as float32
+    Discrete(n, start)      a one-hot vector of n (x − start is the hot index)
+    MultiDiscrete(nvec)     one one-hot vector per entry, entries in C order
+    MultiBinary(shape)      its bits in C order
+    Dict                    its parts in the space's key order (Gymnasium sorts a plain dict's keys)
+    Tuple                   its parts in index order; Dicts and Tuples nest
+
+Parts that are not numeric (MiniGrid's `mission` text, a Graph, a Sequence) are dropped, with
+one warning naming them. Images are refused: a `uint8` Box of 2 or 3 dimensions bounded by 0
+and 255 with more than `MAX_IMAGE_VALUES` values is a frame of pixels, which needs a
+convolutional network. Smaller grids (MiniGrid's 7×7×3 view, 2048's 4×4×16 board) are
+flattened.
+
+>>> layout = observation_layout(gym.spaces.Dict({"a": gym.spaces.Discrete(3), "b": gym.spaces.Box(0, 1, (2, 2))}))
+>>> layout.dim, layout.flatten({"a": 1, "b": [[1, 2], [3, 4]]}).tolist()
+(7, [0.0, 1.0, 0.0, 1.0, 2.0, 3.0, 4.0])
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from .errors import ConfigError, DqfdWarning
+
+MAX_IMAGE_VALUES = 64 * 64
+"""A uint8 grid 0–255 larger than 64×64 values is taken for an image; at or below it, for a
+small symbolic grid that a dense layer can read."""
+
+NUMERIC = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)
+
+
+def describe(space: gym.Space) -> str:
+    """A short text of `space`: kinds, shapes and dtypes, without Box bounds or Text's charset."""
+    if isinstance(space, gym.spaces.Box):
+        return f"Box{space.shape} {space.dtype}"
+    if isinstance(space, gym.spaces.Discrete):
+        return f"Discrete({space.n})" if int(space.start) == 0 else f"Discrete({space.n}, start={space.start})"
+    if isinstance(space, (gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)):
+        return repr(space)
+    if isinstance(space, gym.spaces.Dict):
+        return "Dict(" + ", ".join(f"{key}: {describe(part)}" for key, part in space.spaces.items()) + ")"
+    if isinstance(space, gym.spaces.Tuple):
+        return "Tuple(" + ", ".join(describe(part) for part in space.spaces) + ")"
+    return type(space).__name__
+
+
+def is_image(space: gym.Space) -> bool:
+    """A frame of pixels: uint8, 2 or 3 dimensions, bounds 0 and 255, more than MAX_IMAGE_VALUES values."""
+    return (isinstance(space, gym.spaces.Box) and space.dtype == np.uint8 and len(space.shape) in (2, 3)
+            and bool(np.all(space.low == 0)) and bool(np.all(space.high == 255))
+            and int(np.prod(space.shape)) > MAX_IMAGE_VALUES)
+
+
+def is_flat(space: gym.Space) -> bool:
+    """A one-dimensional Box: the networks take it as it is."""
+    return isinstance(space, gym.spaces.Box) and len(space.shape) == 1
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """How an env's observations become a network's input: which parts, in which order, how wide."""
+
+    space: gym.Space
+    """The env's own observation space."""
+    kept: gym.Space
+    """`space` without its non-numeric parts (the same object when nothing is dropped)."""
+    dropped: tuple[str, ...]
+    """Paths of the dropped parts, e.g. ("mission",)."""
+    dim: int
+    """Features of the flat vector."""
+
+    @property
+    def flat(self) -> bool:
+        """True when observations pass unchanged (a one-dimensional Box)."""
+        return is_flat(self.space)
+
+    def flatten(self, obs: Any, batch: int | None = None) -> np.ndarray:
+        """One observation as a (dim,) float32 vector, or, with `batch`, `batch` observations whose
+        leaves carry a leading axis of that length (a Minari episode) as (batch, dim)."""
+        flat = _flatten(self.kept, obs, 1 if batch is None else batch)
+        return flat[0] if batch is None else flat
+
+    def to_dict(self) -> dict:
+        """What `config.json` records: the env's space, its shape, the features and what was dropped."""
+        shape = getattr(self.space, "shape", None)
+        return {"space": describe(self.space), "shape": None if shape is None else list(shape),
+                "features": self.dim, "flattened": not self.flat, "dropped": list(self.dropped)}
+
+    def text(self) -> str:
+        """One line: the space and how it becomes the network's input."""
+        if self.flat:
+            return describe(self.space)
+        dropped = f"; dropped {', '.join(self.dropped)}" if self.dropped else ""
+        return f"{describe(self.space)} flattened to {self.dim} features{dropped}"
+
+
+def observation_layout(space: gym.Space, env_id: str = "the env") -> ObservationLayout:
+    """The layout of `space`, or a one-line `ConfigError` for images and for spaces with no
+    numeric part; warns once, naming them, when parts are dropped."""
+    if is_flat(space):
+        return ObservationLayout(space, space, (), int(space.shape[0]))
+    dropped: list[str] = []
+    kept = _numeric(space, "", dropped, env_id)
+    if kept is None:
+        raise ConfigError(f"{env_id} has observation space {describe(space)}, which has no numeric part; "
+                          "supported: Box, Discrete, MultiDiscrete, MultiBinary and Dicts or Tuples of them")
+    if dropped:
+        warnings.warn(f"{env_id}: dropping non-numeric observation part(s) {', '.join(dropped)} "
+                      f"(of {describe(space)})", DqfdWarning, stacklevel=2)
+    return ObservationLayout(space, kept if dropped else space, tuple(dropped),
+                             int(gym.spaces.flatdim(kept)))
+
+
+def _numeric(space: gym.Space, path: str, dropped: list[str], env_id: str) -> gym.Space | None:
+    """`space` with its non-numeric parts removed (their paths appended to `dropped`); None if nothing is left."""
+    if is_image(space):
+        where = f" (part {path})" if path else ""
+        raise ConfigError(f"{env_id} observes images{where}: {describe(space)} needs a convolutional network, "
+                          "which is not supported yet (for Atari, try --env-kwargs obs_type='\"ram\"')")
+    if isinstance(space, NUMERIC):
+        return space
+    if isinstance(space, (gym.spaces.Dict, gym.spaces.Tuple)):
+        items = space.spaces.items() if isinstance(space, gym.spaces.Dict) else enumerate(space.spaces)
+        parts = {key: _numeric(part, f"{path}.{key}" if path else str(key), dropped, env_id) for key, part in items}
+        parts = {key: part for key, part in parts.items() if part is not None}
+        if not parts:
+            return None
+        if isinstance(space, gym.spaces.Dict):
+            return gym.spaces.Dict(list(parts.items()))  # a list keeps the order
+        return gym.spaces.Tuple(tuple(parts.values())) if len(parts) == len(space.spaces) else _Kept(space, parts)
+    dropped.append(path or type(space).__name__)
+    return None
+
+
+class _Kept(gym.spaces.Tuple):
+    """A Tuple with some parts dropped: remembers which indices of the original it keeps."""
+
+    def __init__(self, original: gym.spaces.Tuple, parts: dict[int, gym.Space]) -> None:
+        super().__init__(tuple(parts.values()))
+        self.indices = tuple(parts)
+
+
+def _flatten(space: gym.Space, x: Any, batch: int) -> np.ndarray:
+    """(batch, flatdim(space)) float32, in `gymnasium.spaces.flatten`'s order."""
+    if isinstance(space, (gym.spaces.Box, gym.spaces.MultiBinary)):
+        return np.asarray(x, dtype=np.float32).reshape(batch, -1)
+    if isinstance(space, gym.spaces.Discrete):
+        index = np.asarray(x, dtype=np.int64).reshape(batch) - int(space.start)
+        return np.eye(int(space.n), dtype=np.float32)[index]
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        index = (np.asarray(x, dtype=np.int64) - space.start).reshape(batch, -1)
+        return np.concatenate([np.eye(int(n), dtype=np.float32)[index[:, i]]
+                               for i, n in enumerate(space.nvec.reshape(-1))], axis=1)
+    if isinstance(space, gym.spaces.Dict):
+        return np.concatenate([_flatten(part, x[key], batch) for key, part in space.spaces.items()], axis=1)
+    indices = getattr(space, "indices", range(len(space.spaces)))
+    return np.concatenate([_flatten(part, x[i], batch) for i, part in zip(indices, space.spaces)], axis=1)
+
+
+class FlattenObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Observations as `layout` flattens them: a float32 Box of `layout.dim` features."""
+
+    def __init__(self, env: gym.Env, layout: ObservationLayout) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
+        self.layout = layout
+        flat = gym.spaces.flatten_space(layout.kept)
+        self.observation_space = gym.spaces.Box(flat.low.astype(np.float32), flat.high.astype(np.float32),
+                                                dtype=np.float32)
+
+    def observation(self, observation: Any) -> np.ndarray:
+        return self.layout.flatten(observation)

@@ -1,0 +1,104 @@
+"""Observations: the flattening order by hand and against Gymnasium's, batches, dropped parts, images."""
+
+import re
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.observations import MAX_IMAGE_VALUES, FlattenObservation, describe, is_image, observation_layout
+
+Box, Discrete, MultiBinary, MultiDiscrete = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiBinary,
+                                             gym.spaces.MultiDiscrete)
+
+
+def test_a_flat_box_passes_unchanged():
+    layout = observation_layout(Box(-1.0, 1.0, (3,), np.float32))
+    assert layout.flat and layout.dim == 3 and layout.dropped == ()
+    assert layout.to_dict() == {"space": "Box(3,) float32", "shape": [3], "features": 3, "flattened": False,
+                                "dropped": []}
+
+
+def test_the_order_by_hand():
+    """Dict keys sorted (Gymnasium sorts a plain dict), Box in C order, Discrete one-hot from its start,
+    MultiDiscrete one one-hot per entry, MultiBinary as bits, Tuple by index."""
+    space = gym.spaces.Dict({
+        "z": Box(0, 9, (2, 2), np.float32),
+        "a": Discrete(3, start=1),
+        "m": gym.spaces.Tuple((MultiDiscrete([2, 3]), MultiBinary(2))),
+    })
+    layout = observation_layout(space)
+    obs = {"z": np.array([[1, 2], [3, 4]], np.float32), "a": 2, "m": (np.array([1, 0]), np.array([0, 1], np.int8))}
+    want = [0, 1, 0,  # a = 2 with start 1: index 1 of 3
+            0, 1, 1, 0, 0, 0, 1,  # m: (1 of 2) (0 of 3), bits 0 1
+            1, 2, 3, 4]  # z row by row
+    assert layout.dim == 14
+    np.testing.assert_array_equal(layout.flatten(obs), want)
+    np.testing.assert_array_equal(layout.flatten(obs), gym.spaces.flatten(space, obs).astype(np.float32))
+    assert layout.flatten(obs).dtype == np.float32
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_batches_flatten_as_single_observations_do(seed):
+    space = gym.spaces.Dict({"d": Discrete(4), "b": Box(-1, 1, (3, 2)), "md": MultiDiscrete([[2, 2], [3, 1]])})
+    space.seed(seed)
+    samples = [space.sample() for _ in range(6)]
+    batch = {key: np.stack([s[key] for s in samples]) for key in ("d", "b", "md")}
+    layout = observation_layout(space)
+    np.testing.assert_array_equal(layout.flatten(batch, batch=6), np.stack([layout.flatten(s) for s in samples]))
+    for sample in samples:
+        np.testing.assert_allclose(layout.flatten(sample), gym.spaces.flatten(space, sample), rtol=1e-6)
+
+
+def test_non_numeric_parts_are_dropped_with_one_warning_naming_them():
+    space = gym.spaces.Dict({"direction": Discrete(4), "image": Box(0, 255, (7, 7, 3), np.uint8),
+                             "mission": gym.spaces.Text(10), "extra": gym.spaces.Tuple((Discrete(2), gym.spaces.Text(3)))})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        layout = observation_layout(space, "minigrid-like")
+    assert [str(w.message) for w in caught if w.category is DqfdWarning] == [
+        "minigrid-like: dropping non-numeric observation part(s) extra.1, mission (of Dict(direction: Discrete(4), "
+        "extra: Tuple(Discrete(2), Text), image: Box(7, 7, 3) uint8, mission: Text))"]
+    assert layout.dropped == ("extra.1", "mission") and layout.dim == 4 + 2 + 147
+    obs = {"direction": 1, "image": np.full((7, 7, 3), 5, np.uint8), "mission": "go", "extra": (1, "abc")}
+    flat = layout.flatten(obs)
+    np.testing.assert_array_equal(flat[:6], [0, 1, 0, 0, 0, 1])  # direction, then extra's kept Discrete
+    assert (flat[6:] == 5).all()
+
+
+def test_images_are_refused_small_grids_are_flattened():
+    assert is_image(Box(0, 255, (84, 84, 4), np.uint8)) and is_image(Box(0, 255, (210, 160), np.uint8))
+    assert not is_image(Box(0, 255, (7, 7, 3), np.uint8))  # MiniGrid's symbolic view
+    assert not is_image(Box(0, 1, (4, 4, 16), np.uint8))  # 2048's one-hot board
+    assert not is_image(Box(0, 255, (MAX_IMAGE_VALUES,), np.uint8))  # Atari RAM is one-dimensional
+    with pytest.raises(ConfigError, match=re.escape("pong observes images: Box(210, 160, 3) uint8 needs a "
+                                                    "convolutional network")):
+        observation_layout(Box(0, 255, (210, 160, 3), np.uint8), "pong")
+    with pytest.raises(ConfigError, match=re.escape("observes images (part pixels)")):
+        observation_layout(gym.spaces.Dict({"pixels": Box(0, 255, (64, 65, 1), np.uint8)}))
+    assert observation_layout(Box(0, 1, (4, 4, 16), np.uint8)).dim == 256
+
+
+def test_nothing_numeric_is_an_error():
+    with pytest.raises(ConfigError, match="has no numeric part"):
+        observation_layout(gym.spaces.Dict({"mission": gym.spaces.Text(4)}))
+
+
+def test_the_wrapper_gives_a_float32_box_of_the_layout():
+    class Grid(gym.Env):
+        observation_space = Box(-2, 2, (2, 3), np.float64)
+        action_space = Discrete(2)
+
+        def reset(self, *, seed=None, options=None):
+            return np.arange(6.0).reshape(2, 3), {}
+
+        def step(self, action):
+            return -np.arange(6.0).reshape(2, 3), 0.0, True, False, {}
+
+    env = FlattenObservation(Grid(), observation_layout(Grid.observation_space))
+    assert env.observation_space == Box(-2, 2, (6,), np.float32)
+    obs, _ = env.reset()
+    assert obs.dtype == np.float32 and obs.tolist() == [0, 1, 2, 3, 4, 5]
+    assert env.step(0)[0].tolist() == [0, -1, -2, -3, -4, -5]
+    assert describe(Grid.observation_space) == "Box(2, 3) float64"
