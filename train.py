@@ -16,10 +16,11 @@ import sys
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
 from dqfd_bc_keras.config import METHODS, QUICK, Config, parse_assignments
-from dqfd_bc_keras.envs import TIMEOUT_MODES, task_slug
+from dqfd_bc_keras.envs import task_slug
 from dqfd_bc_keras.experts import EXPERT_NAMES
 from dqfd_bc_keras.losses import TARGETS
 from dqfd_bc_keras.runs import saved_config, train
+from dqfd_bc_keras.wrappers import TIMEOUT_MODES
 
 
 def parse(argv):

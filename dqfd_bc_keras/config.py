@@ -14,11 +14,12 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from .envs import TASKS, TIMEOUT_MODES, get_task, step_limit, task_spaces
+from .envs import TASKS, get_task, step_limit, task_spaces
 from .errors import ConfigError
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 from .seeds import MAX_SEED
 from .uncertainty import UNCERTAINTIES
+from .wrappers import TIMEOUT_MODES
 
 METHODS = (*EXPERT_LOSSES, "none", "sqil")
 """What `expert_loss` may name: an expert loss J_E, plain DQN, or SQIL."""

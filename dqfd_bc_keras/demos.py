@@ -34,16 +34,16 @@ import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from typing import Any
-
 from .cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
-from .envs import TIMEOUT_MODES, get_task, make_task, task_spaces
+from .envs import get_task, make_task, task_spaces
 from .errors import ConfigError, DemoFileError
 from .experts import EXPERT_NAMES, make_demonstrator
 from .files import atomic_path
+from .wrappers import TIMEOUT_MODES
 
 FORMAT_VERSION = 1
 

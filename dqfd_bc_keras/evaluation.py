@@ -21,7 +21,8 @@ import numpy as np
 
 from .bc import BCModel
 from .config import Config
-from .envs import TIMEOUT_MODES, get_task, make_plain_env, make_task, task_slug, task_spaces
+from .envs import get_task, make_plain_env, make_task, task_slug, task_spaces
+from .wrappers import TIMEOUT_MODES
 from .errors import ConfigError, ModelFileError
 from .uncertainty import EnsembleDense
 

@@ -20,23 +20,23 @@ Minari is optional (`pip install -r requirements-extras.txt`); it is imported on
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import os
 import shutil
 import warnings
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-import dataclasses
-import json
-from typing import Any
-
 from .demos import ARRAYS, DemoDataset, DemoMeta, _validate
-from .envs import TIMEOUT_MODES, TaskSpec, effective_kwargs, get_task, task_spaces
+from .envs import TaskSpec, effective_kwargs, get_task, task_spaces
 from .errors import ConfigError, DemoFileError, one_line
 from .observations import describe
+from .wrappers import TIMEOUT_MODES
 
 _ABSENT = object()
 
@@ -135,9 +135,9 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap",
     ours = effective_kwargs(spec.env_id, env_kwargs)
     if theirs != ours:  # the keys that differ, with the constructor's and registration's defaults filled in
         keys = sorted(k for k in {*theirs, *ours} if theirs.get(k, _ABSENT) != ours.get(k, _ABSENT))
-        show = lambda kwargs: json.dumps({k: kwargs.get(k, "(not given)") for k in keys})  # noqa: E731
-        raise DemoFileError(where, f"was recorded with env kwargs {show(theirs)}, but the task is made with "
-                                   f"{show(ours)}")
+        recorded, made = ({k: kwargs.get(k, "(not given)") for k in keys} for kwargs in (theirs, ours))
+        raise DemoFileError(where, f"was recorded with env kwargs {json.dumps(recorded)}, but the task is made with "
+                                   f"{json.dumps(made)}")
     layout = spaces.layout
     _check_spaces(where, (source.observation_space, source.action_space), task, layout.space, spaces.n_actions)
 

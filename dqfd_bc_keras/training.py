@@ -6,7 +6,7 @@
     stop at the step budget or the task's early-stopping rule.
 
 Every env step whose transition the learner may train on is an interaction, counted in one
-place (`envs.CountInteractions` on every env of the learner); greedy evaluations happen at
+place (`wrappers.CountInteractions` on every env of the learner); greedy evaluations happen at
 exactly every `eval_every` interactions, pausing an episode at the grid point if need be.
 
 An episode is one TensorFlow graph call (`Interaction.play`): a `tf.while_loop` acts
@@ -33,7 +33,8 @@ from . import demos as demo_io
 from .agent import DQfDAgent, make_agent
 from .bc import BCModel, build_bc_model
 from .config import Config
-from .envs import CountInteractions, Tally, make_task
+from .envs import make_task
+from .wrappers import CountInteractions, Tally
 from .errors import DivergedError
 from .evaluation import EvalResult, GreedyPolicy, evaluate
 from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed

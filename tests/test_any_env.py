@@ -4,6 +4,7 @@ are refused in one line, demonstrators come from a rule or a saved model."""
 import json
 import os
 import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -270,3 +271,39 @@ def test_old_demonstration_files_without_kwargs_still_load(tmp_path):
     assert (old.meta.env_kwargs, old.meta.observation) == ({}, "")
     with pytest.raises(DqfdError, match=re.escape("was recorded with env kwargs {}, not the requested {\"size\": 7}")):
         demos.load(tmp_path / "old.npz", task=CHAIN, env_kwargs={"size": 7})
+
+
+def readme_any_env_block() -> str:
+    """The first bash block of the README's "Any Gymnasium env" section: what a user copies."""
+    section = (REPO / "README.md").read_text().split("### Any Gymnasium env", 1)[1]
+    return section.split("```bash\n", 1)[1].split("```", 1)[0]
+
+
+def test_the_readme_third_party_env_commands_train_and_evaluate(tmp_path):
+    """Each `train.py` line of the README block, as written, plus a budget of seconds; the rules
+    module is the block's own heredoc. The three runs go at once (one per core, and a third)."""
+    for module in ("flappy_bird_gymnasium", "highway_env", "minigrid"):
+        pytest.importorskip(module)  # requirements-extras.txt, which the test command installs
+    block = readme_any_env_block()
+    rules = block.split("<<'EOF'\n", 1)[1].split("\nEOF\n", 1)[0]
+    (tmp_path / "my_rules.py").write_text(rules + "\n")
+    commands = [line.split("train.py", 1)[1] for line in block.splitlines() if line.startswith(".venv/bin/python train.py")]
+    assert len(commands) == 3
+    env = {**ENV, "PYTHONPATH": os.pathsep.join([str(REPO), str(tmp_path)])}
+    quick = ["--quick", "--quiet", "--set", "total_steps=200", "--set", "eval_every=200"]
+    processes = [subprocess.Popen([sys.executable, str(REPO / "train.py"), *shlex.split(args), *quick, "--out",
+                                   str(tmp_path / f"run{i}")], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True) for i, args in enumerate(commands)]
+    for i, process in enumerate(processes):
+        _, err = process.communicate(timeout=600)
+        assert process.returncode == 0, f"{commands[i]}\n{err}"
+    configs = [json.loads((tmp_path / f"run{i}" / "config.json").read_text()) for i in range(3)]
+    assert configs[0]["env_kwargs"] == {"use_lidar": False} and configs[0]["observation"]["features"] == 12
+    assert configs[1]["observation"]["shape"] == [5, 5] and configs[1]["observation"]["features"] == 25
+    assert configs[2]["observation"]["dropped"] == ["mission"] and configs[2]["observation"]["features"] == 151
+    assert [c["max_steps"] for c in configs] == [1000, 40, 100]
+    for i in range(3):
+        result = json.loads((tmp_path / f"run{i}" / "eval.json").read_text())
+        assert len(result["returns"]) == 2 and all(n <= configs[i]["max_steps"] for n in result["lengths"])
+    evaluated = run("evaluate.py", tmp_path / "run2", "--episodes", 1, "--json")  # MiniGrid, again from config.json
+    assert evaluated.returncode == 0, evaluated.stderr

@@ -8,7 +8,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import dqfd_bc_keras  # noqa: F401  (registers the ids)
-from dqfd_bc_keras.envs import TASKS, TIMEOUT_MODES, make_plain_env, make_task
+from dqfd_bc_keras.envs import TASKS, make_plain_env, make_task
+from dqfd_bc_keras.wrappers import TIMEOUT_MODES
 from dqfd_bc_keras.errors import ConfigError
 
 RIGHT, LEFT = 1, 0
@@ -42,8 +43,8 @@ def test_fall_penalty_lands_on_the_falling_step_only(mode):
 
 
 def test_fall_penalty_is_configurable_and_truncation_never_pays_it():
-    env = dqfd_bc_keras.envs.TimeLimitMode(
-        dqfd_bc_keras.envs.FallPenalty(gym.make("CartPole-v1", max_episode_steps=-1), penalty=-7.0), 30)
+    env = dqfd_bc_keras.wrappers.TimeLimitMode(
+        dqfd_bc_keras.wrappers.FallPenalty(gym.make("CartPole-v1", max_episode_steps=-1), penalty=-7.0), 30)
     assert run_episode(env, lambda obs: RIGHT)[-1][0] == -7.0
     steps = run_episode(env, balance)
     assert len(steps) == 30 and steps[-1][2] is True
