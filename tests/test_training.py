@@ -498,7 +498,8 @@ def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
     checkpoint = out / "checkpoints" / latest["dir"]
     assert json.loads((checkpoint / "state.json").read_text())["episode"] == result.episodes
     assert (checkpoint / "tf.index").is_file() and (checkpoint / "demos.npz").is_file()
-    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(["latest.json", latest["dir"]])
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(["latest.json", latest["dir"],
+                                                                            runs.GIVEN_DEMOS])
 
 
 def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path):
