@@ -11,11 +11,30 @@ import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level, 
 
 import json
 import sys
+import time
 from collections.abc import Sequence
 
 from dqfd_bc_keras.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
 from dqfd_bc_keras.evaluation import POLICY_FILES, evaluate, load_policy, record_video
 from dqfd_bc_keras.files import write_text
+
+
+PROGRESS_EVERY = 10.0
+"""Seconds between two progress lines of a long evaluation."""
+
+
+def progress_lines(total: int):
+    """A callback for `evaluate`: one line on stderr at most every PROGRESS_EVERY seconds."""
+    started = last = time.monotonic()
+
+    def report(done: int) -> None:
+        nonlocal last
+        now = time.monotonic()
+        if now - last >= PROGRESS_EVERY and done < total:
+            last = now
+            print(f"evaluated {done} of {total} episodes ({now - started:.0f} s)", file=sys.stderr, flush=True)
+
+    return report
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -40,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                              settings.max_steps, settings.env_kwargs)
         print(f"recorded {len(files)} episode(s) in {args.video}", file=sys.stderr)
     result = evaluate(policy, settings.task, args.episodes, args.seed, settings.timeout, settings.max_steps,
-                      settings.env_kwargs)
+                      settings.env_kwargs, progress=progress_lines(args.episodes))
     report = {**result.to_dict(), "model": str(settings.model_path)}
     if args.out:
         write_text(args.out, json.dumps(report, indent=2) + "\n")
@@ -49,4 +68,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(run(main))
+    sys.exit(run(main, interrupted="evaluation interrupted: nothing was written"))

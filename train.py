@@ -17,6 +17,7 @@ import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras import cli, demos
 from dqfd_bc_keras.config import METHODS, QUICK, Config, parse_assignments
 from dqfd_bc_keras.envs import task_slug
+from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experts import EXPERT_NAMES
 from dqfd_bc_keras.losses import TARGETS
 from dqfd_bc_keras.runs import saved_config, train
@@ -49,6 +50,17 @@ def parse(argv):
     return parser.parse_args(argv)
 
 
+def refuse_changes(config: Config, given: dict, demos_source: str | None) -> None:
+    """`--resume` continues a run as it was configured: a flag giving another value is an error."""
+    saved = config.to_dict()
+    changed = [f"{key}={value!r} (the run has {saved[key]!r})" for key, value in given.items() if saved[key] != value]
+    if demos_source:
+        changed.append("--demos (the run keeps the demonstrations it started with)")
+    if changed:
+        raise ConfigError(f"--resume continues the run in its own config, but the command changes {', '.join(changed)}; "
+                          "drop those flags, or start the run over with --force")
+
+
 def main(argv=None) -> int:
     args = parse(argv)
     flags = {"expert_loss": args.expert_loss, "target": args.target, "timeout": args.timeout,
@@ -62,10 +74,14 @@ def main(argv=None) -> int:
     defaults = Config.__dataclass_fields__
     out = args.out or (f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
                        f"-seed{overrides.get('seed', defaults['seed'].default)}")
-    # A resumed run is the run in `out`: its config.json holds its task, env kwargs and limit.
+    # A resumed run is the run in `out`, as its config.json says; a flag that would change it is refused.
     config = saved_config(out) if args.resume else Config.for_task(task, **overrides)
-    dataset = (demos.load_source(args.demos, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
-               if args.demos else None)
+    if args.resume:
+        refuse_changes(config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})},
+                       args.demos)
+    dataset = (demos.load_source(args.demos, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs,
+                                 max_transitions=config.demo_capacity)
+               if args.demos and not args.resume else None)
     if not args.quiet:
         print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
               f"config: {out}/config.json", flush=True)

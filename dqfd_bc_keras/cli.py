@@ -104,10 +104,14 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
         _default_showwarning(message, category, filename, lineno, file, line)
 
 
-def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
+RESUMABLE = "a training run continues from its last checkpoint with --resume"
+
+
+def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None,
+        interrupted: str = RESUMABLE) -> int:
     """Call `main`, turning every failure a user can meet into one line on stderr: a user error
     or an OS error (full disk, read-only path, a directory where a file belongs) exits 2,
-    Ctrl-C 130 and SIGTERM 143."""
+    Ctrl-C 130 and SIGTERM 143 (saying `interrupted`: what the interruption left)."""
     signal.signal(signal.SIGTERM, _terminate)
     warnings.showwarning = _show_warning
     try:
@@ -121,6 +125,5 @@ def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None 
         return EXIT_USAGE
     except KeyboardInterrupt as error:
         name, code = ("SIGTERM", 143) if isinstance(error, Terminated) else ("Ctrl-C", 130)
-        print(f"interrupted ({name}); a training run continues from its last checkpoint with --resume",
-              file=sys.stderr)
+        print(f"interrupted ({name}); {interrupted}", file=sys.stderr)
         return code

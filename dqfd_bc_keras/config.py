@@ -11,11 +11,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 from .envs import TASKS, get_task, step_limit, task_spaces
-from .errors import ConfigError
+from .errors import ConfigError, DqfdWarning
 from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
 from .seeds import MAX_SEED
 from .uncertainty import UNCERTAINTIES
@@ -310,6 +311,12 @@ class Config:
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
+        if not self.uses_demos and self.total_steps < self.batch_size:
+            raise ConfigError(f"total_steps={self.total_steps} is below batch_size={self.batch_size}: without "
+                              "demonstrations there is no pre-training, so no gradient step would ever be taken")
+        if self.limit < self.n_step:
+            warnings.warn(f"the episode limit {self.limit} is shorter than the n-step window n_step={self.n_step}: "
+                          "every n-step return is cut at the end of its episode", DqfdWarning, stacklevel=2)
         return self
 
     def to_dict(self) -> dict:

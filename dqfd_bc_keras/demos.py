@@ -276,9 +276,11 @@ def _not_a_file(path: Path) -> str:
 
 
 def load(path: str | Path, task: str | None = None, timeout: str | None = None,
-         env_kwargs: dict[str, Any] | None = None) -> DemoDataset:
+         env_kwargs: dict[str, Any] | None = None, max_transitions: int | None = None) -> DemoDataset:
     """Read and validate a dataset; with `task`/`timeout`, also check it was recorded for them
-    (with `task`, on an env made with `env_kwargs`: none when not given).
+    (with `task`, on an env made with `env_kwargs`: none when not given, and with the task's
+    observation features and actions); with `max_transitions`, check its size from the file's
+    header before any array is read.
 
     Raises `DemoFileError` naming the file and the problem for anything a learner could trip
     on later: not an npz, pickled objects, missing keys, wrong shapes or dtypes, non-finite
@@ -289,6 +291,11 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
         raise DemoFileError(path, _not_a_file(path))
     if not zipfile.is_zipfile(path):
         raise DemoFileError(path, "is not an .npz file")
+    if max_transitions is not None:
+        rows = _rows(path)
+        if rows is not None and rows > max_transitions:
+            raise DemoFileError(path, f"holds {rows} transitions, more than demo_capacity={max_transitions} "
+                                      "(raise it with --set demo_capacity=N, or give fewer demonstrations)")
     try:
         with np.load(path, allow_pickle=False) as data:
             contents = {key: data[key] for key in data.files}
@@ -307,6 +314,12 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
     if task is not None and meta.env_kwargs != dict(env_kwargs or {}):
         raise DemoFileError(path, f"was recorded with env kwargs {json.dumps(meta.env_kwargs)}, not the "
                                   f"requested {json.dumps(dict(env_kwargs or {}))}")
+    if task is not None:  # the task's spaces now, which its env's package may have changed since
+        spaces = task_spaces(task, env_kwargs)
+        features = spaces.obs_dim + (meta.timeout == "time-aware")
+        if meta.obs_dim != features or meta.n_actions != spaces.n_actions:
+            raise DemoFileError(path, f"holds observations of {meta.obs_dim} features and {meta.n_actions} actions, "
+                                      f"but task {task} has {features} features and {spaces.n_actions} actions")
     if timeout is not None and meta.timeout != timeout:
         raise DemoFileError(
             path, f"was recorded with timeout={meta.timeout!r}, not the requested {timeout!r} "
@@ -314,14 +327,36 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
     return dataset
 
 
-def load_source(source: str, task: str, timeout: str, env_kwargs: dict[str, Any] | None = None) -> DemoDataset:
+def load_source(source: str, task: str, timeout: str, env_kwargs: dict[str, Any] | None = None,
+                max_transitions: int | None = None) -> DemoDataset:
     """Demonstrations for `task` (made with `env_kwargs`) from `source`: a `.npz` file of ours or
-    `minari:DATASET_ID` (a dataset in the local Minari cache, converted by `minari_io.from_minari`)."""
+    `minari:DATASET_ID` (a dataset in the local Minari cache, converted by `minari_io.from_minari`),
+    of at most `max_transitions` transitions."""
     if source.startswith("minari:"):
         from .minari_io import from_minari  # optional dependency
 
-        return from_minari(source.removeprefix("minari:"), task, timeout, env_kwargs)
-    return load(source, task=task, timeout=timeout, env_kwargs=env_kwargs)
+        return from_minari(source.removeprefix("minari:"), task, timeout, env_kwargs, max_transitions)
+    return load(source, task=task, timeout=timeout, env_kwargs=env_kwargs, max_transitions=max_transitions)
+
+
+def _rows(path: Path) -> int | None:
+    """How many transitions the file holds, from the header of its `actions` array (its data unread)."""
+    try:
+        with zipfile.ZipFile(path) as archive, archive.open("actions.npy") as file:
+            version = np.lib.format.read_magic(file)
+            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape = read(file)[0]
+    except (KeyError, ValueError, OSError, zipfile.BadZipFile):
+        return None  # the full load names what is wrong
+    return int(shape[0]) if shape else None
+
+
+META_TYPES: dict[str, tuple[type, ...]] = {
+    "task": (str,), "env_id": (str,), "timeout": (str,), "obs_dim": (int,), "n_actions": (int,), "expert": (str,),
+    "epsilon": (int, float), "seed": (int,), "episode_returns": (list,), "plain_returns": (list,),
+    "format_version": (int,), "env_kwargs": (dict,), "observation": (str,),
+}
+"""The JSON type of each meta field (a bool is not a number here)."""
 
 
 def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
@@ -340,9 +375,14 @@ def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
     missing = sorted(names - optional - fields.keys())
     if missing:
         raise DemoFileError(path, f"meta lacks {missing}")
+    for key, kinds in META_TYPES.items():
+        value = fields.get(key)
+        if key in fields and (isinstance(value, bool) or not isinstance(value, kinds)):
+            raise DemoFileError(path, f"meta's {key} must be {' or '.join(k.__name__ for k in kinds)}, got {value!r}")
+    for key in ("episode_returns", "plain_returns"):
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in fields[key]):
+            raise DemoFileError(path, f"meta's {key} must be a list of numbers")
     meta = DemoMeta(**{key: fields[key] for key in names if key in fields})
-    if not isinstance(meta.env_kwargs, dict) or not isinstance(meta.observation, str):
-        raise DemoFileError(path, "meta's env_kwargs must be a JSON object and its observation a string")
     try:
         get_task(meta.task)
     except ConfigError as error:

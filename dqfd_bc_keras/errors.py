@@ -35,6 +35,10 @@ class RunDirectoryError(DqfdError):
     the message names the path."""
 
 
+class DirectoryInUseError(RunDirectoryError):
+    """Another live process holds the run directory's lock."""
+
+
 class BrokenRunError(RunDirectoryError):
     """A run's checkpoint or config is corrupt or does not fit: it can only be started over."""
 

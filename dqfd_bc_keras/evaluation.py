@@ -157,19 +157,21 @@ def solved_text(task: str) -> str:
 
 def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed: int,
              timeout: str = "bootstrap", max_steps: int | None = None,
-             env_kwargs: dict[str, Any] | None = None) -> EvalResult:
+             env_kwargs: dict[str, Any] | None = None,
+             progress: Callable[[int], None] | None = None) -> EvalResult:
     """Play `episodes` episodes of `policy` on task `task`'s plain env (episode i: seed + i).
 
     `timeout`/`max_steps`/`env_kwargs` are the training run's: in time-aware mode the
     observation carries the time feature the agent learned with. Goal-count tasks replay the
     same seeds on the task env, where the car restarts at the flag, to count the goals.
+    `progress(done)` is called after each episode.
     """
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
     if timeout not in TIMEOUT_MODES:
         raise ConfigError(f"unknown timeout mode {timeout!r}; expected one of {TIMEOUT_MODES}")
     env = make_plain_env(task, timeout, max_steps, env_kwargs=env_kwargs)
-    returns, lengths, _ = _play(env, policy, episodes, seed)
+    returns, lengths, _ = _play(env, policy, episodes, seed, progress)
     goals = None
     if get_task(task).goal_count:
         goals = _play(make_task(task, timeout, max_steps, env_kwargs=env_kwargs), policy, episodes, seed)[2]
@@ -200,7 +202,8 @@ def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str 
     return sorted(directory.glob(f"{prefix}-episode-*.mp4"))
 
 
-def _play(env, policy, episodes: int, seed: int) -> tuple[list[float], list[int], list[int]]:
+def _play(env, policy, episodes: int, seed: int,
+          progress: Callable[[int], None] | None = None) -> tuple[list[float], list[int], list[int]]:
     """(returns, lengths, info["goals"] at each episode's end, 0 where absent)."""
     returns, lengths, goals = [], [], []
     for i in range(episodes):
@@ -212,6 +215,8 @@ def _play(env, policy, episodes: int, seed: int) -> tuple[list[float], list[int]
         returns.append(total)
         lengths.append(steps)
         goals.append(int(info.get("goals", 0)))
+        if progress is not None:
+            progress(i + 1)
     env.close()
     return returns, lengths, goals
 

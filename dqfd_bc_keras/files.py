@@ -13,12 +13,14 @@ import contextlib
 import errno
 import fcntl
 import os
+import re
+import shutil
 import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import OutputExistsError, RunDirectoryError
+from .errors import DirectoryInUseError, OutputExistsError, RunDirectoryError
 
 
 def _sync(path: Path) -> None:
@@ -69,6 +71,19 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
         tmp.unlink(missing_ok=True)
 
 
+TEMPORARY = re.compile(r"\..+\.[a-z0-9_]{8}(\.[^.]+)?")
+"""The name `atomic_path` gives its temporary file: `.{stem}.{8 random characters}{suffix}`."""
+
+
+def remove_temporaries(directory: Path) -> list[Path]:
+    """Delete the temporaries `atomic_path` left in `directory` and its subdirectories (a writer
+    killed before its rename); returns them."""
+    found = [path for path in Path(directory).rglob(".*") if TEMPORARY.fullmatch(path.name)]
+    for path in found:
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    return found
+
+
 def write_text(path: str | os.PathLike, text: str, durable: bool = False) -> None:
     """Atomically write a text file."""
     with atomic_path(path, durable=durable) as tmp:
@@ -100,7 +115,7 @@ class DirectoryLock:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise RunDirectoryError(f"{self.directory} is in use by process {holder or '(unknown)'}; "
+            raise DirectoryInUseError(f"{self.directory} is in use by process {holder or '(unknown)'}; "
                                     "wait for it to finish or stop it") from None
         stale = os.pread(fd, 64, 0).decode(errors="replace").strip()  # a clean release leaves it empty
         if stale:

@@ -95,7 +95,7 @@ def _check_spaces(where: Path, dataset_spaces: tuple[gym.Space, gym.Space], task
 
 
 def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap",
-                env_kwargs: dict[str, Any] | None = None) -> DemoDataset:
+                env_kwargs: dict[str, Any] | None = None, max_transitions: int | None = None) -> DemoDataset:
     """Read the Minari dataset `dataset_id` from the local cache as demonstrations for `task`
     made with `env_kwargs`.
 
@@ -139,6 +139,9 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap",
         raise DemoFileError(where, f"was recorded with env kwargs {json.dumps(recorded)}, but the task is made with "
                                    f"{json.dumps(made)}")
     layout = spaces.layout
+    if max_transitions is not None and source.total_steps > max_transitions:
+        raise DemoFileError(where, f"holds {source.total_steps} transitions, more than demo_capacity={max_transitions} "
+                                   "(raise it with --set demo_capacity=N)")
     _check_spaces(where, (source.observation_space, source.action_space), task, layout.space, spaces.n_actions)
 
     columns: dict[str, list[np.ndarray]] = {name: [] for name in ARRAYS}

@@ -10,6 +10,8 @@
             checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state), and
                                demos_given.npz, D_demo as given before any interaction
             q_network.keras  bc_model.keras  demos.npz  eval.json  learning_curve.png   (at the end)
+            provenance.json    the code, libraries and machine the run ran on (at the end)
+            complete.json      written last: the run is complete only when it exists
 
 Every file is written atomically; a checkpoint is a new directory, fsynced, then made current
 by rewriting `checkpoints/latest.json`, then the old one is deleted, so a run killed at any
@@ -35,13 +37,16 @@ from . import demos as demo_io
 from .config import Config
 from .errors import (BrokenRunError, ConfigError, DemoFileError, DivergedError, OutputExistsError, RunDirectoryError,
                      one_line)
-from .files import DirectoryLock, atomic_path, sync_tree, write_text
+from .files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from .envs import get_task, task_spaces
 from .evaluation import EvalResult
+from .provenance import provenance
 from .seeds import eval_seed, final_eval_seed
 from .training import (METRIC_FIELDS, Learner, TrainingState, build, run_evaluation, state_from_dict,
                        train_episodes)
 
+COMPLETE = "complete.json"
+"""Written last, atomically, by a finished run: a run without it is resumed, never taken as done."""
 GIVEN_DEMOS = "demos_given.npz"
 """D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
 demonstrations whatever their source (a file, a Minari dataset, a recording)."""
@@ -182,6 +187,7 @@ class RunDirectory:
                     demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
             self.state.interactions = self.learner.interactions
             write_text(target / "state.json", json.dumps(dataclasses.asdict(self.state)))
+            write_text(target / "config.json", json.dumps(self.config.to_dict(), indent=1))  # the run's own
             sync_tree(target)
             write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
         except BaseException as error:
@@ -228,6 +234,9 @@ class RunDirectory:
         plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
         self.save_checkpoint()
         self.tb.close()
+        write_text(out / "provenance.json", json.dumps(provenance(), indent=1))
+        write_text(out / COMPLETE, json.dumps({"episodes": self.state.episode, "env_steps": int(
+            learner.interaction.env_steps.numpy()), "interactions": learner.interactions}) + "\n", durable=True)
         return RunResult(out, self.state.episode, int(learner.interaction.env_steps.numpy()), learner.interactions,
                          self.state.stopped_early, self.state.wall_time, evaluation)
 
@@ -257,6 +266,9 @@ def train(
             if isinstance(error, DivergedError):
                 raise DivergedError(f"{out}: {error}; nothing was kept") from None
             raise
+        if resume:  # restored: what a kill cut short goes
+            remove_temporaries(out)
+            (out / COMPLETE).unlink(missing_ok=True)  # written again when it finishes again
         try:
             train_episodes(run.learner, run.state, run.on_episode, run.evaluate)
         except DivergedError as error:
@@ -267,14 +279,34 @@ def train(
 
 def saved_config(out: str | Path) -> Config:
     """The config of the run in `out`, to resume it: its task, env kwargs and step limit come from
-    there, not from the command line. A one-line error if there is no run to resume."""
+    there, not from the command line. A one-line error if there is no run to resume, and if its
+    `config.json` is not the one its latest checkpoint was trained with (a copy is in each)."""
     out = Path(out)
     check_dir(out, resume=True, force=False)
+    config = _read_config(out / "config.json")
     try:
-        return Config.from_dict(json.loads((out / "config.json").read_text()))
+        own = out / "checkpoints" / json.loads((out / "checkpoints" / "latest.json").read_text())["dir"] / "config.json"
+    except (OSError, ValueError, KeyError, TypeError):
+        return config  # an unreadable latest.json is the restore's to report
+    if own.is_file():  # checkpoints written before the copy existed have none
+        changed = differences(_read_config(own).to_dict(), config.to_dict())
+        if changed:
+            raise BrokenRunError(f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
+                                 f"{'; '.join(changed)}; put it back, or start the run over with --force")
+    return config
+
+
+def differences(was: dict, now: dict) -> list[str]:
+    """The fields whose values differ between two configs' dicts, as `key: now (was before)`."""
+    return [f"{key}: {now.get(key)!r} (was {was.get(key)!r})" for key in sorted({*was, *now})
+            if was.get(key) != now.get(key)]
+
+
+def _read_config(path: Path) -> Config:
+    try:
+        return Config.from_dict(json.loads(path.read_text()))
     except (OSError, ValueError) as error:
-        raise BrokenRunError(f"{out / 'config.json'}: cannot be resumed ({one_line(error)}); "
-                             "start the run over with --force") from None
+        raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
 
 
 def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool) -> RunDirectory:

@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import tensorflow as tf
 
@@ -166,7 +167,12 @@ DAMAGE = {
     "garbage config.json": (lambda run: (run / "config.json").write_text("garbage{"), "JSONDecodeError", "config.json"),
     "config.json of another task": (
         lambda run: (run / "config.json").write_text((run / "config.json").read_text().replace(
-            '"task": "cartpole"', '"task": "mountaincar"')), "was recorded on task 'cartpole'", "demos_given.npz"),
+            '"task": "cartpole"', '"task": "mountaincar"')), "task: 'mountaincar' (was 'cartpole')", "config.json"),
+    "edited config.json": (
+        lambda run: (run / "config.json").write_text((run / "config.json").read_text().replace(
+            '"learning_rate": 0.001', '"learning_rate": 0.5').replace('"expert_loss": "bayes"', '"expert_loss": "none"')),
+        "differs from the config the run was trained with", "expert_loss: 'none' (was 'bayes'); learning_rate: 0.5 "
+                                                            "(was 0.001)"),
 }
 
 
@@ -188,6 +194,7 @@ def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tm
     run = tmp_path / "suite" / arm.name / "seed0"
     shutil.copytree(finished, run)
     (run / "eval.json").unlink()  # cut off before it finished …
+    (run / runs.COMPLETE).unlink()
     (run / "checkpoints" / "latest.json").write_text("")  # … and its checkpoint is damaged
     lines = []
     with pytest.raises(ConfigError, match="1 of 1 runs failed"):
@@ -354,3 +361,206 @@ def test_sigterm_stops_a_run_like_ctrl_c_and_it_resumes(tmp_path):
     resumed = subprocess.run([*args, "--resume"], cwd=REPO, env=ENV, capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
     assert (out / "eval.json").is_file()
+
+
+# --- round 2: a resumed run is the run it says it is --------------------------------------------
+
+def test_resume_refuses_flags_that_would_change_the_run(finished, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(finished, run)
+    before = tree(run)
+    one_line(capsys, cli.run(train_main, ["--quiet", "--out", str(run), "--resume", "--set", "learning_rate=0.5",
+                                          "--expert-loss", "ce"]),
+             "--resume continues the run in its own config, but the command changes expert_loss='ce' (the run has "
+             "'bayes'), learning_rate=0.5 (the run has 0.001)")
+    one_line(capsys, cli.run(train_main, ["--quiet", "--out", str(run), "--resume", "--demos", "x.npz"]),
+             "--demos (the run keeps the demonstrations it started with)")
+    assert tree(run) == before
+    assert cli.run(train_main, ["--quick", "--quiet", "--out", str(run), "--resume"]) == 0  # the same values: fine
+
+
+def test_the_runner_resumes_a_run_only_if_its_config_is_the_arms(finished, tmp_path):
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, "learning_rate": 0.002}.items()), "quick", 1)
+    run = tmp_path / "suite" / arm.name / "seed0"
+    shutil.copytree(finished, run)  # trained with learning_rate 0.001, and cut off before its end
+    (run / runs.COMPLETE).unlink()
+    lines = []
+    with pytest.raises(ConfigError, match="1 of 1 runs failed"):
+        run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+    assert "not the arm's config (learning_rate: 0.001 (was 0.002))" in lines[-1] and "--restart-broken" in lines[-1]
+    [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append, restart_broken=True)
+    assert not outcome.error and json.loads((run / "config.json").read_text())["learning_rate"] == 0.002
+
+
+# --- round 2: nothing half-written counts as done ---------------------------------------------------
+
+def test_a_kill_at_any_file_operation_of_the_final_phase_is_resumed_never_skipped(finished, tmp_path, monkeypatch):
+    """Snapshot the run directory at every file operation of `finish` while its temporary exists
+    (what a SIGKILL then leaves); no snapshot is complete, and each one resumes to a complete run
+    with the same evaluation and no temporaries left."""
+    import contextlib
+
+    from dqfd_bc_keras import demos as demos_module
+    from dqfd_bc_keras import files
+    from dqfd_bc_keras.experiments.sweep import Job
+
+    run = tmp_path / "run"
+    shutil.copytree(finished, run)
+    snapshots, original = [], files.atomic_path
+
+    @contextlib.contextmanager
+    def snapshotting(path, **options):
+        with original(path, **options) as tmp:
+            yield tmp
+            if Path(tmp).exists():
+                snapshots.append((Path(path).name, tmp_path / f"snap{len(snapshots)}"))
+                shutil.copytree(run, snapshots[-1][1])
+
+    for module in (files, runs, demos_module):
+        monkeypatch.setattr(module, "atomic_path", snapshotting)
+    assert cli.run(train_main, ["--quick", "--quiet", "--out", str(run), "--resume"]) == 0  # finishes again
+    monkeypatch.undo()
+    names = [name for name, _ in snapshots]
+    assert {"q_network.keras", "bc_model.keras", "eval.json", "learning_curve.png", "state.json", "latest.json",
+            "provenance.json", runs.COMPLETE} <= set(names), names
+    assert names[-1] == runs.COMPLETE
+    final = json.loads((finished / "eval.json").read_text())
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
+    for name, snap in snapshots:
+        job = Job(arm, 0, snap.parent)
+        assert not (snap / runs.COMPLETE).is_file(), name
+        assert not Job(arm, 0, tmp_path).complete
+        assert cli.run(train_main, ["--quick", "--quiet", "--out", str(snap), "--resume"]) == 0, name
+        assert (snap / runs.COMPLETE).is_file() and (snap / "provenance.json").is_file(), name
+        assert json.loads((snap / "eval.json").read_text()) == final, name
+        assert not [p for p in snap.rglob(".*") if p.name != ".lock"], name  # the temporaries are gone
+        del job
+
+
+def test_a_run_held_by_another_live_runner_is_left_to_it_and_not_failed(finished, tmp_path):
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
+    run = tmp_path / "suite" / arm.name / "seed0"
+    shutil.copytree(finished, run)
+    (run / runs.COMPLETE).unlink()
+    lines = []
+    with DirectoryLock(run):  # this test process is the other runner
+        [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+    assert outcome.busy and not outcome.error
+    assert "left to the runner that holds it" in lines[1] and f"in use by process {os.getpid()}" in lines[1]
+    assert "1 run(s) left to another runner" in lines[-1]
+
+
+def test_the_report_names_every_run_it_leaves_out(finished, tmp_path):
+    from dqfd_bc_keras.experiments.report import report
+
+    suite = tmp_path / "suite"
+    shutil.copytree(finished, suite / "cartpole-bootstrap-bayes-quick" / "seed0")
+    cut = suite / "cartpole-bootstrap-bayes-quick" / "seed1"
+    shutil.copytree(finished, cut)
+    (cut / "eval.json").unlink()
+    warned = []
+    report(suite, tmp_path / "RESULTS.md", tmp_path / "figures", warn=warned.append)
+    assert warned == [f"{suite}/cartpole-bootstrap-bayes-quick/seed1/eval.json: missing: the run has not finished "
+                      "(still running, or cut off: run the suite again to resume it); run skipped"]
+
+
+# --- round 2: Ctrl-C on a sweep ----------------------------------------------------------------------
+
+def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
+    out = tmp_path / "sweep"
+    args = [sys.executable, "-m", "dqfd_bc_keras.experiments", "run", "quick", "--seeds", "2", "--workers", "2",
+            "--set", "total_steps=5000", "--set", "checkpoint_every=300", "--out", str(out)]
+    process = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 240
+    while time.time() < deadline and process.poll() is None:
+        latest = [json.loads(p.read_text())["dir"] for p in out.glob("*/seed0/checkpoints/latest.json")
+                  if p.read_text().strip()]
+        if len([d for d in latest if d != "ckpt-0"]) == 2:  # both runs have checkpointed during learning
+            break
+        time.sleep(0.1)
+    signal_sent = time.time()
+    process.send_signal(signal.SIGINT)
+    stdout, err = process.communicate(timeout=120)
+    seconds = time.time() - signal_sent
+    print(f"the sweep exited {seconds:.1f} s after Ctrl-C")
+    assert process.returncode == 130, err
+    assert seconds < 30, seconds  # a liveness bound: the runs stop at their next step, not at their end
+    assert "interrupted after 0 of 4 runs; no run was started after it" in stdout
+    assert err.strip().splitlines()[-1] == ("interrupted (Ctrl-C); every finished run is kept; run the same command "
+                                            "again to go on")
+    assert sorted(p.name for p in out.glob("*/seed*")) == ["seed0", "seed0"]  # seed 1 never started
+    for run in out.glob("*/seed0"):
+        assert (run / ".lock").read_text() == "" and not (run / runs.COMPLETE).exists()
+        assert (run / "checkpoints" / "latest.json").is_file()
+    [logged] = [json.loads(line) for line in (out / "sweeps.jsonl").read_text().splitlines()]
+    assert logged["interrupted"] is True and logged["runs"] == 0
+
+
+# --- round 2: demonstrations checked before any TensorFlow work --------------------------------------
+
+def test_demonstrations_are_checked_against_the_task_before_any_training(tmp_path, capsys):
+    from dqfd_bc_keras import demos as demo_io
+
+    data = demo_io.record("mountaincar", "imperfect", 1)  # 2 features, 3 actions; its own meta consistent
+    demo_io.save(data, tmp_path / "mc.npz")
+    out = tmp_path / "run"
+    one_line(capsys, cli.run(train_main, ["--quick", "--demos", str(tmp_path / "mc.npz"), "--out", str(out)]),
+             "was recorded on task 'mountaincar', not on the requested 'cartpole'")
+    meta = json.loads(str(np.load(tmp_path / "mc.npz")["meta"]))
+    arrays = dict(np.load(tmp_path / "mc.npz"))
+    np.savez(tmp_path / "renamed.npz", **{**arrays, "meta": np.array(json.dumps({**meta, "task": "cartpole"}))})
+    one_line(capsys, cli.run(train_main, ["--quick", "--demos", str(tmp_path / "renamed.npz"), "--out", str(out)]),
+             "holds observations of 2 features and 3 actions, but task cartpole has 4 features and 2 actions")
+    np.savez(tmp_path / "typed.npz", **{**arrays, "meta": np.array(json.dumps({**meta, "obs_dim": "2"}))})
+    one_line(capsys, cli.run(train_main, ["--quick", "--task", "mountaincar", "--demos", str(tmp_path / "typed.npz"),
+                                          "--out", str(out)]), "meta's obs_dim must be int, got '2'")
+    one_line(capsys, cli.run(train_main, ["--quick", "--task", "mountaincar", "--demos", str(tmp_path / "mc.npz"),
+                                          "--set", "demo_capacity=100", "--set", "max_steps=100", "--out", str(out)]),
+             f"holds {len(data)} transitions, more than demo_capacity=100")
+    assert not out.exists()
+
+
+def test_the_size_is_read_from_the_header_without_the_arrays(tmp_path, monkeypatch):
+    from dqfd_bc_keras import demos as demo_io
+
+    demo_io.save(demo_io.record("cartpole", "imperfect", 2), tmp_path / "d.npz")
+    monkeypatch.setattr(np, "load", lambda *a, **k: pytest.fail("the arrays were read"))
+    with pytest.raises(demo_io.DemoFileError, match="more than demo_capacity=10"):
+        demo_io.load(tmp_path / "d.npz", max_transitions=10)
+
+
+# --- round 2: long evaluations, tiny budgets, provenance ---------------------------------------------
+
+def test_a_long_evaluation_shows_progress_and_an_interrupt_says_so(tmp_path, monkeypatch, capsys):
+    evaluate = importlib.util.module_from_spec(importlib.util.spec_from_file_location("evaluate", REPO / "evaluate.py"))
+    evaluate.__spec__.loader.exec_module(evaluate)
+    clock = iter([0.0, 3.0, 11.0, 12.0, 25.0])
+    monkeypatch.setattr(evaluate.time, "monotonic", lambda: next(clock))
+    report = evaluate.progress_lines(100)
+    for done in (1, 2, 3, 4):
+        report(done)
+    assert capsys.readouterr().err.splitlines() == ["evaluated 2 of 100 episodes (11 s)",
+                                                    "evaluated 4 of 100 episodes (25 s)"]
+    process = subprocess.Popen([sys.executable, "evaluate.py", "models/cartpole", "--episodes", "100000000"],
+                               cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(15)  # TensorFlow's import, then episodes
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert err.strip().splitlines()[-1] == "interrupted (Ctrl-C); evaluation interrupted: nothing was written"
+
+
+def test_budgets_too_small_to_learn_are_refused_or_warned():
+    with pytest.raises(ConfigError, match="total_steps=10 is below batch_size=64: without demonstrations"):
+        Config.for_task("cartpole", expert_loss="none", total_steps=10)
+    with pytest.warns(UserWarning, match="the episode limit 1 is shorter than the n-step window n_step=10"):
+        Config.for_task("cartpole", max_steps=1, demo_capacity=500)
+
+
+def test_provenance_records_the_machine_and_tensorflows_build(finished):
+    record = json.loads((finished / "provenance.json").read_text())
+    assert record["machine"]["cpu"] and record["machine"]["cores"] == os.cpu_count()
+    assert set(record["machine"]["isa"]) <= {"sse4_2", "avx", "avx2", "fma", "avx512f", "avx512_vnni", "amx_tile"}
+    assert record["tensorflow"]["version"] == tf.__version__ and record["tensorflow"]["onednn"] == "0"
+    assert record["tensorflow"]["intra_op_threads"] == 1 and "is_cuda_build" in record["tensorflow"]["build"]
+    assert record["code_commit"] is None or len(record["code_commit"]) == 40

@@ -198,8 +198,18 @@ def _run_dirs(directory: Path) -> list[Path]:
     return sorted(final.parent for final in directory.rglob("eval.json"))
 
 
+def _unfinished(directory: Path) -> list[Path]:
+    """Run directories below `directory` that have started (config.json, checkpoints/) but hold no eval.json."""
+    return sorted(config.parent for config in directory.rglob("config.json")
+                  if (config.parent / "checkpoints").is_dir() and not (config.parent / "eval.json").is_file())
+
+
 def _load(directory: Path, shown: Path, skipped: list[RunFileError] | None) -> list[FinishedRun]:
     runs = []
+    if skipped is not None:  # the report names them; an export leaves them out as it always did
+        skipped.extend(RunFileError(PurePosixPath(run_dir.relative_to(directory).as_posix()) / "eval.json",
+                                    "missing: the run has not finished (still running, or cut off: run the suite "
+                                    "again to resume it)") for run_dir in _unfinished(directory))
     for run_dir in _run_dirs(directory):
         relative = PurePosixPath(run_dir.relative_to(directory).as_posix())
         try:

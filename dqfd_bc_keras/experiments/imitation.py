@@ -24,7 +24,7 @@ from ..files import write_text
 from ..seeds import final_eval_seed
 from ..training import demonstrations, fit_bc
 from .suites import Arm, grid_arms
-from .sweep import provenance
+from ..provenance import provenance
 
 IMITATION_DIR = "bc-alone"
 """The folder of the suite directory that holds BC alone's results (exported with the runs)."""

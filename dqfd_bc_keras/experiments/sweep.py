@@ -1,25 +1,31 @@
 """Running a suite: every (arm, seed) a fresh process on a local pool or a Ray task.
 
-A run is complete when its `eval.json` exists: running a suite again skips complete runs and
-resumes a run that was cut off from its last checkpoint, so a sweep killed halfway picks up
-where it stopped. Every finished run gets a `provenance.json` (the code and rules commits it ran
-under), and every sweep a line in `OUT/sweeps.jsonl`.
+A run is complete when its `complete.json` exists (written last): running a suite again skips complete runs and
+resumes a run that was cut off from its last checkpoint (if its config is still the arm's), so a
+sweep killed halfway picks up where it stopped. Every sweep gets a line in `OUT/sweeps.jsonl`.
+
+Ctrl-C or SIGTERM stops a local sweep within seconds: no run is started after it, and each
+running one gets SIGTERM, which stops it where `train.py` would stop (its last checkpoint kept).
+A run whose directory another live runner holds is left to that runner, not counted as failed.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
+import signal
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from multiprocessing import get_context
+from multiprocessing.connection import wait as wait_for
 from pathlib import Path
 
-from ..errors import BrokenRunError, ConfigError
+from ..cli import Terminated
+from ..errors import BrokenRunError, ConfigError, DirectoryInUseError
 from ..files import write_text
+from ..provenance import provenance
+from ..runs import COMPLETE
 from .data import SWEEP_LOG
 from .suites import Arm, suite_arms
 
@@ -40,7 +46,7 @@ class Job:
 
     @property
     def complete(self) -> bool:
-        return (self.directory / "eval.json").is_file()
+        return (self.directory / COMPLETE).is_file()
 
 
 @dataclass
@@ -53,72 +59,83 @@ class Outcome:
     mean_return: float
     seconds: float
     error: str = ""
-
-
-RULES = ("dqfd_bc_keras/experiments/claims.py", "docs/PREREGISTRATION.md")
-"""Where the verdict rules live: `rules_commit` is the last commit that changed either."""
-
-
-def _git(*args: str) -> str | None:
-    root = Path(__file__).resolve().parents[2]
-    try:
-        done = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=30)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return done.stdout.strip() if done.returncode == 0 else None
-
-
-def provenance() -> dict:
-    """The code a run ran and the rules that will judge it: commits (None outside a git checkout),
-    whether tracked files differed from the commit, and the library versions."""
-    import gymnasium
-    import keras
-    import numpy
-    import tensorflow
-
-    status = _git("status", "--porcelain", "--untracked-files=no")
-    return {"code_commit": _git("rev-parse", "HEAD"), "rules_commit": _git("log", "-1", "--format=%H", "--", *RULES),
-            "dirty": bool(status) if status is not None else None,
-            "versions": {m.__name__: m.__version__ for m in (tensorflow, keras, gymnasium, numpy)}}
+    busy: str = ""
+    """Why the run was left alone: another live runner holds its directory."""
 
 
 def run_job(job: Job) -> Outcome:
     """One run (in a worker process): train, resuming a run cut off before, and summarise it."""
-    from ..runs import train
+    from ..runs import differences, saved_config, train
 
     started = time.perf_counter()
     resume = (job.directory / "checkpoints" / "latest.json").is_file()
     config = job.arm.config(job.seed)
     try:
         try:
+            if resume:  # the run on disk must be this arm's run
+                changed = differences(config.to_dict(), saved_config(job.directory).to_dict())
+                if changed:
+                    raise BrokenRunError(f"{job.directory / 'config.json'}: not the arm's config ({'; '.join(changed)})")
             result = train(config, job.directory, resume=resume, force=not resume, quiet=True)
         except BrokenRunError as error:
             if not job.restart_broken:
                 raise BrokenRunError(f"{error} (or rerun the sweep with --restart-broken)") from None
             result = train(config, job.directory, force=True, quiet=True)
-        write_text(job.directory / "provenance.json", json.dumps(provenance(), indent=1))
+    except DirectoryInUseError as error:  # another runner's: it will finish it
+        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, busy=str(error))
     except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
         return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}")
     return Outcome(job, result.episodes, result.env_steps, result.evaluation.mean_return,
                    time.perf_counter() - started)
 
 
-def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
-    """A pool of fresh processes (one run each: no TensorFlow state carried between runs).
+STOP_GRACE = 60.0
+"""Seconds a stopped run gets to reach its safe point before it is killed (its last checkpoint is
+kept either way; every file of a run is written atomically)."""
 
-    Not several runs per process: it would save TensorFlow's import (~5 s per run), but Python
-    3.11's `ProcessPoolExecutor` stopped starting new workers once two had retired after their
-    `max_tasks_per_child` > 1 (a 72-run sweep hung after its 20th run)."""
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), max_tasks_per_child=1) as pool:
-        pending = {pool.submit(run_job, job) for job in jobs}
-        try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    yield future.result()
-        except BaseException:  # Ctrl-C, SIGTERM: the queued runs are dropped, the running ones end
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
+
+def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
+    """Up to `workers` runs at once, each in a fresh process (no TensorFlow state carried between
+    runs). If the sweep is stopped (Ctrl-C, SIGTERM, or its consumer closing this generator), no
+    run is started after it and each running one is sent SIGTERM and awaited."""
+    context = get_context("spawn")
+    queue, running = list(jobs), {}
+    try:
+        while queue or running:
+            while queue and len(running) < workers:
+                job = queue.pop(0)
+                receive, send = context.Pipe(duplex=False)
+                process = context.Process(target=_worker, args=(job, send), daemon=True)
+                process.start()
+                send.close()
+                running[process.sentinel] = (process, receive, job)
+            for sentinel in wait_for(list(running)):
+                process, receive, job = running.pop(sentinel)
+                outcome = receive.recv() if receive.poll() else None
+                process.join()
+                yield outcome or Outcome(job, 0, 0, float("nan"), 0.0, f"its process died (exit code {process.exitcode})")
+    except BaseException:
+        for process, _, _ in running.values():
+            process.terminate()  # SIGTERM: the run stops at its next safe point
+        for process, _, _ in running.values():
+            process.join(STOP_GRACE)
+            if process.is_alive():
+                process.kill()
+        raise
+
+
+def _worker(job: Job, send) -> None:
+    """One run in a worker process; Ctrl-C is the sweep's to relay (as SIGTERM), not the run's."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop)
+    try:
+        send.send(run_job(job))
+    except Terminated:
+        pass  # stopped: nothing to report, the run resumes next time
+
+
+def _stop(signum: int, frame: object) -> None:
+    raise Terminated
 
 
 def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Outcome]:
@@ -174,18 +191,28 @@ def run_suite(
             outcomes.append(outcome)
             job = outcome.job
             status = (f"failed: {outcome.error}" if outcome.error else
+                      f"left to the runner that holds it ({outcome.busy})" if outcome.busy else
                       f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
             progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
                      f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
         interrupted = False
+    except KeyboardInterrupt:
+        progress(f"{name}: interrupted after {len(outcomes)} of {len(todo)} runs; no run was started after it, the "
+                 f"running ones stopped at their last checkpoint ({time.perf_counter() - started:.0f} s elapsed): "
+                 "run the same command again to go on")
+        raise
     finally:
-        if outcomes:  # every sweep that ran something, one cut off too (as such)
+        if outcomes or interrupted:  # every sweep that ran something, and one cut off (as such)
             log = out / SWEEP_LOG
             entry = {"suite": name, "seeds": seeds or max(arm.seeds for arm in arms), "runs": len(outcomes),
                      "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
                      "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **({"interrupted": True} if interrupted else {}),
                      **provenance()}
             write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
+    busy = [o for o in outcomes if o.busy]
+    if busy:
+        progress(f"{name}: {len(busy)} run(s) left to another runner that holds them; run the command again once "
+                 "it is done to check they are complete")
     failed = [o for o in outcomes if o.error]
     if failed:
         raise ConfigError(f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}")
