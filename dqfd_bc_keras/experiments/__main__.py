@@ -68,8 +68,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     grid.add_argument("--quick", action="store_true", help="2 cells, 1 seed, the QUICK budget (about a minute)")
     grid.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: 5)")
     grid.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
+    rep2 = commands.add_parser(
+        "replicate", help="rerun an archived arm at fresh seeds and compare its metrics' distributions",
+        description="Reruns the arm ARM of the archive (its directory name) with its config at seeds A-B, none of "
+                    "them archived, into OUT, then compares each metric's median and a Mann-Whitney rank test "
+                    "with the archive's runs (OUT/REPLICATE.md).")
+    rep2.add_argument("arm", help="an arm's directory name in the archive, e.g. cartpole-bootstrap-bayes")
+    rep2.add_argument("--seeds", required=True, help="A-B: the fresh seeds, inclusive")
+    rep2.add_argument("--out", required=True, help="directory of the reruns")
+    rep2.add_argument("--archive", default="docs/data/results.tar.xz", help="default: docs/data/results.tar.xz")
+    rep2.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     args = parser.parse_args(argv)
-    if args.command == "grid":
+    if args.command == "replicate":
+        from .replicate import parse_seeds, replicate
+
+        replicate(args.arm, parse_seeds(args.seeds), args.out, args.archive, args.workers,
+                  progress=lambda line: print(line, flush=True))
+    elif args.command == "grid":
         from .grid import run_grid
 
         run_grid(args.out, args.quick, args.seeds, args.workers, progress=lambda line: print(line, flush=True))

@@ -1,8 +1,9 @@
 """Running a suite: every (arm, seed) a fresh process on a local pool or a Ray task.
 
-A run is complete when its `complete.json` exists (written last): running a suite again skips complete runs and
-resumes a run that was cut off from its last checkpoint (if its config is still the arm's), so a
-sweep killed halfway picks up where it stopped. Every sweep gets a line in `OUT/sweeps.jsonl`.
+A run is complete when its `complete.json` exists (written last): running a suite again skips
+complete runs and resumes one that was cut off from its last checkpoint (if its config is still
+the arm's), so a sweep killed halfway picks up where it stopped. Every sweep gets a line in
+`OUT/sweeps.jsonl`.
 
 Ctrl-C or SIGTERM stops a local sweep within seconds: no run is started after it, and each
 running one gets SIGTERM, which stops it where `train.py` would stop (its last checkpoint kept).
@@ -175,11 +176,19 @@ def run_suite(
     progress lines and the sweep log), seeds 0 … `seeds` − 1, or each arm's own number when
     `seeds` is None; one progress line per run. A run whose checkpoint cannot be resumed fails
     (reported, the sweep goes on) unless `restart_broken`, which starts it over."""
+    name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
+    jobs = sweep_jobs(arms, seeds, Path(out), restart_broken)
+    return run_jobs(jobs, Path(out), name, seeds or max(arm.seeds for arm in arms), workers, backend, address,
+                    progress)
+
+
+def run_jobs(
+    jobs: Sequence[Job], out: Path, name: str, seeds: int | str, workers: int = 2, backend: str = "local",
+    address: str | None = None, progress: Callable[[str], None] = print,
+) -> list[Outcome]:
+    """Run the incomplete ones of `jobs`, logged in `out`'s sweep log as `name` with `seeds`."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
-    name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
-    out = Path(out)
-    jobs = sweep_jobs(arms, seeds, out, restart_broken)
     todo = [job for job in jobs if not job.complete]
     progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
              f"on {workers} {backend} worker(s)")
@@ -204,7 +213,7 @@ def run_suite(
     finally:
         if outcomes or interrupted:  # every sweep that ran something, and one cut off (as such)
             log = out / SWEEP_LOG
-            entry = {"suite": name, "seeds": seeds or max(arm.seeds for arm in arms), "runs": len(outcomes),
+            entry = {"suite": name, "seeds": seeds, "runs": len(outcomes),
                      "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
                      "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **({"interrupted": True} if interrupted else {}),
                      **provenance()}

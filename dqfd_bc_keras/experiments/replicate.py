@@ -1,0 +1,117 @@
+"""Replicate an archived arm on the reader's machine: rerun it at fresh seeds and compare the
+distributions of its metrics with the archive's, so a table of RESULTS.md can be checked
+without trusting the machine it came from.
+
+    python -m dqfd_bc_keras.experiments replicate cartpole-bootstrap-bayes --seeds 100-107 --out replica
+
+The reruns train with the config of the arm's archived runs, only the seed changed, into
+`OUT/<arm>/seed<N>/` (a sweep like any other: cut off, it resumes). Reruns are bit-identical
+only on the same code, seed and machine kind (`provenance.py`); on another machine, or at other
+seeds, only the distributions should agree, which is what this compares: the medians, and a
+two-sided Mann–Whitney rank test per metric. A small p says the two samples differ; a large one
+does not prove they agree (with 8 seeds a side only large shifts are seen).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..files import write_text
+from .claims import interactions_to_threshold
+from .data import FinishedRun, load_runs
+from .stats import mann_whitney
+from .suites import arm
+from .sweep import Job, run_jobs
+
+DEFAULT_ARCHIVE = "docs/data/results.tar.xz"
+METRICS: dict[str, Callable[[FinishedRun], float]] = {
+    "interactions to the threshold": interactions_to_threshold,
+    "final return": lambda run: float(run.final["mean_return"]),
+    "mean training return": lambda run: float(np.mean(run.column("plain_return"))),
+}
+"""What is compared; a run that never reached the threshold counts as ∞ (ranked last)."""
+
+
+@dataclass(frozen=True)
+class Comparison:
+    metric: str
+    archived: list[float]
+    fresh: list[float]
+
+    @property
+    def p(self) -> float:
+        return mann_whitney(self.archived, self.fresh)[1]
+
+    def row(self) -> str:
+        def median(values: list[float]) -> str:
+            value = float(np.median(values))
+            return "∞" if np.isinf(value) else f"{value:g}"
+
+        return (f"| {self.metric} | {len(self.archived)} | {median(self.archived)} | {len(self.fresh)} | "
+                f"{median(self.fresh)} | {self.p:.2f} |")
+
+
+def parse_seeds(text: str) -> range:
+    """`A-B` (inclusive) or a single seed `A`."""
+    first, _, last = text.partition("-")
+    try:
+        seeds = range(int(first), int(last or first) + 1)
+    except ValueError:
+        raise ConfigError(f"--seeds {text!r}: expected A-B, e.g. 100-107") from None
+    if not seeds or seeds.start < 0:
+        raise ConfigError(f"--seeds {text!r}: expected A-B with 0 ≤ A ≤ B")
+    return seeds
+
+
+def archived_runs(archive: str | Path, name: str) -> list[FinishedRun]:
+    """The runs of the arm called `name` (its directory) in `archive`; one config but for the seed."""
+    runs = load_runs(archive)
+    found = [run for run in runs if run.path.parent.name == name]
+    if not found:
+        names = sorted({run.path.parent.name for run in runs})
+        near = difflib.get_close_matches(name, names, n=1)
+        raise ConfigError(f"{archive} has no arm {name!r}" + (f"; did you mean {near[0]!r}?" if near else
+                                                               f" ({len(names)} arms, e.g. {names[0]!r})"))
+    configs = {json.dumps({k: v for k, v in run.config.to_dict().items() if k != "seed"}, sort_keys=True)
+               for run in found}
+    if len(configs) > 1:
+        raise ConfigError(f"{archive}: the runs of {name!r} do not share one config")
+    return found
+
+
+def replicate(name: str, seeds: range, out: str | Path, archive: str | Path = DEFAULT_ARCHIVE, workers: int = 2,
+              progress: Callable[[str], None] = print) -> list[Comparison]:
+    """Rerun arm `name` of `archive` at `seeds` (none of them archived) into `out`; compare."""
+    runs = archived_runs(archive, name)
+    taken = sorted(set(seeds) & {run.config.seed for run in runs})
+    if taken:
+        raise ConfigError(f"--seeds: the archive already has seed(s) {taken} of {name!r}; fresh seeds are ones it has not")
+    config = runs[0].config.to_dict()
+    fields = {k: v for k, v in config.items() if k not in ("task", "timeout", "expert_loss", "seed")}
+    rerun = arm(config["task"], config["timeout"], config["expert_loss"], len(seeds), **fields)
+    prefix = rerun.name.removesuffix(rerun.label)
+    if name.startswith(prefix):  # the archive's own name for the same config (its labels may be in another order)
+        rerun = dataclasses.replace(rerun, label=name.removeprefix(prefix))
+    out = Path(out)
+    jobs = [Job(rerun, seed, out) for seed in seeds]
+    run_jobs(jobs, out, f"replicate {name}", f"{seeds.start}-{seeds.stop - 1}", workers, progress=progress)
+    fresh = [run for run in load_runs(out / rerun.name) if run.config.seed in seeds]
+    comparisons = [Comparison(metric, [f(r) for r in runs], [f(r) for r in fresh]) for metric, f in METRICS.items()]
+    table = "\n".join([
+        f"# Replication of {name}", "",
+        f"Archive: {archive} ({len(runs)} runs, seeds {min(r.config.seed for r in runs)}–"
+        f"{max(r.config.seed for r in runs)}). Fresh: seeds {seeds.start}–{seeds.stop - 1} on this machine.", "",
+        "| metric | archived runs | archived median | fresh runs | fresh median | rank test p |",
+        "| --- | ---: | ---: | ---: | ---: | ---: |", *(c.row() for c in comparisons), "",
+    ])
+    write_text(out / "REPLICATE.md", table)
+    progress(table)
+    return comparisons
