@@ -20,7 +20,7 @@ def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
     assert len(commands) == 2 and all("\n" not in c for c in commands)
     install = "python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt"
     assert all(c.startswith(install) for c in commands)
-    assert commands[1].endswith("-m pytest -q")
+    assert commands[1].endswith("-m pytest -q -n 2")
     ci = (REPO / ".ci" / "run").read_text().splitlines()
     assert commands[1] in ci and "set -euo pipefail" in ci
 
