@@ -316,7 +316,7 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
                                   f"requested {json.dumps(dict(env_kwargs or {}))}")
     if task is not None:  # the task's spaces now, which its env's package may have changed since
         spaces = task_spaces(task, env_kwargs)
-        features = spaces.obs_dim + (meta.timeout == "time-aware")
+        features = spaces.input_dim(meta.timeout)
         if meta.obs_dim != features or meta.n_actions != spaces.n_actions:
             raise DemoFileError(path, f"holds observations of {meta.obs_dim} features and {meta.n_actions} actions, "
                                       f"but task {task} has {features} features and {spaces.n_actions} actions")

@@ -129,6 +129,10 @@ class TaskSpaces:
     def obs_dim(self) -> int:
         return self.layout.dim
 
+    def input_dim(self, timeout: str) -> int:
+        """The networks' input width: the flattened observation, and the time feature in time-aware mode."""
+        return self.layout.dim + (timeout == "time-aware")
+
 
 def task_spaces(name: str, env_kwargs: Mapping[str, Any] | None = None) -> TaskSpaces:
     """The spaces of task `name` made with `env_kwargs`, checked once per process: a one-line

@@ -301,8 +301,7 @@ def load_policy(target: str | Path, policy: str | None = None, task: str | None 
         max_steps if max_steps is not None else config.max_steps if own else None,
         dict(env_kwargs) if env_kwargs is not None else dict(config.env_kwargs) if own else {})
     spaces = task_spaces(settings.task, settings.env_kwargs)
-    time_feature = int(settings.timeout == "time-aware")
-    check_model_fits(model, spaces.obs_dim + time_feature, spaces.n_actions, model_path, settings.task)
+    check_model_fits(model, spaces.input_dim(settings.timeout), spaces.n_actions, model_path, settings.task)
     return greedy, settings
 
 
