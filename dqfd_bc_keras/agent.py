@@ -59,6 +59,8 @@ class DQfDAgent(keras.Model):
         if config.uses_bc and bc_model is None:
             raise ConfigError(f"expert_loss={config.expert_loss!r} needs a fitted BC model")
         self.config = config
+        self.method = config.method
+        self.expert_term = self.method.expert_term()
         self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
         self.q_network = build_q_network(obs_dim, n_actions, config.hidden, obs_scale)
         self.target_network = build_q_network(obs_dim, n_actions, config.hidden, obs_scale, name="target_network")
@@ -116,7 +118,7 @@ class DQfDAgent(keras.Model):
     @property
     def sqil(self) -> bool:
         """SQIL learns from rewards 1 on demonstrations and 0 on its own data, in balanced batches."""
-        return self.config.expert_loss == "sqil"
+        return self.method.sqil_rewards
 
     def set_demos(self, obs, actions, rewards, next_obs, terminated, truncated) -> None:
         """Fill D_demo with these transitions (with the BC model's view of each state)."""
@@ -141,24 +143,8 @@ class DQfDAgent(keras.Model):
             self.replay.set_expert_targets(rows, *self.expert_view(obs))
 
     def expert_loss(self, q: tf.Tensor, batch: Batch) -> tf.Tensor:
-        """J_E, importance-weighted: margin on demonstrations only, the others on every row."""
-        c = self.config
-        if c.expert_loss in ("none", "sqil"):
-            return tf.constant(0.0)
-        if c.expert_loss == "margin":
-            per_sample = losses.margin_loss(q, batch.actions, c.margin)
-            return losses.weighted_mean(per_sample, batch.weights * batch.is_demo)
-        if c.expert_loss == "bc_margin":
-            a_e = tf.argmax(batch.pi_bc, axis=1, output_type=tf.int32)
-            return losses.weighted_mean(losses.margin_loss(q, a_e, c.margin), batch.weights)
-        if c.expert_loss == "ce":
-            return losses.weighted_mean(losses.cross_entropy_loss(q, batch.pi_bc, c.temperature), batch.weights)
-        likelihood = losses.weighted_mean(
-            losses.bayes_likelihood_loss(q, batch.pi_bc, batch.sigma_sq, c.temperature), batch.weights)
-        if not c.bayes_prior:
-            return likelihood
-        return likelihood + losses.bayes_prior_loss(self.q_network.trainable_weights, self.prior_weights,
-                                                    c.prior_scale, self.replay.demo_size)
+        """J_E of the config's method (methods.py; the built-in terms are in expert_terms.py)."""
+        return tf.constant(0.0) if self.expert_term is None else self.expert_term(self, q, batch)
 
     def train_step(self, batch: Batch) -> tf.Tensor:
         """One gradient step on J(Q) for `batch`; returns the 1-step TD errors δ, (B,)."""

@@ -4,7 +4,7 @@ Two ways to fit it, one `train_step`:
 - MLE (for `ce` and `bc_margin`, as in DQfD-BC): plain cross entropy, no dropout;
 - MAP (for `bayes`): cross entropy + a Gaussian weight prior ‖w‖²/(2·s²·N), and `predictive`
   returns the mean policy π̄_bc and a variance σ²(s) = σ0² + the epistemic part from one of
-  `uncertainty.UNCERTAINTIES`: MC dropout (the paper's: dropout kept active for K passes), an
+  `config.UNCERTAINTIES`: MC dropout (the paper's: dropout kept active for K passes), an
   ensemble of K members on bootstrap resamples, or the distance to the demonstrations.
 """
 
@@ -16,10 +16,10 @@ import keras
 import numpy as np
 import tensorflow as tf
 
-from .config import Config
+from .config import UNCERTAINTIES, Config
 from .networks import dense_stack, normalization
 from .optimizers import FusedAdam
-from .uncertainty import NearestDemoVariance, UNCERTAINTIES, bootstrap_counts, ensemble_stack, policy_variance
+from .uncertainty import NearestDemoVariance, bootstrap_counts, ensemble_stack, policy_variance
 
 
 @keras.saving.register_keras_serializable(package="dqfd_bc_keras")
@@ -144,12 +144,6 @@ class BCModel(keras.Model):
         grads = tape.gradient(loss, self.trainable_weights)
         self.optimizer.apply(grads, self.trainable_weights)
         return self._record(actions, self._mean_policy_logits(logits) if self.ensemble else logits, ce, loss)
-
-    def test_step(self, data):
-        obs, actions = data
-        logits = self(obs, training=False)
-        ce = self.cross_entropy(actions, logits)
-        return self._record(actions, logits, ce, ce + self.prior_loss())
 
     @staticmethod
     def cross_entropy(actions: tf.Tensor, logits: tf.Tensor) -> tf.Tensor:

@@ -1,9 +1,10 @@
 """Every hyperparameter, with the paper's (or DQfD's) default, in one typed dataclass.
 
 Where the paper is silent, ALGORITHM.md decides; where that is silent too, the value is ours
-and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults (any other Gymnasium env id gets
-`EnvConfig`'s);
-`validate` rejects settings the algorithm cannot use with a `ConfigError` naming the value.
+and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults (the
+registry in `tasks/`; any other Gymnasium env id gets `tasks.ENV_DEFAULTS`); `validate` rejects
+settings the algorithm cannot use with a `ConfigError` naming the value. Nothing here imports
+TensorFlow: reading a config.json is cheap.
 """
 
 from __future__ import annotations
@@ -11,19 +12,24 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
-from .envs import TASKS, get_task, step_limit, task_spaces
+from .envs import get_task, step_limit, task_spaces
 from .errors import ConfigError, DqfdWarning
-from .losses import EXPERT_LOSSES, TARGETS, TD_LOSSES
+from .methods import Method, get_method
 from .seeds import MAX_SEED
-from .uncertainty import UNCERTAINTIES
+from .tasks import ENV_DEFAULTS, EXPERT_NAMES, find_preset
 from .wrappers import TIMEOUT_MODES
 
-METHODS = (*EXPERT_LOSSES, "none", "sqil")
-"""What `expert_loss` may name: an expert loss J_E, plain DQN, or SQIL."""
+TARGETS = ("dqn", "double")
+"""The bootstrap targets (losses.bootstrap_value)."""
+TD_LOSSES = ("squared", "huber")
+"""The per-sample TD losses (losses.td_loss)."""
+UNCERTAINTIES = ("mc_dropout", "ensemble", "distance")
+"""The estimators of σ²(s) (uncertainty.py)."""
 PRIOR_CENTERS = ("pretrained", "zero")
 DYNAMIC_MODES = ("episodes", "rollouts", "off")
 """How D_demo grows (§5): the agent's own training episodes, M extra greedy roll-outs, or not at all."""
@@ -42,7 +48,7 @@ class Config:
 
     # --- task -------------------------------------------------------------------------------
     task: str = "cartpole"
-    """Task preset (envs.TASKS), or the id of any Gymnasium env with Discrete actions and an
+    """Task preset (tasks.TASKS, or `module:preset` registered by `module`), or the id of any Gymnasium env with Discrete actions and an
     observation that `observations` flattens (`module:Env-v0` imports `module` first)."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments of the env's constructor (`gym.make(id, **env_kwargs)`), JSON values; part
@@ -54,9 +60,9 @@ class Config:
 
     # --- the loss J = J_DQ + λ1·J_n + λ2·J_E + λ3·J_L2 (§2) ----------------------------------
     expert_loss: str = "bayes"
-    """J_E: margin (DQfD) | bc_margin (DQfD-BC) | ce (DQfD-BC) | bayes (the paper) | none (plain DQN)
-    | sqil (no J_E: SQIL's rewards, 1 on demonstrations and 0 on the agent's, half of each batch
-    from D_demo; Reddy et al. 2020, on our DQN)."""
+    """The method (methods.py): margin (DQfD) | bc_margin (DQfD-BC) | ce (DQfD-BC) | bayes (the
+    paper) | none (plain DQN) | sqil (SQIL's rewards on our DQN), or a method of your own as
+    `module:NAME`."""
     target: str = "dqn"
     """Bootstrap target: dqn (the paper's) | double (DQfD's)."""
     td_loss: str = "squared"
@@ -188,17 +194,14 @@ class Config:
     """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
 
     def __post_init__(self) -> None:
-        if type(self) is Config:
-            raise ConfigError("Config holds the shared defaults only: use Config.for_task(task, ...) "
-                              "or a task preset, whose defaults differ")
         self.validate()
 
     @classmethod
     def for_task(cls, task: str, **overrides: object) -> Config:
-        """Task preset `task`'s defaults (its dataclass in `PRESETS`; `EnvConfig` for any other
-        Gymnasium env) with `overrides`, validated: the only way to make a Config."""
+        """Task `task`'s defaults (its preset's, or `ENV_DEFAULTS` for any other Gymnasium env) with
+        `overrides`, validated. Use it rather than `Config(...)`, whose defaults are no task's."""
         get_task(task)
-        return PRESETS[task](**overrides) if task in PRESETS else EnvConfig(task=task, **overrides)
+        return cls(**{**preset_defaults(task), **overrides})
 
     @classmethod
     def from_dict(cls, fields: dict) -> Config:
@@ -223,9 +226,14 @@ class Config:
         return step_limit(self.task, self.max_steps)
 
     @property
+    def method(self) -> Method:
+        """The registered method `expert_loss` names (methods.py)."""
+        return get_method(self.expert_loss)
+
+    @property
     def uses_demos(self) -> bool:
-        """Every expert loss learns from demonstrations; `none` is plain DQN without any."""
-        return self.expert_loss != "none"
+        """Every method but plain DQN (`none`) learns from demonstrations."""
+        return self.method.needs_demos
 
     @property
     def initial_epsilon(self) -> float:
@@ -235,23 +243,26 @@ class Config:
 
     @property
     def uses_bc(self) -> bool:
-        """Whether a BC model is fitted (every expert loss but DQfD's margin, and none)."""
-        return self.expert_loss in ("bc_margin", "ce", "bayes")
+        """Whether a BC model is fitted (bc_margin, ce, bayes: the method's `bc_fit`)."""
+        return self.method.uses_bc
 
     @property
     def bayesian_bc(self) -> bool:
-        """The bayes loss fits the BC model by MAP with dropout; ce and bc_margin by MLE."""
-        return self.expert_loss == "bayes"
+        """The BC model is fitted by MAP with dropout (bayes), not by MLE (ce, bc_margin)."""
+        return self.method.bc_fit == "map"
 
     def validate(self) -> Config:
         """Raise ConfigError for the first value the algorithm cannot use; return self."""
-        get_task(self.task)
+        task = get_task(self.task)
         if not isinstance(self.env_kwargs, dict) or not all(isinstance(k, str) for k in self.env_kwargs):
             raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
-        if self.task not in TASKS or self.env_kwargs:  # a preset's own spaces are known; an env's are checked
+        if find_preset(self.task) is None or self.env_kwargs:  # a preset's own spaces are known; an env's are checked
             task_spaces(self.task, self.env_kwargs)
+        if not self.method.q_learning:
+            raise ConfigError(f"expert_loss={self.expert_loss!r} trains no Q-network: behavioural cloning alone is "
+                              "run by the lab's imitation arms (python -m dqfd_bc_keras.experiments grid)")
         choices = {
-            "timeout": TIMEOUT_MODES, "expert_loss": METHODS, "target": TARGETS,
+            "timeout": TIMEOUT_MODES, "target": TARGETS,
             "td_loss": TD_LOSSES, "prior_center": PRIOR_CENTERS, "dynamic_demos": DYNAMIC_MODES,
             "uncertainty": UNCERTAINTIES,
         }
@@ -305,9 +316,11 @@ class Config:
             ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
             ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
         ]
-        from .experts import check_demonstrator
-
-        check_demonstrator(self.expert)
+        scripted = tuple(dict.fromkeys((*EXPERT_NAMES, *task.experts)))
+        if self.expert not in scripted and not self.expert.endswith(".keras") \
+                and not re.fullmatch(r"[\w.]+:\w+", self.expert):
+            raise ConfigError(f"expert={self.expert!r} is none of {', '.join(scripted)}, module:function or "
+                              "a .keras model file")
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
@@ -323,83 +336,13 @@ class Config:
         return dataclasses.asdict(self)
 
 
-@dataclass
-class CartPoleConfig(Config):
-    """`cartpole`: CartPole-v1, 500 steps, −100 on a fall; stops early at 10 episodes ≥ 490."""
-
-    task: str = "cartpole"
-    total_steps: int = 50_000
-    eval_every: int = 1_000
-    """Runs end within ~10–50k steps: a finer grid makes steps-to-threshold meaningful."""
-
-
-@dataclass
-class CartPole200Config(Config):
-    """`cartpole-200`: the paper's unstable variant with a 200-step limit."""
-
-    task: str = "cartpole-200"
-    total_steps: int = 50_000
-    eval_every: int = 1_000
-
-
-@dataclass
-class MountainCarConfig(Config):
-    """`mountaincar`: MountainCar-v0, 200 steps, sparse; no early stop (the budget ends it)."""
-
-    task: str = "mountaincar"
-    demo_episodes: int = 10
-    total_steps: int = 100_000
-    early_stop_window: int = 0
-
-
-@dataclass
-class MountainCarGoalsConfig(MountainCarConfig):
-    """`mountaincar-goals`: the paper's goal-count variant (Figs. 9–11)."""
-
-    task: str = "mountaincar-goals"
-
-
-@dataclass
-class EnvConfig(Config):
-    """Any other Gymnasium env (`--env ID`): no shaping, its own step limit, no early stop;
-    10 demonstrated episodes, 100k steps, an evaluation every 5k. Ours, not the paper's."""
-
-    task: str = ""
-    demo_episodes: int = 10
-    total_steps: int = 100_000
-    eval_every: int = 5_000
-    early_stop_window: int = 0
-
-
-@dataclass
-class AcrobotConfig(EnvConfig):
-    """`acrobot`: Acrobot-v1, 500 steps, solved at −100; the generic env defaults (SB3's budget of
-    100k steps) with an evaluation every 1k, E's sample-efficiency grid."""
-
-    task: str = "acrobot"
-    eval_every: int = 1_000
-
-
-@dataclass
-class LunarLanderConfig(AcrobotConfig):
-    """`lunarlander`: LunarLander-v3, 1000 steps, solved at 200; as `acrobot`."""
-
-    task: str = "lunarlander"
-
-
-PRESETS: dict[str, type[Config]] = {
-    "cartpole": CartPoleConfig, "cartpole-200": CartPole200Config,
-    "mountaincar": MountainCarConfig, "mountaincar-goals": MountainCarGoalsConfig,
-    "acrobot": AcrobotConfig, "lunarlander": LunarLanderConfig,
-}
-
-
 def preset_defaults(task: str) -> dict[str, object]:
-    """The defaults of `task`'s preset (EnvConfig's for any env), without validating them: an env
-    without a time limit has no valid defaults until `max_steps` is given."""
-    fields = dataclasses.fields(PRESETS.get(task, EnvConfig))
-    values = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory() for f in fields}
-    return {**values, "task": task}
+    """The defaults of `task` (its preset's, `ENV_DEFAULTS` for any env), without validating them:
+    an env without a time limit has no valid defaults until `max_steps` is given."""
+    preset = find_preset(task)
+    shared = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+              for f in dataclasses.fields(Config)}
+    return {**shared, **(preset.defaults if preset else ENV_DEFAULTS), "task": task}
 
 
 DERIVED_KEYS = ("observation",)

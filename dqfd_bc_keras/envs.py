@@ -1,7 +1,7 @@
 """Tasks: the paper's (ALGORITHM.md §6) and ours as presets, or any Gymnasium env by its id.
 
-A task is a preset name (`TASKS`: cartpole, cartpole-200, mountaincar, mountaincar-goals,
-acrobot, lunarlander) or the id of any registered Gymnasium env with a `Discrete` action
+A task is a preset name (the registry in `tasks/`: cartpole, cartpole-200, mountaincar,
+mountaincar-goals, acrobot, lunarlander, or a user's `module:preset`) or the id of any registered Gymnasium env with a `Discrete` action
 space and an observation space that `observations` can flatten (`"module:Env-v0"` imports
 `module` first, as `gym.make` does); `get_task` turns either into a `TaskSpec`. Keyword
 arguments for the env's constructor (`env_kwargs`, e.g. FlappyBird's `use_lidar=False`) go
@@ -40,50 +40,8 @@ import gymnasium as gym
 
 from .errors import ConfigError
 from .observations import FlattenObservation, ObservationLayout, is_flat, observation_layout
+from .tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
 from .wrappers import FallPenalty, GoalCount, TimeFeature, TimeLimitMode
-
-ID_NAMESPACE = "dqfd_bc_keras"
-
-
-@dataclass(frozen=True)
-class TaskSpec:
-    """A task preset: which plain env, which shaping, which step limit (paper's settings)."""
-
-    name: str
-    env_id: str
-    """The plain Gymnasium env; evaluation scores on it, unmodified."""
-    family: str | None
-    """Which scripted experts apply (experts.FAMILIES); None for an env without any."""
-    max_steps: int | None
-    """The step limit; None only for an env without a `TimeLimit` of its own (set `max_steps`)."""
-    fall_penalty: float | None = None
-    goal_reward: float | None = None
-    solved_return: float | None = None
-    """The plain env's "solved" threshold (its spec's `reward_threshold`: CartPole-v1 475,
-    MountainCar-v0 −110, Acrobot-v1 −100, LunarLander-v3 200); None when it has none."""
-
-    @property
-    def gym_id(self) -> str:
-        """The id under which the preset is registered with Gymnasium."""
-        return f"{ID_NAMESPACE}/{self.name}-v0"
-
-    @property
-    def goal_count(self) -> bool:
-        return self.goal_reward is not None
-
-
-TASKS: dict[str, TaskSpec] = {
-    spec.name: spec
-    for spec in (
-        TaskSpec("cartpole", "CartPole-v1", "cartpole", 500, fall_penalty=-100.0, solved_return=475.0),
-        TaskSpec("cartpole-200", "CartPole-v1", "cartpole", 200, fall_penalty=-100.0, solved_return=475.0),
-        TaskSpec("mountaincar", "MountainCar-v0", "mountaincar", 200, solved_return=-110.0),
-        TaskSpec("mountaincar-goals", "MountainCar-v0", "mountaincar", 200, goal_reward=100.0,
-                 solved_return=-110.0),
-        TaskSpec("acrobot", "Acrobot-v1", "acrobot", 500, solved_return=-100.0),
-        TaskSpec("lunarlander", "LunarLander-v3", "lunarlander", 1000, solved_return=200.0),
-    )
-}
 
 SUPPORTED_SPACES = ("a Discrete action space starting at 0 and an observation of Box, Discrete, MultiDiscrete or "
                     "MultiBinary parts (Dicts and Tuples of them are flattened; images are not supported yet)")
@@ -93,10 +51,9 @@ RESERVED_KWARGS = {"render_mode": "is chosen by the command (evaluate.py --video
 
 
 def get_task(name: str) -> TaskSpec:
-    """The preset called `name`, else the Gymnasium env with that id (`env_task`)."""
-    if name in TASKS:
-        return TASKS[name]
-    return env_task(name)
+    """The preset called `name` (or `module:preset`, registered by `module`), else the Gymnasium
+    env with that id (`env_task`)."""
+    return find_preset(name) or env_task(name)
 
 
 @functools.cache
@@ -115,7 +72,7 @@ def env_task(env_id: str) -> TaskSpec:
         raise ConfigError(f"unknown task {env_id!r}: neither a preset ({', '.join(sorted(TASKS))}) nor a "
                           f"Gymnasium env id ({type(error).__name__}: {error})") from None
     threshold = None if spec.reward_threshold is None else float(spec.reward_threshold)
-    return TaskSpec(env_id, env_id, None, spec.max_episode_steps, solved_return=threshold)
+    return TaskSpec(env_id, env_id, max_steps=spec.max_episode_steps, solved_return=threshold, defaults=ENV_DEFAULTS)
 
 
 @dataclass(frozen=True)

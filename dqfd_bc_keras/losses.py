@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import tensorflow as tf
 
-TD_LOSSES = ("squared", "huber")
-TARGETS = ("dqn", "double")
-EXPERT_LOSSES = ("margin", "bc_margin", "ce", "bayes")
+from .config import TARGETS, TD_LOSSES
 
 
 def bootstrap_value(q_next_target: tf.Tensor, q_next_online: tf.Tensor | None, target: str = "dqn") -> tf.Tensor:

@@ -1,4 +1,5 @@
-"""The BC model's epistemic variance σ²(s) − σ0² (ALGORITHM.md §3; issue I): three estimators.
+"""The BC model's epistemic variance σ²(s) − σ0² (ALGORITHM.md §3): three estimators
+(config.UNCERTAINTIES).
 
     mc_dropout  the paper's: the variance of K dropout passes of one MAP network.
     ensemble    K MAP networks from different initialisations, each fitted on its own bootstrap
@@ -18,8 +19,6 @@ from collections.abc import Sequence
 import keras
 import numpy as np
 import tensorflow as tf
-
-UNCERTAINTIES = ("mc_dropout", "ensemble", "distance")
 
 
 def max_policy_variance(n_actions: int) -> float:

@@ -13,7 +13,9 @@ from dqfd_bc_keras.agent import DQfDAgent, make_agent
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.errors import ConfigError
 
-EXPERT_LOSSES = ("margin", "bc_margin", "ce", "bayes")
+from dqfd_bc_keras.methods import METHODS
+
+EXPERT_LOSSES = tuple(name for name, method in METHODS.items() if method.term is not None)
 
 
 def agent_for(loss, demos, bc_models, **overrides):

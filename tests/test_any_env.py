@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from dqfd_bc_keras import cli, demos
-from dqfd_bc_keras.config import Config, EnvConfig
+from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.envs import get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, DqfdError
 from dqfd_bc_keras.evaluation import evaluate, load_policy
@@ -55,7 +55,6 @@ def test_a_user_env_is_a_task_with_its_own_limit_threshold_and_no_shaping():
 
 def test_the_generic_preset_is_written_to_config_json_and_overridable():
     config = Config.for_task(CHAIN, total_steps=123)
-    assert isinstance(config, EnvConfig)
     assert (config.task, config.total_steps, config.demo_episodes, config.early_stop_window) == (CHAIN, 123, 10, 0)
     assert Config.from_dict(json.loads(json.dumps(config.to_dict()))) == config
     assert config.with_overrides(["eval_every=7"]).eval_every == 7

@@ -3,14 +3,11 @@
 import numpy as np
 import pytest
 
-from dqfd_bc_keras.experts import (
-    EXPERT_NAMES,
-    FAMILIES,
-    RULES,
-    expert_returns,
-    main,
-    make_expert,
-)
+from dqfd_bc_keras.commands.experts import main
+from dqfd_bc_keras.experts import EXPERT_NAMES, expert_returns, make_expert
+from dqfd_bc_keras.tasks import TASKS, families
+
+FAMILIES = families()
 
 
 def test_cartpole_strong_balances_and_imperfect_is_clearly_worse() -> None:
@@ -53,7 +50,7 @@ def test_lunarlander_strong_is_gymnasiums_heuristic() -> None:
     for _ in range(2000):
         obs = rng.normal(size=8)
         obs[6:] = rng.random(2) < 0.2  # legs touching
-        assert RULES["lunarlander", "strong"](obs) == heuristic(env, obs)
+        assert TASKS["lunarlander"].experts["strong"](obs) == heuristic(env, obs)
 
 
 OBS_DIM = {"cartpole": 4, "mountaincar": 2, "acrobot": 6, "lunarlander": 8}
@@ -69,7 +66,7 @@ def test_epsilon_zero_equals_rule_and_ignores_extra_feature(family: str, name: s
         obs = rng.uniform(-0.5, 0.5, size=width).astype(np.float32)
         action = expert(obs)
         assert type(action) is int
-        assert action == RULES[family, name](obs)
+        assert action == TASKS[family].experts[name](obs)
         assert expert(np.append(obs, np.float32(0.3))) == action
 
 

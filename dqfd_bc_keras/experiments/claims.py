@@ -17,6 +17,7 @@ import numpy as np
 
 from ..config import Config
 from ..envs import get_task
+from ..methods import METHODS, get_method, method_fields
 from .data import FinishedRun
 from .stats import (CensoredSummary, Summary, beyond, bootstrap_diff_ci, bound_power, equivalence_power, equivalent,
                     fisher_exact, mann_whitney, pooled_sd, tost_ci)
@@ -33,11 +34,8 @@ GOALS_MARGIN = 0.25
 """C4: flags per episode within ±0.25 are no difference; "markedly more" has to clear +0.25."""
 EARLY_EPISODES = 30
 """C4's "early in training": the first 30 training episodes."""
-BAYES_ONLY = ("sigma0_sq", "mc_passes", "prior_scale", "prior_center", "bc_dropout", "bc_prior_scale", "bayes_prior",
-              "mc_dropout", "uncertainty", "ensemble_members")
-"""Config fields only the bayes loss reads: a bayes arm pairs with the ce arm equal in every other field."""
-BC_ONLY, BC_LOSSES = ("dynamic_demos", "dynamic_window", "dynamic_rollouts", "bc_refit_epochs"), ("bc_margin", "ce", "bayes")
-"""Config fields only the losses with a BC model read: they do not name a margin or none arm."""
+BAYES_ONLY = tuple(sorted(set(METHODS["bayes"].reads) - set(METHODS["ce"].reads)))
+"""Config fields only the bayes loss reads (methods.py): a bayes arm pairs with the ce arm equal in every other field."""
 PEAK_FRACTION, COLLAPSE_FRACTION = 0.98, 0.5
 """A collapse (the paper's perturbation): plain return < 0.5 × limit after the first episode ≥ 0.98 × limit."""
 PAPER_READING_STEPS = 60_000
@@ -170,8 +168,7 @@ def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
         peers = [a.config for a in arms.values() if a.setting == arm.setting]
         varying = [k for k in arm.config if k not in ("task", "timeout", "expert_loss")
                    and len({json.dumps(p[k]) for p in peers}) > 1
-                   and not (k in BAYES_ONLY and arm.config["expert_loss"] != "bayes")
-                   and not (k in BC_ONLY and arm.config["expert_loss"] not in BC_LOSSES)]
+                   and not (k in method_fields() and k not in get_method(arm.config["expert_loss"]).reads)]
         arm.name = " ".join([arm.config["expert_loss"], *(f"{k}={arm.config[k]}" for k in varying)])
     return sorted(arms.values(), key=lambda a: a.label)
 
@@ -399,8 +396,9 @@ def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> Verdict:
 # --- ablations and the dynamic-demonstration default (docs/PREREGISTRATION.md §2, §6) -------
 ABLATED = {"dynamic_demos": "off", "bayes_prior": False, "mc_dropout": False}
 """The part each ablation switches off, and its value when off."""
-ABLATION_METRIC = {"cartpole": ("mean_train_return", RETURN_MARGIN), "mountaincar-goals": ("goals_first30", None)}
-"""Per task: the metric an ablation is judged on and its margin (a fraction of the limit, or GOALS_MARGIN)."""
+ABLATION_MARGINS = {"mean_train_return": RETURN_MARGIN, "goals_first30": None}
+"""The metrics an ablation can be judged on (a task's `lab.ablation_metric`, tasks/) and each one's
+margin: a fraction of the limit, or None for GOALS_MARGIN."""
 
 
 def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
@@ -410,7 +408,7 @@ def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
         return {k: v for k, v in arm.config.items() if k != key}
 
     return [(key, *common_seeds(ablated, full)) for key, off in ABLATED.items() for ablated in arms
-            if ablated.config[key] == off and ablated.config["task"] in ABLATION_METRIC
+            if ablated.config[key] == off and get_task(ablated.config["task"]).lab.ablation_metric
             for full in arms if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)]
 
 
@@ -423,7 +421,8 @@ def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
     the first 30 episodes within ±GOALS_MARGIN), the TOST_LEVEL CI of full − ablated: no measurable
     contribution if it lies within ±margin; contributes if it lies wholly above +margin; hurts if
     wholly below −margin; else inconclusive."""
-    metric, fraction = ABLATION_METRIC[full.config["task"]]
+    metric = get_task(full.config["task"]).lab.ablation_metric
+    fraction = ABLATION_MARGINS[metric]
     margin = GOALS_MARGIN if fraction is None else fraction * full.runs[0].config.limit
     comparison = compare(metric, full, ablated)
     low, high = comparison.tost

@@ -20,7 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..envs import get_task
 from ..files import write_text
+from ..tasks import TASKS
 from .claims import first_reaching
 from .data import FinishedRun
 from .stats import bootstrap_ci
@@ -29,12 +31,8 @@ SB3_METHOD = "SB3 DQN (rl-zoo3)"
 """The method name of the Stable-Baselines3 arms."""
 EFFICIENCY_FILE = "efficiency.json"
 """Written into the suite directory by benchmarks/bench_sample_efficiency.py; quoted by the report."""
-TARGET_RATIO = {"cartpole": 10.0, "mountaincar": 10.0, "acrobot": 5.0, "lunarlander": 5.0}
-"""The goal per task: SB3's median steps to threshold ÷ ours ≥ it, judged on the point estimate
-(issue E set 10× on the paper's envs, issue H 5× on Acrobot and LunarLander)."""
-TEACHER = {"acrobot": -112.68, "lunarlander": 129.03}
-"""Issue H's imperfect teachers, mean plain return over 100 episodes (seeds 0–99;
-`python -m dqfd_bc_keras.experts --episodes 100`, pinned by tests/test_efficiency.py)."""
+TEACHER = {name: spec.lab.teacher_return for name, spec in TASKS.items() if spec.lab.teacher_return is not None}
+"""The imperfect teachers our final returns are compared with (each preset's `lab.teacher_return`, tasks/)."""
 RESAMPLES, RNG_SEED, LEVEL = 10_000, 0, 0.95
 """Percentile bootstrap of every interval here: resamples, generator seed, coverage."""
 
@@ -64,7 +62,7 @@ class ArmSteps:
 
     @property
     def target(self) -> float:
-        return TARGET_RATIO.get(self.task, 10.0)
+        return get_task(self.task).lab.target_ratio
 
     @property
     def label(self) -> str:
@@ -122,7 +120,7 @@ def ratio_ci(theirs: np.ndarray, ours: np.ndarray, resamples: int = RESAMPLES,
 
 def rows(arms: list[ArmSteps]) -> list[dict]:
     """`summarise` of each arm; ours also get `ratio` = [point, low, high] of SB3's median ÷
-    theirs (`ratio_ci`) where the task has an SB3 arm, and `target_met` (point ≥ TARGET_RATIO)."""
+    theirs (`ratio_ci`) where the task has an SB3 arm, and `target_met` (point ≥ the task's `lab.target_ratio`)."""
     sb3 = {a.task: a.steps for a in arms if a.method == SB3_METHOD}
     out = []
     for arm in arms:
@@ -144,7 +142,7 @@ def _times(value: float) -> str:
 
 def table(arms: list[ArmSteps]) -> list[str]:
     """The arms as a markdown table: each of ours with SB3's median ÷ its median (95% CI) and
-    whether that reaches the task's TARGET_RATIO; each SB3 arm with its independent check beside
+    whether that reaches the task's `lab.target_ratio`; each SB3 arm with its independent check beside
     the median; then a note on any open-ended or undefined interval."""
     lines = ["| arm | median steps to threshold | 95% CI | seeds that reached it | above it at the end "
              "(median final return) | SB3's median ÷ this median [95% CI] | goal |",

@@ -36,14 +36,17 @@ from ..demos import record, rollout
 from ..envs import make_task
 from ..evaluation import GreedyPolicy, load_model
 from ..files import write_text
+from ..tasks import TASKS as PRESETS
 from ..seeds import demo_seed
-from ..uncertainty import UNCERTAINTIES, max_policy_variance
+from ..config import UNCERTAINTIES
+from ..uncertainty import max_policy_variance
 from .claims import CLAIMS, ArmRuns, judge
 from .efficiency import ratio_ci
 from .stats import CensoredSummary, Summary
 from .suites import SUITES
 
-TASKS = ("cartpole", "mountaincar")
+TASKS = tuple(name for name, spec in PRESETS.items() if spec.lab.calibrate)
+"""The tasks the estimators are calibrated on (each preset's `lab.calibrate`, tasks/)."""
 STATE_SETS = ("held-out demos", "trained agent", "random policy", "3–6 std away")
 OFF_DEMO = ("random policy", "3–6 std away")
 """The sets an epistemic estimator must single out (the trained agent may stay near the demos)."""

@@ -31,10 +31,8 @@ from .imitation import imitation_arms, load_imitation, run_imitation
 from .suites import GRID_TASK, SUITES, Arm, grid_arms, grid_cells
 from .sweep import run_suite
 
-TEACHER_RETURNS = {("strong", 0.0): 500.0, ("imperfect", 0.0): 198.06, ("strong", 0.2): 495.54,
-                   ("strong", 0.5): 169.67}
-"""Each CartPole teacher's mean plain return over 100 episodes (seeds 0–99; `python -m
-dqfd_bc_keras.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
+TEACHER_RETURNS = get_task(GRID_TASK).lab.grid_teachers
+"""Each teacher's mean plain return on the grid's task (its preset's `lab.grid_teachers`, tasks/)."""
 BC_ALONE, DQN = "BC alone", "DQN (no demos)"
 GRID_FILE = "GRID.md"
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from ..config import QUICK, Config, parse_assignments, preset_defaults
 from ..envs import task_slug
 from ..errors import ConfigError
+from ..tasks import TASKS
 from .claims import CLAIMS, PAPER_READING_STEPS
 from .plans import planned_seeds
 
@@ -107,8 +108,8 @@ def claim_seeds(claim_id: str, task: str) -> int:
 PROTOCOL = {"eval_every": 1_000, "eval_episodes": 10}
 """The sample-efficiency protocol, ours and SB3's alike: 10 greedy episodes on the plain env with
 fixed seeds (`seeds.eval_seed`) at exactly every 1,000 interactions."""
-EFFICIENCY_TASKS = {"cartpole": 5, "mountaincar": 10, "acrobot": 10, "lunarlander": 10}
-"""Sample-efficiency tasks → demonstration episodes of the imperfect expert (the presets')."""
+EFFICIENCY_TASKS = {name: spec.lab.efficiency_demos for name, spec in TASKS.items() if spec.lab.efficiency_demos}
+"""Sample-efficiency tasks → demonstration episodes of the imperfect expert (each preset's `lab`, tasks/)."""
 PAPER_TASKS = ("cartpole", "mountaincar")
 """The paper's two envs: the dynamic-demonstration readings and every expert loss run on them."""
 C2_PAPER_READING = {"early_stop_window": 0, "total_steps": PAPER_READING_STEPS}
