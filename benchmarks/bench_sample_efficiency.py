@@ -43,7 +43,7 @@ import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log l
 from dqfd_bc_keras.config import QUICK  # noqa: E402
 from dqfd_bc_keras.envs import get_task  # noqa: E402
 from dqfd_bc_keras.evaluation import evaluate  # noqa: E402
-from dqfd_bc_keras.experiments.claims import first_reaching  # noqa: E402
+from dqfd_bc_keras.experiments.metrics import first_reaching  # noqa: E402
 from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, ArmSteps,  # noqa: E402
                                                   interaction_evals, load, rows, save, table, teacher_table)

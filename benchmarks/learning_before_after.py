@@ -4,7 +4,7 @@ A speed-up that alters float rounding or a random stream (the order of the BC mo
 say) changes every run's trajectory; it must not change learning in distribution. This trains
 seeds 0..N−1 of one preset with `train.py` in each of two code trees (e.g. a `git worktree` of the
 old commit and this one), over two workers with the two sides of a seed side by side, so both
-meet the same load, and compares the lab's per-run metrics (`experiments.claims.PER_RUN`) and each
+meet the same load, and compares the lab's per-run metrics (`experiments.metrics.PER_RUN`) and each
 run's wall time: per side the median, and the Mann–Whitney p of the difference. `--figure` draws
 the greedy-evaluation learning curves of both sides. Runs that are complete are not run again.
 
@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dqfd_bc_keras.experiments.claims import PER_RUN  # noqa: E402
+from dqfd_bc_keras.experiments.metrics import PER_RUN  # noqa: E402
 from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
 from dqfd_bc_keras.experiments.stats import mann_whitney  # noqa: E402
 

@@ -13,7 +13,8 @@ import platform
 import subprocess
 from pathlib import Path
 
-RULES = ("dqfd_bc_keras/experiments/claims.py", "dqfd_bc_keras/tasks", "docs/PREREGISTRATION.md")
+RULES = ("dqfd_bc_keras/experiments/claims.py", "dqfd_bc_keras/experiments/metrics.py", "dqfd_bc_keras/experiments/arms.py",
+         "dqfd_bc_keras/tasks", "docs/PREREGISTRATION.md")
 """Where the verdict rules live: `rules_commit` is the last commit that changed any of them."""
 
 ISA_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512_vnni", "amx_tile")

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy import stats as sps
-from dqfd_bc_keras.experiments import claims as analysis, plans as planning, report as results
-from dqfd_bc_keras.experiments.claims import ArmRuns, Setting
+from dqfd_bc_keras.experiments import arms as grouping, claims as analysis, metrics, plans as planning, report as results
+from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
 from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
 from dqfd_bc_keras.config import Config
@@ -57,7 +57,7 @@ def write_run(run: FinishedRun) -> None:
 
 
 def arm(runs: list[FinishedRun]) -> ArmRuns:
-    return analysis.group_arms(runs)[0]
+    return grouping.group_arms(runs)[0]
 
 
 CP = {"task": "cartpole-200", "timeout": "naive"}
@@ -91,21 +91,21 @@ def suite(tmp_path_factory) -> Path:
 
 def test_per_run_metrics_by_hand(tmp_path):
     solver = make_run(tmp_path, cartpole_rows(SOLVER), [20.0, 300.0, 480.0, 500.0], **CP)
-    assert analysis.episodes_to_solve(solver) == 17 and analysis.finished(solver)
-    assert analysis.collapses(solver) == 1
-    assert analysis.PER_RUN["mean_train_return"](solver) == pytest.approx(SOLVER_MEAN)
-    assert analysis.interactions_to_threshold(solver) == 10_000  # 480 ≥ 475 at the third evaluation
+    assert metrics.episodes_to_solve(solver) == 17 and metrics.finished(solver)
+    assert metrics.collapses(solver) == 1
+    assert metrics.PER_RUN["mean_train_return"](solver) == pytest.approx(SOLVER_MEAN)
+    assert metrics.interactions_to_threshold(solver) == 10_000  # 480 ≥ 475 at the third evaluation
     unfinished = make_run(tmp_path, cartpole_rows(UNFINISHED), [20.0, 400.0], **CP)
-    assert analysis.episodes_to_solve(unfinished) is None and not analysis.finished(unfinished)
-    assert analysis.PER_RUN["episodes_to_solve"](unfinished) == np.inf  # censored
-    assert analysis.PER_RUN["unfinished"](unfinished) == 1.0
-    assert analysis.collapses(unfinished) == 2 and analysis.PER_RUN["collapsed"](unfinished) == 1.0
-    assert analysis.interactions_to_threshold(unfinished) == np.inf
+    assert metrics.episodes_to_solve(unfinished) is None and not metrics.finished(unfinished)
+    assert metrics.PER_RUN["episodes_to_solve"](unfinished) == np.inf  # censored
+    assert metrics.PER_RUN["unfinished"](unfinished) == 1.0
+    assert metrics.collapses(unfinished) == 2 and metrics.PER_RUN["collapsed"](unfinished) == 1.0
+    assert metrics.interactions_to_threshold(unfinished) == np.inf
     goals = make_run(tmp_path, goal_rows([1] * 30 + [3] * 10), [-200.0, -110.0], **MC)
-    assert analysis.PER_RUN["goals_first30"](goals) == 1.0
-    assert analysis.PER_RUN["goals_all"](goals) == pytest.approx(60 / 40)
-    assert analysis.interactions_to_threshold(goals) == 5000  # −110 reaches MountainCar-v0's threshold
-    assert analysis.episodes_to_solve(goals) is None  # no early-stopping rule on MountainCar
+    assert metrics.PER_RUN["goals_first30"](goals) == 1.0
+    assert metrics.PER_RUN["goals_all"](goals) == pytest.approx(60 / 40)
+    assert metrics.interactions_to_threshold(goals) == 5000  # −110 reaches MountainCar-v0's threshold
+    assert metrics.episodes_to_solve(goals) is None  # no early-stopping rule on MountainCar
 
 
 def test_a_censored_run_ranks_after_every_finished_run(tmp_path):
@@ -113,7 +113,7 @@ def test_a_censored_run_ranks_after_every_finished_run(tmp_path):
     episode count + 1 (21) would have ranked it first."""
     censored = make_run(tmp_path, cartpole_rows(UNFINISHED), expert_loss="bayes", **CP)
     slow = make_run(tmp_path, cartpole_rows([50] * 20 + [200] * 10), expert_loss="ce", **CP)
-    values = [analysis.PER_RUN["episodes_to_solve"](r) for r in (censored, slow)]
+    values = [metrics.PER_RUN["episodes_to_solve"](r) for r in (censored, slow)]
     assert values == [np.inf, 30.0] and list(sps.rankdata(values)) == [2.0, 1.0]
     never = arm([make_run(tmp_path, cartpole_rows(UNFINISHED), expert_loss="bayes", seed=s, **CP) for s in range(3)])
     slower = arm([make_run(tmp_path, cartpole_rows([50] * (20 + s) + [200] * 10), expert_loss="ce", seed=s, **CP)
@@ -127,23 +127,23 @@ def test_a_censored_run_ranks_after_every_finished_run(tmp_path):
 
 def test_early_stop_rule_follows_the_config(tmp_path):
     run = make_run(tmp_path, cartpole_rows([200] * 3 + [150] + [200] * 3), early_stop_window=3, **CP)
-    assert analysis.episodes_to_solve(run) == 3
+    assert metrics.episodes_to_solve(run) == 3
     run = make_run(tmp_path, cartpole_rows([200] * 3 + [150] + [200] * 3), early_stop_window=3,
                    early_stop_fraction=0.5, max_steps=400, **CP)  # limit 400: 200 ≥ 0.5 × 400
-    assert analysis.episodes_to_solve(run) == 3
-    assert analysis.collapses(run) == 0  # never ≥ 0.98 × 400
+    assert metrics.episodes_to_solve(run) == 3
+    assert metrics.collapses(run) == 0  # never ≥ 0.98 × 400
 
 
 def test_runs_are_grouped_into_arms_by_config(suite):
     runs = load_runs(suite)
     assert len(runs) == 20  # the run without eval.json is left out
-    arms = analysis.group_arms(runs)
+    arms = grouping.group_arms(runs)
     assert [(a.label, len(a.runs)) for a in arms] == [
         ("cartpole-200/naive · bayes", 3), ("cartpole-200/naive · ce", 3), ("cartpole-200/naive · none", 2),
         ("mountaincar-goals/bootstrap · bayes sigma0_sq=0.05", 4),
         ("mountaincar-goals/bootstrap · bayes sigma0_sq=0.5", 4), ("mountaincar-goals/bootstrap · ce", 4)]
     assert sorted(r.config.seed for r in arms[0].runs) == [0, 1, 2]
-    pairs = analysis.bayes_ce_pairs(arms, "mountaincar-goals", None)
+    pairs = grouping.bayes_ce_pairs(arms, "mountaincar-goals", None)
     assert [(b.name, c.name) for b, c in pairs] == [("bayes sigma0_sq=0.5", "ce"), ("bayes sigma0_sq=0.05", "ce")]
 
 
@@ -263,7 +263,7 @@ def test_c2_paper_reading_is_selected_and_judged_on_collapses(tmp_path):
                         c2_arm(tmp_path / "p", "ce", falling, **PAPER_FIELDS),
                         c2_arm(tmp_path / "t", "bayes", [SOLVER] * 2), c2_arm(tmp_path / "t", "ce", [SOLVER] * 2))
             for r in a.runs]
-    arms = analysis.group_arms(runs)
+    arms = grouping.group_arms(runs)
     c1_200, today, paper = analysis.CLAIMS[0].settings[1], *analysis.CLAIMS[1].settings
     assert paper.reading.startswith("the paper's reading") and today.reading.startswith("today's reading")
     [(bayes, ce)] = paper.pairs(arms)
@@ -284,8 +284,8 @@ def test_c2_paper_reading_is_selected_and_judged_on_collapses(tmp_path):
 
 
 def test_c2_and_n_below_two(suite):
-    arms = analysis.group_arms(load_runs(suite))
-    bayes, ce = analysis.bayes_ce_pairs(arms, "cartpole-200", "naive")[0]
+    arms = grouping.group_arms(load_runs(suite))
+    bayes, ce = grouping.bayes_ce_pairs(arms, "cartpole-200", "naive")[0]
     result = analysis.judge_c2(bayes, ce)
     unfinished, falls = result.comparisons
     assert result.verdict == "inconclusive"  # 1 of 3 unfinished in each arm: too few seeds to show equal shares
@@ -381,7 +381,7 @@ def test_a_run_repeated_in_another_suite_directory_counts_once(tmp_path):
     for where in ("paper", "sensitivity"):
         write_run(make_run(tmp_path / where / "run", cartpole_rows([30]), expert_loss="ce", seed=3, **CP))
     write_run(make_run(tmp_path / "paper" / "other", cartpole_rows([30]), expert_loss="ce", seed=4, **CP))
-    [only] = analysis.group_arms(load_runs(tmp_path))
+    [only] = grouping.group_arms(load_runs(tmp_path))
     assert [r.config.seed for r in only.runs] == [3, 4]
 
 
@@ -392,9 +392,9 @@ def test_the_reference_pair_is_the_one_at_the_preset(tmp_path):
         runs.append(make_run(tmp_path / loss, goal_rows([1]), expert_loss=loss, **MC))
         runs += [make_run(tmp_path / f"{loss}{s}", goal_rows([1]), expert_loss=loss, total_steps=20_000, seed=s, **MC)
                  for s in range(3)]
-    arms = analysis.group_arms(runs)
-    assert sorted(analysis.preset_distance(a) for a in arms) == [0, 0, 1, 1]
-    bayes, ce = analysis.bayes_ce_pairs(arms, "mountaincar-goals", "bootstrap")[0]
+    arms = grouping.group_arms(runs)
+    assert sorted(grouping.preset_distance(a) for a in arms) == [0, 0, 1, 1]
+    bayes, ce = grouping.bayes_ce_pairs(arms, "mountaincar-goals", "bootstrap")[0]
     assert (bayes.config["total_steps"], ce.config["total_steps"], len(bayes.runs)) == (100_000, 100_000, 1)
 
 
@@ -477,5 +477,5 @@ def test_fields_a_loss_does_not_read_do_not_name_its_arm(tmp_path):
     """dynamic_demos varies between the bayes arms of the setting, but margin has no BC model."""
     runs = [make_run(tmp_path / name, cartpole_rows([500] * 3), task="cartpole", expert_loss=loss, dynamic_demos=mode)
             for name, loss, mode in (("a", "bayes", "episodes"), ("b", "bayes", "rollouts"), ("c", "margin", "episodes"))]
-    names = sorted(a.name for a in analysis.group_arms(runs))
+    names = sorted(a.name for a in grouping.group_arms(runs))
     assert names == ["bayes dynamic_demos=episodes", "bayes dynamic_demos=rollouts", "margin"]

@@ -13,7 +13,7 @@ import pytest
 from dqfd_bc_keras.cli import run
 from dqfd_bc_keras.experiments import figures
 from dqfd_bc_keras.experiments.__main__ import main
-from dqfd_bc_keras.experiments.claims import PER_RUN
+from dqfd_bc_keras.experiments.metrics import PER_RUN
 from dqfd_bc_keras.experiments.data import load_runs, open_suite
 from dqfd_bc_keras.experiments.report import NOTES, PER_SEED
 

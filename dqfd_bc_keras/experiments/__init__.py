@@ -6,7 +6,9 @@ nothing in the learning core imports it.
     suites.py   declared arms × seeds (the grid of demonstration quality × quantity among them)
     sweep.py    running a suite on a local process pool or Ray, provenance
     data.py     run directories read into `FinishedRun`s; the compact per-run archive
-    claims.py   per-run metrics, the claims C1–C4 and their verdict rules
+    metrics.py  per-run metrics (episodes to solve, collapses, interactions to threshold, …)
+    arms.py     runs grouped into arms by config; a bayes arm's ce pair
+    claims.py   the claims C1–C4, the ablations and their verdict rules
     plans.py    seeds per arm of each claim setting, planned by power
     efficiency.py  sample efficiency against SB3: steps to threshold, ratios
     stats.py    bootstrap CIs, IQM, tests, TOST equivalence, power

@@ -1,24 +1,22 @@
 """The paper's claims (ALGORITHM.md §7, C1–C4) judged over seeds; `report.py` writes them up.
 
-Every metric, margin and verdict rule is a constant or docstring here, fixed before any result
-is looked at, so RESULTS.md can quote them. Runs are read from their files (never from their
-directory names) and grouped into arms by config.json: every field except `seed`.
+Every margin and verdict rule is a constant or docstring here (the metrics they read are in
+metrics.py, the arms they compare in arms.py), fixed before any result is looked at, so
+RESULTS.md can quote them.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..config import Config
 from ..envs import get_task
-from ..methods import METHODS, get_method, method_fields
-from .data import FinishedRun
+from .arms import ArmRuns, Setting, common_seeds
+from .metrics import CENSORED, SHARES
 from .stats import (CensoredSummary, Summary, beyond, bootstrap_diff_ci, bound_power, equivalence_power, equivalent,
                     fisher_exact, mann_whitney, pooled_sd, tost_ci)
 
@@ -32,190 +30,8 @@ SHARE_MARGIN = 0.2
 """C2: "about equally frequent" means shares of runs within ±0.2 of each other."""
 GOALS_MARGIN = 0.25
 """C4: flags per episode within ±0.25 are no difference; "markedly more" has to clear +0.25."""
-EARLY_EPISODES = 30
-"""C4's "early in training": the first 30 training episodes."""
-BAYES_ONLY = tuple(sorted(set(METHODS["bayes"].reads) - set(METHODS["ce"].reads)))
-"""Config fields only the bayes loss reads (methods.py): a bayes arm pairs with the ce arm equal in every other field."""
-PEAK_FRACTION, COLLAPSE_FRACTION = 0.98, 0.5
-"""A collapse (the paper's perturbation): plain return < 0.5 × limit after the first episode ≥ 0.98 × limit."""
 PAPER_READING_STEPS = 60_000
 """C2's paper reading runs without early stop for this budget: ≥ 300 episodes of at most 200 steps."""
-
-METRICS = {
-    "episodes_to_solve": "training episodes until the early-stopping rule fired (the last `early_stop_window` "
-                         "task returns all ≥ `early_stop_fraction` × limit); a run in which it never fired is "
-                         "censored as ∞, so it ranks after every finished run (medians and rank tests, never a mean)",
-    "unfinished": "1 if the early-stopping rule never fired within the step budget, else 0",
-    "mean_train_return": "mean plain-env return over all training episodes",
-    "collapses": f"episodes with plain return < {COLLAPSE_FRACTION} × limit after the first episode whose task "
-                 f"return ≥ {PEAK_FRACTION} × limit",
-    "collapsed": "1 if the run has at least one collapse, else 0",
-    "goals_first30": f"mean flags reached per episode over the first {EARLY_EPISODES} training episodes "
-                     "(all, if fewer)",
-    "goals_all": "mean flags reached per episode over all training episodes",
-    "final_eval": "mean return of the final greedy evaluation (eval.json) on the plain env",
-    "interactions_to_threshold": "interactions (every env step the learner's data came from, roll-outs included) "
-                                 "at the first grid evaluation whose mean return ≥ the plain env's solved "
-                                 "threshold; ∞ if none did (medians and rank tests)",
-}
-
-
-# --- per-run metrics ------------------------------------------------------------------------
-def episodes_to_solve(run: FinishedRun) -> int | None:
-    """The episode at which the task's early-stopping rule fired; None if it never did."""
-    c = run.config
-    if c.early_stop_window == 0:
-        return None
-    streak = 0
-    for episode, good in enumerate(run.column("return") >= c.early_stop_fraction * c.limit, start=1):
-        streak = streak + 1 if good else 0
-        if streak >= c.early_stop_window:
-            return episode
-    return None
-
-
-def finished(run: FinishedRun) -> bool:
-    return episodes_to_solve(run) is not None
-
-
-def censored_episodes_to_solve(run: FinishedRun) -> float:
-    """`episodes_to_solve`, inf for a run that never solved: it ranks after every finished run by
-    construction (its own episode count + 1 would rank before a slower run that did finish)."""
-    solved = episodes_to_solve(run)
-    return np.inf if solved is None else float(solved)
-
-
-def collapses(run: FinishedRun) -> int:
-    """The paper's perturbations: episodes whose plain return falls below COLLAPSE_FRACTION × limit
-    after the first whose task return reached PEAK_FRACTION × limit."""
-    peaks = np.flatnonzero(run.column("return") >= PEAK_FRACTION * run.config.limit)
-    if peaks.size == 0:
-        return 0
-    return int(np.sum(run.column("plain_return")[peaks[0] + 1:] < COLLAPSE_FRACTION * run.config.limit))
-
-
-def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> float | None:
-    """The first evaluated step of (step, mean return) pairs whose mean reaches `threshold`."""
-    return next((float(step) for step, mean in evals if mean >= threshold), None)
-
-
-def interactions_to_threshold(run: FinishedRun) -> float:
-    """Counted interactions at the first evaluation that reaches the plain env's threshold; inf if
-    none did."""
-    step = first_reaching(((e["interactions"], e["mean_return"]) for e in run.evals),
-                          get_task(run.config.task).solved_return)
-    return np.inf if step is None else step
-
-
-PER_RUN: dict[str, Callable[[FinishedRun], float]] = {
-    "episodes_to_solve": censored_episodes_to_solve,
-    "unfinished": lambda r: float(not finished(r)),
-    "mean_train_return": lambda r: float(r.column("plain_return").mean()),
-    "collapses": collapses,
-    "collapsed": lambda r: float(collapses(r) > 0),
-    "goals_first30": lambda r: float(r.column("goals")[:EARLY_EPISODES].mean()),
-    "goals_all": lambda r: float(r.column("goals").mean()),
-    "final_eval": lambda r: float(r.final["mean_return"]),
-    "interactions_to_threshold": interactions_to_threshold,
-}
-"""Each metric as one number per run, for statistics over seeds."""
-CENSORED = ("episodes_to_solve", "interactions_to_threshold")
-"""Metrics with inf for "never": summarised by medians, compared by ranks only."""
-SHARES = ("unfinished", "collapsed")
-"""0/1 metrics: their mean is a share of runs, compared with Fisher's exact test."""
-
-
-# --- arms and settings ----------------------------------------------------------------------
-@dataclass
-class ArmRuns:
-    """The runs of one configuration (all fields but the seed)."""
-
-    config: dict
-    runs: list[FinishedRun]
-    name: str = ""
-
-    @property
-    def setting(self) -> str:
-        return f"{self.config['task']}/{self.config['timeout']}"
-
-    @property
-    def label(self) -> str:
-        return f"{self.setting} · {self.name}"
-
-    def values(self, metric: str) -> np.ndarray:
-        return np.array([PER_RUN[metric](run) for run in self.runs], dtype=float)
-
-
-def common_seeds(first: ArmRuns, second: ArmRuns) -> tuple[ArmRuns, ArmRuns]:
-    """The two arms restricted to the seeds both ran: a comparison the pre-registration plans
-    within one suite stays the same when one of its arms gets more seeds in another suite."""
-    seeds = {r.config.seed for r in first.runs} & {r.config.seed for r in second.runs}
-    return tuple(dataclasses.replace(arm, runs=[r for r in arm.runs if r.config.seed in seeds])
-                 for arm in (first, second))
-
-
-def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
-    """Runs with equal configs but for `seed` form an arm; each arm is named by its expert loss
-    and every field in which the arms of its setting (task, timeout) differ."""
-    arms: dict[str, ArmRuns] = {}
-    for run in runs:
-        fields = {k: v for k, v in run.config.to_dict().items() if k != "seed"}
-        arm = arms.setdefault(json.dumps(fields, sort_keys=True), ArmRuns(fields, []))
-        if all(r.config.seed != run.config.seed for r in arm.runs):  # a run repeated elsewhere counts once
-            arm.runs.append(run)
-    for arm in arms.values():
-        arm.runs.sort(key=lambda r: r.config.seed)
-        peers = [a.config for a in arms.values() if a.setting == arm.setting]
-        varying = [k for k in arm.config if k not in ("task", "timeout", "expert_loss")
-                   and len({json.dumps(p[k]) for p in peers}) > 1
-                   and not (k in method_fields() and k not in get_method(arm.config["expert_loss"]).reads)]
-        arm.name = " ".join([arm.config["expert_loss"], *(f"{k}={arm.config[k]}" for k in varying)])
-    return sorted(arms.values(), key=lambda a: a.label)
-
-
-def preset_distance(arm: ArmRuns, overrides: tuple[tuple[str, object], ...] = ()) -> int:
-    """How many config fields besides the loss (and the timeout) differ from the task preset with
-    `overrides`: 0 for the paper's and the baselines' arms, more for a sensitivity or benchmark variant."""
-    preset = Config.for_task(arm.config["task"], **dict(overrides)).to_dict()
-    return sum(v != preset[k] for k, v in arm.config.items() if k not in ("expert_loss", "timeout"))
-
-
-def bayes_ce_pairs(arms: list[ArmRuns], task: str, timeout: str | None,
-                   overrides: tuple[tuple[str, object], ...] = ()) -> list[tuple[ArmRuns, ArmRuns | None]]:
-    """Each bayes arm of the setting (`task`, `timeout` or any if None, and the config fields of
-    `overrides`) with its ce arm (equal in every field but the Bayes-only ones and the loss), the
-    reference pair first: the one closest to the task preset with `overrides`."""
-    def strip(arm: ArmRuns) -> dict:
-        return {k: v for k, v in arm.config.items() if k not in ("expert_loss", *BAYES_ONLY)}
-
-    def selected(arm: ArmRuns) -> bool:
-        return (arm.config["task"] == task and timeout in (None, arm.config["timeout"])
-                and all(arm.config[k] == v for k, v in overrides))
-
-    pairs = [(b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
-             for b in arms if b.config["expert_loss"] == "bayes" and selected(b)]
-    return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0], overrides), -len(p[0].runs),
-                                        p[0].label))
-
-
-@dataclass(frozen=True)
-class Setting:
-    """Where a claim is tested: the arms of `task` under `timeout` (None: any) whose config has the
-    fields of `overrides`, so one task can carry several readings of a claim (C2)."""
-
-    task: str
-    timeout: str | None
-    overrides: tuple[tuple[str, object], ...] = ()
-    reading: str = ""
-    """Which reading of the claim this setting is, when it has several."""
-
-    @property
-    def name(self) -> str:
-        return " ".join([f"{self.task}/{self.timeout or '*'}", *(f"{k}={v}" for k, v in self.overrides)])
-
-    def pairs(self, arms: list[ArmRuns]) -> list[tuple[ArmRuns, ArmRuns | None]]:
-        return bayes_ce_pairs(arms, self.task, self.timeout, self.overrides)
-
 
 # --- the claims -----------------------------------------------------------------------------
 @dataclass

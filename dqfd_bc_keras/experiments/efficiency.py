@@ -23,7 +23,7 @@ import numpy as np
 from ..envs import get_task
 from ..files import write_text
 from ..tasks import TASKS
-from .claims import first_reaching
+from .metrics import first_reaching
 from .data import FinishedRun
 from .stats import bootstrap_ci
 

@@ -40,7 +40,8 @@ from ..tasks import TASKS as PRESETS
 from ..seeds import demo_seed
 from ..config import UNCERTAINTIES
 from ..uncertainty import max_policy_variance
-from .claims import CLAIMS, ArmRuns, judge
+from .arms import ArmRuns
+from .claims import CLAIMS, judge
 from .efficiency import ratio_ci
 from .stats import CensoredSummary, Summary
 from .suites import SUITES

@@ -24,7 +24,8 @@ import numpy as np
 
 from ..envs import get_task
 from ..files import write_text
-from .claims import ArmRuns, group_arms, interactions_to_threshold
+from .arms import ArmRuns, group_arms
+from .metrics import interactions_to_threshold
 from .data import load_runs
 from .efficiency import ratio_ci, teacher_verdict
 from .imitation import imitation_arms, load_imitation, run_imitation

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..config import Config
 from ..errors import ConfigError
-from .claims import ALPHA, GOALS_MARGIN, PAPER, RETURN_MARGIN, SHARE_MARGIN, TODAY, Setting, rule_power
+from .arms import Setting
+from .claims import ALPHA, GOALS_MARGIN, PAPER, RETURN_MARGIN, SHARE_MARGIN, TODAY, rule_power
 from .stats import sd_from_ci, seeds_for_bound, seeds_for_equivalence
 
 POWER = 0.8

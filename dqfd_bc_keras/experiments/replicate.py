@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..files import write_text
-from .claims import interactions_to_threshold
+from .metrics import interactions_to_threshold
 from .data import FinishedRun, load_runs
 from .stats import mann_whitney
 from .suites import arm

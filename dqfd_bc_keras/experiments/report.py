@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from . import figures
-from .claims import (ALPHA, CLAIMS, METRICS, PER_RUN, ArmRuns, Comparison, EARLY_EPISODES,
-                     ablation_pairs, bayes_ce_pairs, dynamic_default, finished, group_arms, judge, judge_ablation,
-                     preset_distance, rule_text)
+from .arms import ArmRuns, bayes_ce_pairs, group_arms, preset_distance
+from .claims import ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, judge, judge_ablation, rule_text
+from .metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
 from ..config import Config
 from ..envs import get_task
 from ..files import write_text
