@@ -1,4 +1,5 @@
-"""The front door: README's two commands, CI running the test command verbatim, quiet TF."""
+"""The front door and the docs: README's two commands, CI running the test command verbatim, a
+short README, links and § citations that resolve, no issue letters, quiet TF."""
 
 import os
 import re
@@ -7,22 +8,88 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+README = REPO / "README.md"
+DOCS = sorted((REPO / "docs").glob("*.md"))
+CODE = [REPO / "train.py", REPO / "evaluate.py",
+        *sorted(p for d in ("dqfd_bc_keras", "benchmarks", "tests") for p in (REPO / d).rglob("*.py"))]
+NOTES = ("<!-- notes: hand-written, kept when the report is regenerated -->", "<!-- /notes -->")
 
 
 def quick_start_commands() -> list[str]:
-    readme = (REPO / "README.md").read_text()
-    section = readme.split("## Quick start", 1)[1].split("\n## ", 1)[0]
+    section = README.read_text().split("## Quick start", 1)[1].split("\n## ", 1)[0]
     return re.findall(r"```bash\n(.+?)\n```", section, flags=re.S)
 
 
 def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
     commands = quick_start_commands()
     assert len(commands) == 2 and all("\n" not in c for c in commands)
-    install = "python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt"
-    assert all(c.startswith(install) for c in commands)
+    assert commands[0].startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/dqfd-train")
+    assert commands[1].startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt")
     assert commands[1].endswith("-m pytest -q -n 2")
     ci = (REPO / ".ci" / "run").read_text().splitlines()
     assert commands[1] in ci and "set -euo pipefail" in ci
+
+
+def test_readme_is_a_front_door_of_at_most_250_lines():
+    lines = README.read_text().splitlines()
+    assert len(lines) <= 250, f"README.md has {len(lines)} lines; move reference detail to docs/"
+
+
+def relative_links(markdown: Path) -> list[str]:
+    """Targets of [text](target) and ![alt](target) that point into the repository."""
+    targets = re.findall(r"!?\[[^\]]*\]\(([^)\s]+)\)", markdown.read_text())
+    return [t.split("#", 1)[0] for t in targets if not re.match(r"[a-z]+:|#", t)]
+
+
+def test_every_relative_link_of_the_docs_resolves_to_a_file_in_the_repository():
+    broken = [f"{md.relative_to(REPO)} → {target}" for md in [README, *DOCS] for target in relative_links(md)
+              if not (md.parent / target).resolve().exists()
+              or not (md.parent / target).resolve().is_relative_to(REPO)]
+    assert not broken, broken
+    assert "docs/ALGORITHM.md" in relative_links(README)  # the scan sees the README's links at all
+
+
+def test_relative_links_leave_out_urls_anchors_and_fragments(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("[a](there.md#part) ![b](fig.png) [c](https://example.org) [d](#top)")
+    assert relative_links(page) == ["there.md", "fig.png"]
+
+
+def algorithm_citations(text: str) -> set[int]:
+    """Section numbers cited as `ALGORITHM.md §N` (also `§2–§3`, `§4, §5`)."""
+    runs = re.findall(r"ALGORITHM\.md (§\d+(?:\s*(?:[–-]|,|and)\s*§\d+)*)", text)
+    return {int(n) for run in runs for n in re.findall(r"§(\d+)", run)}
+
+
+def test_algorithm_citations_are_parsed_with_ranges():
+    assert algorithm_citations("(ALGORITHM.md §4–§5) and ALGORITHM.md §7, C1 and §9; ALGORITHM.md §2, §3") == {2, 3, 4, 5, 7}
+
+
+def test_every_algorithm_section_the_code_cites_is_a_heading_of_docs_algorithm_md():
+    headings = {int(n) for n in re.findall(r"^## (\d+)\. ", (REPO / "docs" / "ALGORITHM.md").read_text(), flags=re.M)}
+    cited = {(path.relative_to(REPO), n) for path in [*CODE, README, *DOCS]
+             for n in algorithm_citations(path.read_text())}
+    assert {n for _, n in cited} >= {1, 2, 3, 4, 5, 6, 7}  # the code's citations are all found
+    assert not {c for c in cited if c[1] not in headings}, sorted(c for c in cited if c[1] not in headings)
+
+
+ISSUE_LETTER = re.compile(r"\b[Ii]ssues? [A-L]\b|(?<![\w.])[A-L]'s\b")
+"""How a project issue was cited: "issue H", "(issues D, E)", "E's protocol"."""
+
+
+def user_facing_text() -> dict[str, str]:
+    """README and docs/*.md; of RESULTS.md only its hand-written notes (the rest is generated)."""
+    pages = {str(p.relative_to(REPO)): p.read_text() for p in [README, *DOCS]}
+    results = pages["docs/RESULTS.md"]
+    pages["docs/RESULTS.md"] = results[results.find(NOTES[0]):results.find(NOTES[1])]
+    return pages
+
+
+def test_user_facing_docs_cite_no_issue_letters():
+    assert [m.group(0) for m in ISSUE_LETTER.finditer("issue H, (issues D, E), E's protocol")] == ["issue H", "issues D", "E's"]
+    assert not ISSUE_LETTER.search("DQfD's margin, BCModel's fit, TD's target, C4's flags, the issue's goal")
+    found = [f"{name}: {m.group(0)!r}" for name, text in user_facing_text().items() for m in ISSUE_LETTER.finditer(text)]
+    assert not found, found
 
 
 def test_tensorflow_is_quiet_and_single_threaded():
