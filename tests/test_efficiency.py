@@ -105,7 +105,7 @@ def test_table_marks_the_goal_on_the_point_estimate_and_states_the_anchor():
 
 
 def test_new_tasks_have_the_5x_goal_and_their_published_anchor():
-    """Issue H: 5× on Acrobot; SB3's row shows rl-zoo3's published final return beside its median."""
+    """The goal on Acrobot is 5×; SB3's row shows rl-zoo3's published final return beside its median."""
     acrobot = [ArmSteps("acrobot", "bayes", [4000.0] * 3, [-80.0, -90.0, -85.0], -100.0),
                ArmSteps("acrobot", SB3_METHOD, [24_000.0] * 3, [-75.0, -77.0, -90.0], -100.0, anchor_final=-76.6)]
     ours, sb3 = table(acrobot)[2:4]

@@ -1,4 +1,4 @@
-"""Issue I's lab: the quality × quantity grid (rules, `grid --quick` end to end), BC alone, and
+"""The lab's quality × quantity grid (rules, `grid --quick` end to end), BC alone, and
 the estimators' calibration and section."""
 
 import json

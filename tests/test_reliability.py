@@ -1,4 +1,4 @@
-"""No run is ever lost, every failure is one line, one writer per run directory (issue F).
+"""No run is ever lost, every failure is one line, one writer per run directory.
 
 Each test is one failure mode of the README's table: what breaks, and what the user sees.
 """

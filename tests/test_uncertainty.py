@@ -1,4 +1,4 @@
-"""The three estimators of σ²(s) − σ0² (uncertainty.py, issue I): values on constructed inputs,
+"""The three estimators of σ²(s) − σ0² (uncertainty.py): values on constructed inputs,
 the ensemble's bootstrap, save/load round trips, and their use by the agent."""
 
 import keras

@@ -214,7 +214,7 @@ def efficiency_section(suite_dir: Path) -> list[str]:
     path = suite_dir / EFFICIENCY_FILE
     loaded = load(path)
     if loaded is None:
-        return [f"Not run (or {EFFICIENCY_FILE} predates issue E): `python benchmarks/bench_sample_efficiency.py "
+        return [f"Not run (or {EFFICIENCY_FILE} predates the current protocol): `python benchmarks/bench_sample_efficiency.py "
                 f"--out {suite_dir}` writes {EFFICIENCY_FILE}."]
     protocol, arms = loaded
     thresholds = ", ".join(f"{task} {threshold:g}" for task, threshold in {a.task: a.threshold for a in arms}.items())

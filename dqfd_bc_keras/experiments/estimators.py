@@ -1,4 +1,4 @@
-"""The estimators of σ² (issue I): does σ² know where the demonstrations are, and does the
+"""The estimators of σ²: does σ² know where the demonstrations are, and does the
 Bayesian loss with a working estimator change the verdicts?
 
     python -m dqfd_bc_keras.experiments calibrate --out results/calibration.json --figure calibration.png
@@ -13,7 +13,7 @@ and σ² − σ0² is averaged over the states of
 - 3–6 std away: held-out demonstrated states moved 3–6 demonstration standard deviations in a
   random direction (standardised space).
 An estimator that is epistemic should give off-demo states several times the on-demo value:
-the goal (issue I) is a ratio ≥ 5. The largest value any of them can take is
+the goal is a ratio ≥ 5. The largest value any of them can take is
 `uncertainty.max_policy_variance(A)`; the share of it shows how far the imitation weight
 1/(2σ²) can fall below 1/(2σ0²).
 """

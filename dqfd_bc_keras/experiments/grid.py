@@ -1,4 +1,4 @@
-"""When do demonstrations help or hurt? The quality × quantity grid (issue I; PREREGISTRATION §8).
+"""When do demonstrations help or hurt? The quality × quantity grid (PREREGISTRATION §8).
 
     python -m dqfd_bc_keras.experiments grid --out results          # runs, BC alone, GRID.md, heatmaps
     python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 1 cell, 1 seed, QUICK budget
@@ -233,7 +233,7 @@ def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdo
     names = ("grid-interactions.png", "grid-final.png")
     heatmaps(cells, table, *(figures_dir / n for n in names), seeds)
     links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
-    budget = "the QUICK budget (a test, not a result)" if quick else "preset defaults (50k steps, early stop, E's protocol)"
+    budget = "the QUICK budget (a test, not a result)" if quick else "preset defaults (50k steps, early stop, the sample-efficiency protocol)"
     return [f"{GRID_TASK}, {budget}; every method with demonstrations "
             f"has up to {seeds} seeds per cell, plain DQN one set for all cells; BC alone is the MLE BC model on the "
             "cell's demonstrations, played greedily without RL (no interaction beyond the demonstrations). "

@@ -1,6 +1,6 @@
 """Statistics over seeds: robust averages, bootstrap intervals, significance, equivalence and power.
 
-The paper shows single runs; issue D compares arms over many seeds the way rliable
+The paper shows single runs; the lab compares arms over many seeds the way rliable
 (Agarwal et al. 2021) recommends: a point estimate (mean, and the interquartile mean, which a
 few outlying seeds cannot drag), a 95% percentile-bootstrap interval, a two-sided test of the
 difference (Mann–Whitney U for values, Fisher's exact test for proportions) and, for a claim of
