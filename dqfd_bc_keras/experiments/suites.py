@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib
 import json
 import re
 from collections.abc import Sequence
@@ -226,6 +227,17 @@ ALL = ("dynamic", "efficiency", "paper", "ablations", "baselines", "sensitivity"
 
 
 def suite_arms(suite: str) -> list[Arm]:
-    if suite not in SUITES:
-        raise ConfigError(f"unknown suite {suite!r}; expected one of {sorted(SUITES)}")
-    return SUITES[suite]
+    """The arms of suite `suite`: one of `SUITES`, or a user's `module:NAME`, a list of `Arm`s
+    (built with `arm(...)`) in an importable module."""
+    if suite in SUITES:
+        return SUITES[suite]
+    module, sep, name = suite.rpartition(":")
+    if not (sep and module):
+        raise ConfigError(f"unknown suite {suite!r}; expected one of {sorted(SUITES)} or module:NAME")
+    try:
+        arms = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as error:
+        raise ConfigError(f"suite {suite!r}: cannot import it ({type(error).__name__}: {error})") from None
+    if not isinstance(arms, (list, tuple)) or not arms or not all(isinstance(a, Arm) for a in arms):
+        raise ConfigError(f"suite {suite!r} must be a non-empty list of experiments.suites.Arm")
+    return list(arms)
