@@ -61,9 +61,9 @@ def task_preset(text: str) -> str:
     if ":" in text or re.search(r"-v\d+$", text):
         raise argparse.ArgumentTypeError(f"{text!r} is a Gymnasium env id, not a task preset: did you mean --env {text}?")
     near = difflib.get_close_matches(text, TASKS, n=1)
-    hint = (f"did you mean {near[0]}?" if near else
-            f"the presets are {', '.join(sorted(TASKS))} (any Gymnasium env: --env ID)")
-    raise argparse.ArgumentTypeError(f"unknown task preset {text!r}; {hint}")
+    hint = (f"; did you mean {near[0]}?" if near else
+            f" (choose from {', '.join(map(repr, sorted(TASKS)))}; any Gymnasium env: --env ID)")
+    raise argparse.ArgumentTypeError(f"invalid choice: {text!r}{hint}")
 
 
 def env_id(text: str) -> str:

@@ -9,6 +9,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from test_cli import Done, assert_answered_without_tensorflow
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "dqfd_bc_keras"
@@ -64,3 +65,13 @@ def test_installed_commands_train_and_evaluate_outside_the_repository(installed)
     assert evaluated.returncode == 0, evaluated.stderr
     assert "cartpole (CartPole-v1), q policy, 2 greedy episodes" in evaluated.stdout
     assert not any(REPO.glob("build")) and not any(REPO.glob("*.egg-info"))  # the checkout was not written to
+
+
+@pytest.mark.parametrize("script, args, code", [
+    ("dqfd-evaluate", ["--help"], 0), ("dqfd-evaluate", ["run", "--episodes", "0"], 2), ("dqfd-train", ["--help"], 0),
+    ("dqfd-train", ["--task", "CartPole-v1"], 2)])
+def test_installed_commands_answer_help_and_errors_before_tensorflow(installed, script, args, code):
+    _, site, elsewhere, env = installed
+    done = Done(site / "bin" / script, *args, cwd=elsewhere, env=env)
+    assert done.code == code and (done.stdout.startswith(f"usage: {script}") or done.stderr[0].startswith(script))
+    assert_answered_without_tensorflow(done)
