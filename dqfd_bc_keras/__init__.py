@@ -1,19 +1,76 @@
 """dqfd_bc_keras: deep Q-learning from demonstrations with a behavioural-cloning model and a
 Bayesian supervised expert loss (Kim, Symmetry 2022), in Keras 3 / TensorFlow.
 
-Importing the package registers the task presets as Gymnasium ids (`dqfd_bc_keras/<task>-v0`)
-and the custom Keras objects (`BCModel`) under the package name `dqfd_bc_keras`, so saved
-models load with `keras.saving.load_model(path)` in safe mode.
+Importing the package is light, so that a command's `--help` answers at once: it does not import
+TensorFlow. It sets TensorFlow's environment (runtime.py), arranges for TensorFlow's thread pools
+to be set as soon as any module imports it, and registers the task presets as Gymnasium ids
+(`dqfd_bc_keras/<task>-v0`). Saved models load with `dqfd_bc_keras.load_model(path)`, which
+registers the package's custom Keras objects (`BCModel`, …) first.
 """
 
-from . import runtime
+from __future__ import annotations
 
-runtime.configure_tensorflow()  # before any TensorFlow op: thread pools, quiet logs
+import importlib.abc
+import importlib.machinery
+import importlib.util
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from .bc import BCModel  # noqa: E402  (registers the Keras custom object)
-from .envs import TASKS, make_plain_env, make_task, register_tasks  # noqa: E402
+from . import runtime  # first: its environment variables are read when TensorFlow loads
+from .envs import TASKS, make_plain_env, make_task, register_tasks
+
+if TYPE_CHECKING:
+    import keras
+
+    from .bc import BCModel
+
+__all__ = ["TASKS", "BCModel", "load_model", "make_plain_env", "make_task"]
+__version__ = "0.1.0"
+
+
+class _ConfigureTensorFlow(importlib.abc.MetaPathFinder):
+    """Finds `tensorflow` like the other finders, then runs `runtime.configure_tensorflow` right
+    after TensorFlow's own import: whichever module imports it first, its thread pools are set
+    before its first op."""
+
+    def find_spec(self, name: str, path: object = None, target: object = None) -> importlib.machinery.ModuleSpec | None:
+        if name != "tensorflow":
+            return None
+        sys.meta_path.remove(self)  # once: the search below, and every later import, go past it
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.loader is not None:
+            exec_module = spec.loader.exec_module
+
+            def exec_then_configure(module: object) -> None:
+                exec_module(module)
+                runtime.configure_tensorflow()
+
+            spec.loader.exec_module = exec_then_configure  # type: ignore[method-assign]
+        return spec
+
+
+if "tensorflow" in sys.modules:
+    runtime.configure_tensorflow()
+elif not any(isinstance(finder, _ConfigureTensorFlow) for finder in sys.meta_path):
+    sys.meta_path.insert(0, _ConfigureTensorFlow())
 
 register_tasks()
 
-__all__ = ["TASKS", "BCModel", "make_plain_env", "make_task"]
-__version__ = "0.1.0"
+
+def load_model(path: str | Path) -> keras.Model:
+    """A saved `.keras` model (a run's q_network.keras or bc_model.keras, a shipped model) in
+    Keras' safe mode, with the package's custom objects registered; a file that is missing, not a
+    .keras archive or unreadable is a one-line `ModelFileError`."""
+    from .evaluation import load_model as load  # registers BCModel, EnsembleDense, FusedAdam, …
+
+    return load(path)
+
+
+def __getattr__(name: str) -> Any:
+    """`dqfd_bc_keras.BCModel`, imported (with TensorFlow) only when asked for."""
+    if name == "BCModel":
+        from .bc import BCModel
+
+        return BCModel
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

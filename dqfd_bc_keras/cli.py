@@ -1,9 +1,13 @@
-"""What every command-line entry point shares: one-line errors and exit code 2."""
+"""What every command-line entry point shares: one-line errors and exit code 2, near misses
+answered with a suggestion. Light on purpose (no TensorFlow): a command parses its arguments
+before it imports anything heavy."""
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
+import re
 import signal
 import sys
 import warnings
@@ -30,9 +34,9 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
     from .envs import TASKS
 
     group = parser.add_mutually_exclusive_group(required=required)
-    group.add_argument("--task", choices=sorted(TASKS),
+    group.add_argument("--task", choices=sorted(TASKS), type=task_preset,
                        help="task preset" + (f" (default: {default})" if default else ""))
-    group.add_argument("--env", metavar="ID", help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
+    group.add_argument("--env", metavar="ID", type=env_id, help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
                        "or my_module:MyEnv-v0 (generic defaults; see config.EnvConfig)")
     parser.add_argument("--max-steps", type=positive_int, metavar="N",
                         help="episode step limit (required for an env registered without one)")
@@ -45,6 +49,36 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
 def chosen_task(args: argparse.Namespace) -> str | None:
     """The task of `add_task_arguments`' flags: --env, else --task, else the default."""
     return args.env or args.task or args.default_task
+
+
+def task_preset(text: str) -> str:
+    """argparse type of `--task`: a preset's name. A Gymnasium id suggests `--env`, a near miss the
+    preset it resembles."""
+    from .envs import TASKS
+
+    if text in TASKS:
+        return text
+    if ":" in text or re.search(r"-v\d+$", text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a Gymnasium env id, not a task preset: did you mean --env {text}?")
+    near = difflib.get_close_matches(text, TASKS, n=1)
+    hint = (f"; did you mean {near[0]}?" if near else
+            f" (choose from {', '.join(map(repr, sorted(TASKS)))}; any Gymnasium env: --env ID)")
+    raise argparse.ArgumentTypeError(f"invalid choice: {text!r}{hint}")
+
+
+def env_id(text: str) -> str:
+    """argparse type of `--env`: a registered Gymnasium id (`module:Env-v0` imports `module`), or a
+    preset's name; an unknown id that resembles a preset suggests `--task`."""
+    from .envs import TASKS, get_task
+    from .errors import ConfigError
+
+    try:
+        get_task(text)
+    except ConfigError as error:
+        near = difflib.get_close_matches(text.lower(), TASKS, n=1)
+        hint = f"; did you mean --task {near[0]}?" if near else ""
+        raise argparse.ArgumentTypeError(f"{error}{hint}") from None
+    return text
 
 
 def env_settings(args: argparse.Namespace) -> dict[str, object]:

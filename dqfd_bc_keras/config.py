@@ -356,6 +356,8 @@ def parse_assignments(assignments: list[str]) -> dict[str, object]:
     `env_kwargs` takes a JSON object. Applied before any validation, so an override can make a
     task usable (`max_steps` on an env without a time limit).
     """
+    import difflib
+
     types = {f.name: f.type for f in dataclasses.fields(Config)}
     changes: dict[str, object] = {}
     for assignment in assignments:
@@ -363,8 +365,12 @@ def parse_assignments(assignments: list[str]) -> dict[str, object]:
         key = key.strip().replace("-", "_")
         if key == "task":
             raise ConfigError("the task is chosen with --task or --env: each has its own preset defaults")
-        if not sep or key not in types:
-            raise ConfigError(f"--set {assignment!r}: expected key=value with a key among {sorted(types)}")
+        if not sep:
+            raise ConfigError(f"--set {assignment!r}: expected key=value")
+        if key not in types:
+            near = difflib.get_close_matches(key, types, n=1)
+            hint = f"did you mean {near[0]}?" if near else "Config's fields are listed in dqfd_bc_keras/config.py"
+            raise ConfigError(f"--set {assignment!r}: unknown Config field {key!r}; {hint}")
         changes[key] = _parse(key, types[key], text.strip())
     return changes
 

@@ -1,19 +1,38 @@
-"""The lab's command line: `python -m dqfd_bc_keras.experiments run|export|report …`."""
+"""The lab's command line: `python -m dqfd_bc_keras.experiments run|export|report|… …`.
+
+The arguments are parsed before anything heavy is imported: `--help` and a bad argument answer
+at once, and each command imports what it runs.
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
 import sys
 from collections.abc import Sequence
+from importlib.util import find_spec
 from pathlib import Path
 
-import json
-
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
-from .suites import ALL, SUITES, on_task
-from .sweep import BACKENDS, run_suite
+from .suites import ALL, EFFICIENCY_TASKS, SUITES, on_task
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
+BACKENDS = ("local", "ray")
+"""`run --backend`: sweep.BACKENDS, spelled here so that a wrong name is refused before TensorFlow
+loads (a test keeps the two equal)."""
+
+
+def comma_list(allowed: Sequence[str], what: str):
+    """argparse type of a comma-separated list of names among `allowed`."""
+    def parse(text: str) -> list[str]:
+        names = text.split(",")
+        unknown = sorted(set(names) - set(allowed))
+        if unknown:
+            raise argparse.ArgumentTypeError(f"unknown {what}(s) {unknown}; expected among {', '.join(allowed)}")
+        return names
+
+    return parse
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -24,7 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     go.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: each arm's planned seeds)")
     go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     go.add_argument("--out", required=True, help="suite directory")
-    go.add_argument("--backend", choices=BACKENDS, default="local")
+    go.add_argument("--backend", choices=BACKENDS, default="local", help="local (a process pool, the default) or ray")
     go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
     add_task_arguments(go)  # the suite's arms on this task instead of their own
     go.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -78,8 +97,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     rep2.add_argument("--out", required=True, help="directory of the reruns")
     rep2.add_argument("--archive", default="docs/data/results.tar.xz", help="default: docs/data/results.tar.xz")
     rep2.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
+    eff = commands.add_parser(
+        "efficiency", help="sample efficiency: interactions to the threshold, ours against SB3's DQN",
+        description="Runs the efficiency suite's arms and Stable-Baselines3's DQN as rl-zoo3 runs it (both evaluated "
+                    "on one grid), prints each arm's steps to the threshold and writes OUT/efficiency.json "
+                    "(dqfd_bc_keras/experiments/baselines.py).")
+    eff.add_argument("--seeds", type=positive_int, default=10)
+    eff.add_argument("--workers", type=positive_int, default=2)
+    eff.add_argument("--out", default="results", help="suite directory (runs are reused; the table is written "
+                     "there as efficiency.json)")
+    eff.add_argument("--parts", type=comma_list(("ours", "sb3"), "part"), default=["ours", "sb3"],
+                     help="what to run: ours, sb3 or both (default)")
+    eff.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs "
+                     "(writes no efficiency.json)")
+    eff.add_argument("--no-run", action="store_true", help="run nothing: summarise the complete runs and SB3 files "
+                     "under --out, over the seeds each arm has")
+    eff.add_argument("--tasks", type=comma_list(EFFICIENCY_TASKS, "task"), default=list(EFFICIENCY_TASKS),
+                     help=f"the tasks to run (default: all of {', '.join(EFFICIENCY_TASKS)})")
+    eff.add_argument("--json", action="store_true", help="one JSON list with every arm's row (∞ as Infinity)")
     args = parser.parse_args(argv)
-    if args.command == "replicate":
+    if args.command == "efficiency":
+        if "sb3" in args.parts and find_spec("stable_baselines3") is None:
+            eff.error("--parts sb3 needs Stable-Baselines3: pip install -r benchmarks/requirements.txt")
+        from .baselines import measure
+        from .efficiency import rows, table, teacher_table
+
+        steps = measure(args.parts, args.tasks, args.seeds, args.workers, Path(args.out), args.quick, args.no_run,
+                        progress=(lambda line: None) if args.json else print)
+        print(json.dumps(rows(steps)) if args.json else "\n".join([*table(steps), "", *teacher_table(steps)]))
+    elif args.command == "replicate":
         from .replicate import parse_seeds, replicate
 
         replicate(args.arm, parse_seeds(args.seeds), args.out, args.archive, args.workers,
@@ -93,6 +139,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         calibrate(args.out, args.figure, args.quick)
     elif args.command == "run":
+        from .sweep import run_suite
+
         assignments = [*(f"{key}={json.dumps(value) if isinstance(value, dict) else value}"
                          for key, value in env_settings(args).items()), *args.set]
         task, moved = chosen_task(args), chosen_task(args) is not None or assignments

@@ -1,0 +1,106 @@
+"""Train an agent with Algorithm 1 (DQfD-BC with a supervised expert loss) and evaluate it.
+
+    dqfd-train                                       # cartpole, bayes, 5 imperfect-expert episodes
+    dqfd-train --task mountaincar-goals --expert-loss ce --seed 3
+    dqfd-train --env Acrobot-v1 --expert my_rules:swing       # any Gymnasium env, your demonstrator
+    dqfd-train --env flappy_bird_gymnasium:FlappyBird-v0 --env-kwargs use_lidar=false --max-steps 1000 ...
+    dqfd-train --env CartPole-v1 --demos minari:cartpole/expert-v0   # a local Minari dataset
+    dqfd-train --demos demos.npz --set sigma0_sq=1.0 --set total_steps=20000
+    dqfd-train --out runs/x --resume                 # continue a killed run from its checkpoint
+
+From a checkout, `python train.py …` is the same command.
+
+The arguments are parsed, and every setting validated, before TensorFlow is imported: `--help`
+and a bad argument answer in about a second.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+from .. import demos
+from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
+from ..config import METHODS, QUICK, TARGETS, Config, parse_assignments
+from ..envs import task_slug
+from ..errors import ConfigError
+from ..experts import EXPERT_NAMES
+from ..wrappers import TIMEOUT_MODES
+
+
+def parse(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = ArgumentParser(description=__doc__.split("\n\n")[0],
+                                epilog="Every Config field can be set with --set key=value "
+                                       "(see dqfd_bc_keras/config.py for the list and the defaults).")
+    add_task_arguments(parser, default="cartpole")
+    parser.add_argument("--expert-loss", metavar="METHOD",
+                        help=f"J_E: {' | '.join(METHODS)} or your own MODULE:NAME (default: bayes; "
+                             "none = plain DQN; sqil = SQIL's rewards, no J_E)")
+    parser.add_argument("--target", choices=TARGETS, help="bootstrap target (default: dqn)")
+    parser.add_argument("--timeout", choices=TIMEOUT_MODES, help="time-limit handling (default: bootstrap)")
+    parser.add_argument("--demos", help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari "
+                        "cache); else recorded from --expert")
+    parser.add_argument("--expert", "--policy", dest="expert",
+                        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect), "
+                             "a rule module:function (obs → action) or a saved model.keras")
+    parser.add_argument("--demo-episodes", type=positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
+    parser.add_argument("--steps", type=positive_int, help="environment-step budget")
+    parser.add_argument("--seed", type=seed, help="seed of every random generator (default: 0)")
+    parser.add_argument("--out", help="run directory (default: runs/TASK-LOSS-seedSEED)")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    parser.add_argument("--force", action="store_true", help="replace an existing run in --out")
+    parser.add_argument("--quick", action="store_true", help="a tiny budget (seconds), for tests and smoke checks")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="any Config field")
+    return parser.parse_args(argv)
+
+
+def refuse_changes(config: Config, given: dict, demos_source: str | None) -> None:
+    """`--resume` continues a run as it was configured: a flag giving another value is an error."""
+    saved = config.to_dict()
+    changed = [f"{key}={value!r} (the run has {saved[key]!r})" for key, value in given.items() if saved[key] != value]
+    if demos_source:
+        changed.append("--demos (the run keeps the demonstrations it started with)")
+    if changed:
+        raise ConfigError(f"--resume continues the run in its own config, but the command changes {', '.join(changed)}; "
+                          "drop those flags, or start the run over with --force")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse(argv)
+    flags = {"expert_loss": args.expert_loss, "target": args.target, "timeout": args.timeout,
+             "expert": args.expert, "demo_episodes": args.demo_episodes, "total_steps": args.steps,
+             "seed": args.seed}
+    chosen = {k: v for k, v in flags.items() if v is not None}
+    # Every override before the one validation: --max-steps or --set max_steps=N makes an env
+    # without a time limit usable.
+    overrides = {**(QUICK if args.quick else {}), **chosen, **env_settings(args), **parse_assignments(args.set)}
+    task = chosen_task(args)
+    defaults = Config.__dataclass_fields__
+    out = args.out or (f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
+                       f"-seed{overrides.get('seed', defaults['seed'].default)}")
+    config = None if args.resume else Config.for_task(task, **overrides)
+    from ..runs import saved_config, train  # TensorFlow from here on: every argument has been checked
+
+    # A resumed run is the run in `out`, as its config.json says; a flag that would change it is refused.
+    if args.resume:
+        config = saved_config(out)
+        refuse_changes(config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})},
+                       args.demos)
+    dataset = (demos.load_source(args.demos, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs,
+                                 max_transitions=config.demo_capacity)
+               if args.demos and not args.resume else None)
+    if not args.quiet:
+        print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
+              f"config: {out}/config.json", flush=True)
+    result = train(config, out, dataset, resume=args.resume, force=args.force, quiet=args.quiet)
+    if not args.quiet:
+        print(f"{result.episodes} episodes, {result.env_steps} env steps, {result.interactions} interactions in all"
+              f"{' (early stop)' if result.stopped_early else ''}, {result.wall_time:.0f} s of training")
+        print(result.evaluation.summary())
+    return 0
+
+
+def cli() -> int:
+    """The `dqfd-train` console script."""
+    return run(main)
