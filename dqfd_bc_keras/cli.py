@@ -31,13 +31,13 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
     """`--task PRESET` or `--env ID` (any Gymnasium env with Discrete actions; `module:Env-v0`
     imports `module` first), with `--max-steps N` and `--env-kwargs KEY=VALUE …`; read the
     choice with `chosen_task` and the env settings with `env_settings`."""
-    from .envs import TASKS
+    from .tasks import TASKS
 
     group = parser.add_mutually_exclusive_group(required=required)
-    group.add_argument("--task", choices=sorted(TASKS), type=task_preset,
-                       help="task preset" + (f" (default: {default})" if default else ""))
+    group.add_argument("--task", metavar="{" + ",".join(sorted(TASKS)) + "}", type=task_preset,
+                       help="task preset, or your own as module:preset" + (f" (default: {default})" if default else ""))
     group.add_argument("--env", metavar="ID", type=env_id, help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
-                       "or my_module:MyEnv-v0 (generic defaults; see config.EnvConfig)")
+                       "or my_module:MyEnv-v0 (generic defaults: tasks.ENV_DEFAULTS)")
     parser.add_argument("--max-steps", type=positive_int, metavar="N",
                         help="episode step limit (required for an env registered without one)")
     parser.add_argument("--env-kwargs", nargs="+", action="extend", type=env_kwarg, metavar="KEY=VALUE",
@@ -52,11 +52,11 @@ def chosen_task(args: argparse.Namespace) -> str | None:
 
 
 def task_preset(text: str) -> str:
-    """argparse type of `--task`: a preset's name. A Gymnasium id suggests `--env`, a near miss the
-    preset it resembles."""
-    from .envs import TASKS
+    """argparse type of `--task`: a preset's name, or `module:preset` (importing `module` registers
+    it). A Gymnasium id suggests `--env`, a near miss the preset it resembles."""
+    from .tasks import TASKS, find_preset
 
-    if text in TASKS:
+    if find_preset(text) is not None:
         return text
     if ":" in text or re.search(r"-v\d+$", text):
         raise argparse.ArgumentTypeError(f"{text!r} is a Gymnasium env id, not a task preset: did you mean --env {text}?")
@@ -69,8 +69,9 @@ def task_preset(text: str) -> str:
 def env_id(text: str) -> str:
     """argparse type of `--env`: a registered Gymnasium id (`module:Env-v0` imports `module`), or a
     preset's name; an unknown id that resembles a preset suggests `--task`."""
-    from .envs import TASKS, get_task
+    from .envs import get_task
     from .errors import ConfigError
+    from .tasks import TASKS
 
     try:
         get_task(text)

@@ -116,9 +116,9 @@ def test_train_refuses_to_overwrite_a_run(quick_runs):
 
 @pytest.mark.parametrize("args, message", [
     (["--task", "pong"], "invalid choice: 'pong'"),
-    (["--expert-loss", "kl"], "invalid choice: 'kl'"),
+    (["--expert-loss", "kl"], "expert_loss='kl' is not one of ('margin'"),
     (["--steps", "0"], "must be a positive integer, got 0"),
-    (["--set", "gama=0.9"], "--set 'gama=0.9': expected key=value"),
+    (["--set", "gama=0.9"], "--set 'gama=0.9': unknown Config field 'gama'; did you mean gamma?"),
     (["--set", "gamma=abc"], "--set gamma='abc': expected float"),
     (["--set", "gamma=2"], "gamma must be in [0, 1], got 2.0"),
     (["--demos", "missing.npz"], "missing.npz: no such file"),

@@ -547,7 +547,7 @@ def test_with_overrides_types_each_value():
 
 
 @pytest.mark.parametrize("assignment, match", [
-    ("nope=1", "key=value with a key among"),
+    ("nope=1", "unknown Config field 'nope'"),
     ("hidden", "key=value"),
     ("batch_size=abc", "batch_size='abc': expected int"),
     ("mc_dropout=maybe", "expected bool"),

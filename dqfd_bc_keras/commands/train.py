@@ -21,10 +21,11 @@ from collections.abc import Sequence
 
 from .. import demos
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
-from ..config import METHODS, QUICK, TARGETS, Config, parse_assignments
+from ..config import QUICK, TARGETS, Config, parse_assignments
 from ..envs import task_slug
 from ..errors import ConfigError
 from ..experts import EXPERT_NAMES
+from ..methods import METHODS
 from ..wrappers import TIMEOUT_MODES
 
 

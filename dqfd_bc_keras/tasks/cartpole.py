@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import LabSettings, TaskSpec, register_task
+from .registry import LabSettings, TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:

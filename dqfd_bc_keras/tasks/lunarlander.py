@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import ENV_DEFAULTS, LabSettings, TaskSpec, register_task
+from .registry import ENV_DEFAULTS, LabSettings, TaskSpec, register_task
 
 
 def heuristic(s: np.ndarray, hover_gain: float = 0.5) -> int:

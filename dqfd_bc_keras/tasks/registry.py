@@ -1,0 +1,117 @@
+"""The task registry's types and functions (the package's presets are in the family modules)."""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError
+
+Rule = Callable[[np.ndarray], int]
+"""A scripted demonstrator: observation (as the networks see it) → action."""
+
+EXPERT_NAMES = ("strong", "imperfect")
+"""The scripted experts every package preset has: a strong one and an imperfect one."""
+ENV_DEFAULTS: Mapping[str, object] = {"demo_episodes": 10, "total_steps": 100_000, "eval_every": 5_000,
+                                      "early_stop_window": 0}
+"""The Config defaults of any Gymnasium env that is not a preset (`--env ID`): no early stop,
+10 demonstrated episodes, 100k steps, an evaluation every 5k. Ours, not the paper's."""
+
+
+@dataclass(frozen=True)
+class LabSettings:
+    """What the lab (dqfd_bc_keras/experiments) judges a preset by; every field optional."""
+
+    efficiency_demos: int | None = None
+    """Demonstrated episodes of the imperfect expert in the sample-efficiency suite; None: not in it."""
+    target_ratio: float = 10.0
+    """The sample-efficiency goal: SB3's median interactions to threshold ÷ ours ≥ this."""
+    teacher_return: float | None = None
+    """The imperfect expert's mean plain return over 100 episodes (seeds 0–99), which the efficiency
+    report compares our final returns with; pinned by tests/test_efficiency.py."""
+    grid_teachers: Mapping[tuple[str, float], float] = field(default_factory=dict)
+    """(expert, ε) → mean plain return over 100 episodes of each teacher of the quality × quantity
+    grid (`python -m dqfd_bc_keras.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
+    ablation_metric: str | None = None
+    """The metric the ablations are judged on (experiments/claims.py's ABLATION_MARGINS); None: no ablations."""
+    calibrate: bool = False
+    """Whether the σ² estimators are calibrated on this task (experiments/estimators.py)."""
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """A task: which plain env, which shaping, which step limit, its defaults and its experts."""
+
+    name: str
+    env_id: str
+    """The plain Gymnasium env; evaluation scores on it, unmodified."""
+    family: str | None = None
+    """The family whose scripted experts play it (the name demonstrators carry); None: no experts."""
+    max_steps: int | None = None
+    """The step limit; None only for an env without a `TimeLimit` of its own (set `max_steps`)."""
+    fall_penalty: float | None = None
+    """Reward added on a termination that is a failure (CartPole's fall), ALGORITHM.md §6."""
+    goal_reward: float | None = None
+    """Reward added on reaching the goal (the MountainCar goal-count variant), §6."""
+    solved_return: float | None = None
+    """The plain env's "solved" threshold (its spec's `reward_threshold`); None when it has none."""
+    defaults: Mapping[str, object] = field(default_factory=dict)
+    """The preset's Config defaults where they differ from Config's shared ones."""
+    experts: Mapping[str, Rule] = field(default_factory=dict, repr=False)
+    """Scripted demonstrators by name (strong, imperfect)."""
+    lab: LabSettings = field(default_factory=LabSettings)
+    doc: str = ""
+
+    @property
+    def gym_id(self) -> str:
+        """The id under which the preset is registered with Gymnasium."""
+        return f"{ID_NAMESPACE}/{self.name}-v0"
+
+    @property
+    def goal_count(self) -> bool:
+        return self.goal_reward is not None
+
+
+ID_NAMESPACE = "dqfd_bc_keras"
+TASKS: dict[str, TaskSpec] = {}
+"""Every registered preset by name, in the order registered."""
+
+
+def register_task(spec: TaskSpec) -> TaskSpec:
+    """Add a preset (a user's own, from their module); returns it."""
+    if not isinstance(spec, TaskSpec):
+        raise ConfigError(f"register_task() takes a TaskSpec, got {type(spec).__name__}")
+    TASKS[spec.name] = spec
+    return spec
+
+
+def find_preset(name: str) -> TaskSpec | None:
+    """The preset `name`, or `module:preset` after importing `module` (which registers it); None if
+    `name` is no preset (it may still be a Gymnasium id)."""
+    if name in TASKS:
+        return TASKS[name]
+    module, sep, bare = name.rpartition(":")
+    if not (sep and module):
+        return None
+    if bare not in TASKS:
+        try:
+            importlib.import_module(module)
+        except ImportError:
+            return None  # `envs.env_task` reports it, with the Gymnasium id's own error
+    return TASKS.get(bare)
+
+
+def family_preset(family: str) -> TaskSpec:
+    """The first preset of `family` with scripted experts: it names the family's plain env and experts."""
+    for spec in TASKS.values():
+        if spec.family == family and spec.experts:
+            return spec
+    raise ConfigError(f"unknown family {family!r}; families with scripted experts: {', '.join(families())}")
+
+
+def families() -> list[str]:
+    """Every family with scripted experts, in the order registered."""
+    return list(dict.fromkeys(s.family for s in TASKS.values() if s.family and s.experts))
