@@ -1,0 +1,1 @@
+"""Command-line entry points: each module's main(argv) is one command."""
