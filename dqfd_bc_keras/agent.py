@@ -23,7 +23,7 @@ from .networks import build_q_network
 from .optimizers import FusedAdam
 from .replay import Batch, PrioritizedReplay
 
-LOSS_TERMS = ("loss", "td", "n_step", "expert", "l2")
+from .records import LOSS_TERMS
 
 
 class MeanVector(keras.metrics.Metric):

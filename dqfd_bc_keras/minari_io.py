@@ -5,7 +5,7 @@ Only the local Minari cache is used: its root is `MINARI_DATASETS_PATH`, else
 published dataset, download it first yourself (`minari download ns/name-v0`).
 
 A Minari episode holds T actions and T + 1 observations with Gymnasium's flags, which is our
-`bootstrap` timeout mode; it becomes T transitions of our format (`demos.ARRAYS`):
+`bootstrap` timeout mode; it becomes T transitions of our format (`demo_data.ARRAYS`):
 
     obs = observations[:-1]   next_obs = observations[1:]   actions int64   rewards float32
     terminated / truncated bool (a step with both flags counts as terminated, as `TimeLimitMode` does)
@@ -32,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from .demos import ARRAYS, DemoDataset, DemoMeta, _validate
+from .demo_data import ARRAYS, DemoDataset, DemoMeta, validate
 from .envs import TaskSpec, effective_kwargs, get_task, task_spaces
 from .errors import ConfigError, DemoFileError, one_line
 from .observations import describe
@@ -184,7 +184,7 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap",
     )
     dataset = DemoDataset(**{name: np.concatenate(columns[name]).astype(dtype, copy=False)
                              for name, (dtype, _) in ARRAYS.items()}, meta=meta)
-    _validate(where, dataset)
+    validate(where, dataset)
     return dataset
 
 

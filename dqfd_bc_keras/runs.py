@@ -2,10 +2,12 @@
 
     RUN_DIR/config.json        every hyperparameter (written once, at the start), and under
                                "observation" the env's observation space and how it was flattened
-            metrics.csv        one row per episode (training.METRIC_FIELDS)
+            metrics.csv        one row per episode (records.EpisodeRow)
             evals.csv          greedy evaluations on the plain env at exactly every eval_every interactions
-            demonstrations.json  the initial D_demo: size and returns (runs with demonstrations)
-            dynamic_demos.json every dynamic-demonstration update
+                               (records.EvalRow)
+            demonstrations.json  the initial D_demo: size, returns and source (records.DemoSummary;
+                               runs with demonstrations)
+            dynamic_demos.json every dynamic-demonstration update (records.DemoUpdate)
             tb/                TensorBoard events: returns, evaluations, each loss term
             checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state), and
                                demos_given.npz, D_demo as given before any interaction
@@ -16,14 +18,12 @@
 Every file is written atomically; a checkpoint is a new directory, fsynced, then made current
 by rewriting `checkpoints/latest.json`, then the old one is deleted, so a run killed at any
 moment resumes from a complete one. One process writes a run directory (`.lock` holds its PID).
+The files of records are written by `run_files.py`.
 """
 
 from __future__ import annotations
 
-import csv
-import dataclasses
 import functools
-import io
 import json
 import shutil
 import sys
@@ -35,22 +35,26 @@ import tensorflow as tf
 
 from . import demos as demo_io
 from .config import Config
+from .envs import task_spaces
 from .errors import (BrokenRunError, ConfigError, DemoFileError, DivergedError, OutputExistsError, RunDirectoryError,
                      one_line)
-from .files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
-from .envs import get_task, task_spaces
 from .evaluation import EvalResult
+from .files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from .provenance import provenance
+from .records import DemoSummary, EpisodeRow, EvalRow
+from .run_files import (METRICS, append_row, plot_learning_curve, write_demonstrations, write_dynamic_demos,
+                        write_evals, write_metrics)
+from .run_state import TrainingState
 from .seeds import eval_seed, final_eval_seed
-from .training import (METRIC_FIELDS, Learner, TrainingState, build, run_evaluation, state_from_dict,
-                       train_episodes)
+from .training import Learner, build, run_evaluation, train_episodes
 
 COMPLETE = "complete.json"
 """Written last, atomically, by a finished run: a run without it is resumed, never taken as done."""
 GIVEN_DEMOS = "demos_given.npz"
 """D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
 demonstrations whatever their source (a file, a Minari dataset, a recording)."""
-EVAL_FIELDS = ("env_step", "interactions", "episode", "mean_return", "std_return", "mean_goals")
+EVAL_FIELDS = EvalRow.columns()
+"""evals.csv's columns, as the record spells them."""
 
 
 @dataclass
@@ -83,16 +87,8 @@ def clear(out: Path) -> None:
             shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
-def csv_writer(file, fields: tuple[str, ...]) -> csv.DictWriter:
-    return csv.DictWriter(file, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
-
-
-def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
-    buffer = io.StringIO()
-    writer = csv_writer(buffer, fields)
-    writer.writeheader()
-    writer.writerows(rows)
-    write_text(path, buffer.getvalue())
+TB_SKIPS = ("episode", "interactions", "wall_time")
+"""Columns of an episode row that are not TensorBoard scalars (interactions is its x axis)."""
 
 
 class RunDirectory:
@@ -114,29 +110,31 @@ class RunDirectory:
         """Opened at the first summary: a resume that fails to restore leaves no event file."""
         return tf.summary.create_file_writer(str(self.out / "tb"))
 
-    def write_demonstrations(self, data: demo_io.DemoDataset | None) -> None:
-        """What the run was given before any interaction (not interactions themselves)."""
+    def write_demonstrations(self, data: demo_io.DemoDataset | None, given: bool) -> None:
+        """What the run started from before any interaction (not interactions themselves): a
+        dataset it was `given` (a file, a Minari dataset) or one it recorded from its expert."""
         if data is None:
             return
         meta = data.meta
-        write_text(self.out / "demonstrations.json", json.dumps({
-            "transitions": len(data), "episodes": data.n_episodes, "expert": meta.expert,
-            "episode_returns": meta.episode_returns, "plain_returns": meta.plain_returns,
-            "pretrain_steps": self.config.pretrain_steps}, indent=1))
+        source = ("minari" if meta.expert.startswith("minari:") else "file") if given else "recorded"
+        write_demonstrations(self.out, DemoSummary(
+            transitions=len(data), episodes=data.n_episodes, expert=meta.expert,
+            episode_returns=meta.episode_returns, plain_returns=meta.plain_returns,
+            pretrain_steps=self.config.pretrain_steps, source=source))
 
     # --- called after every episode -------------------------------------------------------
-    def on_episode(self, learner: Learner, state: TrainingState, row: dict) -> None:
-        step = row["env_step"]
-        with self.tb.as_default(step=row["interactions"]):  # TensorBoard's x axis: interactions
-            for key in ("env_step", "return", "plain_return", "length", "goals", "epsilon", "loss", "td", "n_step",
-                        "expert", "l2", "demo_size"):
-                tf.summary.scalar(f"train/{key}", row[key])
+    def on_episode(self, learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
+        step = row.env_step
+        with self.tb.as_default(step=row.interactions):  # TensorBoard's x axis: interactions
+            for key, value in row.to_row().items():
+                if key not in TB_SKIPS:
+                    tf.summary.scalar(f"train/{key}", value)
         if self.progress is not None:
             self.progress.update(step - self.progress.n)
-            self.progress.set_postfix(episode=row["episode"], ret=f"{row['return']:.0f}")
+            self.progress.set_postfix(episode=row.episode, ret=f"{row.return_:.0f}")
         self.write_metrics()
         if state.demo_updates:
-            write_text(self.out / "dynamic_demos.json", json.dumps(state.demo_updates, indent=1))
+            write_dynamic_demos(self.out, state.demo_updates)
         if step >= state.next_checkpoint:
             state.next_checkpoint = step + self.config.checkpoint_every
             self.save_checkpoint()
@@ -146,12 +144,11 @@ class RunDirectory:
         rewrite per episode cost O(episodes²)); written whole, atomically, when the file is not one
         row behind (this process's first episode, a resume). A crash in an append leaves at worst a
         partial last line, which the resume's rewrite replaces."""
-        path, rows = self.out / "metrics.csv", self.state.metrics
-        if self.metrics_rows == len(rows) - 1 and path.is_file():
-            with open(path, "a", newline="") as file:
-                csv_writer(file, METRIC_FIELDS).writerow(rows[-1])
+        rows = self.state.metrics
+        if self.metrics_rows == len(rows) - 1 and (self.out / METRICS).is_file():
+            append_row(self.out / METRICS, rows[-1])
         else:
-            write_csv(path, METRIC_FIELDS, rows)
+            write_metrics(self.out, rows)
         self.metrics_rows = len(rows)
 
     def evaluate(self, points: list[int]) -> None:
@@ -160,16 +157,16 @@ class RunDirectory:
                                 eval_seed(self.config.seed))
         env_step = int(self.learner.interaction.env_steps.numpy())
         for point in points:
-            self.state.evals.append({
-                "env_step": env_step, "interactions": point, "episode": self.state.episode,
-                "mean_return": result.mean_return, "std_return": result.std_return,
-                "mean_goals": float(np.mean(result.goals)) if result.goals is not None else ""})
+            self.state.evals.append(EvalRow(
+                env_step=env_step, interactions=point, episode=self.state.episode, mean_return=result.mean_return,
+                std_return=result.std_return,
+                mean_goals=float(np.mean(result.goals)) if result.goals is not None else None))
             with self.tb.as_default(step=point):
                 tf.summary.scalar("eval/plain_return", result.mean_return)
                 tf.summary.scalar("eval/env_step", env_step)
                 if result.goals is not None:
                     tf.summary.scalar("eval/goals", float(np.mean(result.goals)))
-        write_csv(self.out / "evals.csv", EVAL_FIELDS, self.state.evals)
+        write_evals(self.out, self.state.evals)
         self.tb.flush()
 
     # --- checkpoints ------------------------------------------------------------------------
@@ -186,7 +183,7 @@ class RunDirectory:
                 if dynamic.recent:
                     demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
             self.state.interactions = self.learner.interactions
-            write_text(target / "state.json", json.dumps(dataclasses.asdict(self.state)))
+            write_text(target / "state.json", json.dumps(self.state.to_dict()))
             write_text(target / "config.json", json.dumps(self.config.to_dict(), indent=1))  # the run's own
             sync_tree(target)
             write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
@@ -210,7 +207,7 @@ class RunDirectory:
                 dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
                 recent = source / "recent.npz"
                 dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
-            self.state = state_from_dict(json.loads((source / "state.json").read_text()))
+            self.state = TrainingState.from_dict(json.loads((source / "state.json").read_text()))
         except (OSError, ValueError, LookupError, TypeError, tf.errors.OpError) as error:
             raise BrokenRunError(f"{source}: the checkpoint cannot be resumed ({one_line(error)}); "
                                  "start the run over with --force") from None
@@ -331,7 +328,7 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
     else:
         if learner.demos is not None:
             demo_io.save(learner.demos, given, force=True)
-        run.write_demonstrations(learner.demos)
+        run.write_demonstrations(learner.demos, given=dataset is not None)
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
     return run
@@ -345,34 +342,3 @@ def free_name(path: Path) -> Path:
         candidate = path.with_name(f"{path.name}.{k}")
     return candidate
 
-
-def plot_learning_curve(metrics: list[dict], evals: list[dict], config: Config, path: Path) -> None:
-    """Training returns per episode (plain env's scale), their moving average, and the greedy
-    evaluations, against environment steps, with the plain env's "solved" threshold."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    if metrics:
-        steps = np.array([row["env_step"] for row in metrics])
-        returns = np.array([row["plain_return"] for row in metrics], dtype=float)
-        ax.plot(steps, returns, color="tab:blue", alpha=0.3, lw=1, label="training episode")
-        window = min(config.dynamic_window, len(returns))
-        average = np.convolve(returns, np.ones(window) / window, mode="valid")
-        ax.plot(steps[window - 1:], average, color="tab:blue", lw=2, label=f"moving average ({window})")
-    if evals:
-        ax.plot([e["env_step"] for e in evals], [e["mean_return"] for e in evals], "o-", color="tab:orange",
-                label="greedy evaluation")
-    spec = get_task(config.task)
-    if spec.solved_return is not None:
-        ax.axhline(spec.solved_return, color="grey", ls="--", lw=1, label=f"solved ({spec.solved_return:g})")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel(f"return on {spec.env_id}")
-    ax.set_title(f"{config.task} · {config.expert_loss} · timeout={config.timeout} · seed {config.seed}")
-    ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)

@@ -9,155 +9,54 @@ Every env step whose transition the learner may train on is an interaction, coun
 place (`wrappers.CountInteractions` on every env of the learner); greedy evaluations happen at
 exactly every `eval_every` interactions, pausing an episode at the grid point if need be.
 
-An episode is one TensorFlow graph call (`Interaction.play`): a `tf.while_loop` acts
-ε-greedily with Q, steps the real Gymnasium env through `tf.numpy_function`, stores the
-transition, and takes the gradient step, so the policy that acts is always the one after
-the latest update. Per-episode work (logging, evaluation, dynamic demonstrations,
-checkpoints) stays in Python; `runs.py` holds the files a run writes.
+An episode is one TensorFlow graph call (`interaction.Interaction.play`: act, step the env,
+store, learn, all in the graph). Per-episode work (logging, evaluation, dynamic
+demonstrations, checkpoints) stays in Python: `run_state.py` keeps its bookkeeping, each
+episode ends in a `records.EpisodeRow`, and `runs.py` writes the files of a run.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import gymnasium as gym
 import keras
 import numpy as np
 import tensorflow as tf
 
-from . import demos as demo_io
 from .agent import DQfDAgent, make_agent
 from .bc import BCModel, build_bc_model
 from .config import Config
+from .demo_data import DemoDataset, concatenate
 from .envs import make_task
-from .wrappers import CountInteractions, Tally
 from .errors import DivergedError
 from .evaluation import EvalResult, GreedyPolicy, evaluate
+from .interaction import Interaction
+from .recording import record, rollout
+from .records import DemoUpdate, EpisodeRow, Losses
+from .run_state import TrainingState, early_stop
 from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed
+from .wrappers import CountInteractions, Tally
 
-METRIC_FIELDS = ("episode", "env_step", "interactions", "return", "plain_return", "length", "goals", "epsilon",
-                 "loss", "td", "n_step", "expert", "l2", "demo_size", "wall_time")
-
-
-class Interaction(tf.Module):
-    """The interaction loop of Algorithm 1 (step 3) for one env, compiled into one graph per episode."""
-
-    def __init__(self, agent: DQfDAgent, env: gym.Env, config: Config, record: bool = False) -> None:
-        """`record`: keep the transitions of the running episode (dynamic demonstrations from
-        the agent's own episodes)."""
-        super().__init__()
-        self.agent, self.env, self.config = agent, env, config
-        self.env_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="env_steps")
-        self.rng = tf.random.Generator.from_seed(config.seed + 1)
-        self.episode = EpisodeStats()
-        self.recorder = demo_io.EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed,
-                                                env_kwargs=config.env_kwargs) \
-            if record else None
-        obs_dim = agent.obs_dim
-        self.play = tf.function(self._play, autograph=False, input_signature=[
-            tf.TensorSpec([obs_dim], tf.float32), tf.TensorSpec([], tf.int64)])
-
-    def epsilon(self) -> tf.Tensor:
-        """ε, linear from its start to `epsilon_end` over `epsilon_fraction` of the budget."""
-        c = self.config
-        start = c.initial_epsilon
-        progress = tf.cast(self.env_steps, tf.float32) / (c.epsilon_fraction * c.total_steps)
-        return tf.maximum(c.epsilon_end, start - (start - c.epsilon_end) * progress)
-
-    def reset(self, seed: int) -> np.ndarray:
-        """Start an episode (reset seed `seed`); returns s_0."""
-        obs, _ = self.env.reset(seed=seed)
-        self.episode = EpisodeStats()
-        if self.recorder is not None:
-            self.recorder.clear()
-            self.recorder.reset(obs)
-        return obs
-
-    def _env_step(self, action: np.ndarray) -> np.ndarray:
-        """The Python side of `tf.numpy_function`: step the env, keep the episode's tallies.
-
-        Returns one float32 vector [s' (d), r, terminated, truncated]: one array crosses the
-        boundary instead of four.
-        """
-        obs, reward, terminated, truncated, info = self.env.step(int(action))
-        self.episode.add(float(reward), info)
-        if self.recorder is not None:
-            self.recorder.step(int(action), obs, reward, terminated, truncated, info)
-        return np.append(obs, (reward, terminated, truncated)).astype(np.float32)
-
-    def _play(self, obs: tf.Tensor, max_steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
-        """Act, store and learn until the episode ends or `max_steps` env steps; returns (obs, done)."""
-        agent, c, d = self.agent, self.config, self.agent.obs_dim
-
-        def step(obs: tf.Tensor, done: tf.Tensor, steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor, tf.Tensor]:
-            # ε-greedy: one draw decides whether to explore, the other which action.
-            u = self.rng.uniform([2])
-            random_action = tf.minimum(tf.cast(u[1] * agent.n_actions, tf.int32), agent.n_actions - 1)
-            action = tf.where(u[0] < self.epsilon(), random_action, agent.greedy_actions(obs[None])[0])
-            step = tf.ensure_shape(tf.numpy_function(self._env_step, [action], tf.float32, stateful=True), [d + 3])
-            next_obs, reward, terminated, truncated = step[:d], step[d], step[d + 1] > 0, step[d + 2] > 0
-            agent.store(obs, action, reward, next_obs, terminated, truncated)
-            self.env_steps.assign_add(1)
-            learns = tf.logical_and(self.env_steps % c.train_freq == 0, agent.replay.size >= c.batch_size)
-            tf.cond(learns, agent.learn_step, lambda: None)
-            return next_obs, tf.logical_or(terminated, truncated), steps + 1
-
-        obs, done, _ = tf.while_loop(lambda obs, done, steps: tf.logical_and(tf.logical_not(done), steps < max_steps),
-                                     step, [obs, tf.constant(False), tf.constant(0, tf.int64)])
-        return obs, done
+METRIC_FIELDS = EpisodeRow.columns()
+"""metrics.csv's columns, as the record spells them."""
 
 
-@dataclass
-class EpisodeStats:
-    """Tallies of the running episode, kept by the env step in Python."""
-
-    ret: float = 0.0
-    plain: float = 0.0
-    length: int = 0
-    goals: int = 0
-
-    def add(self, reward: float, info: dict) -> None:
-        self.ret += reward
-        self.plain += info["plain_reward"]
-        self.length += 1
-        self.goals = info.get("goals", self.goals)
-
-
-@dataclass
-class TrainingState:
-    """Everything of a run that lives in Python; saved with each checkpoint."""
-
-    episode: int = 0
-    interactions: int = 0
-    """The learner's tally of interactions, as of the last checkpoint."""
-    returns: list[float] = field(default_factory=list)
-    best_average: float = -np.inf
-    metrics: list[dict] = field(default_factory=list)
-    evals: list[dict] = field(default_factory=list)
-    demo_updates: list[dict] = field(default_factory=list)
-    next_eval: int = 0
-    next_checkpoint: int = 0
-    bc_fits: int = 0
-    wall_time: float = 0.0
-    stopped_early: bool = False
-
-
-def demonstrations(config: Config, dataset: demo_io.DemoDataset | None) -> demo_io.DemoDataset | None:
+def demonstrations(config: Config, dataset: DemoDataset | None) -> DemoDataset | None:
     """Step 1: the given dataset, or `demo_episodes` recorded from the scripted `expert`."""
     if not config.uses_demos:
         return None
     if dataset is not None:
         return dataset
-    return demo_io.record(config.task, config.expert, config.demo_episodes, seed=demo_seed(config.seed),
+    return record(config.task, config.expert, config.demo_episodes, seed=demo_seed(config.seed),
                           epsilon=config.expert_epsilon, timeout=config.timeout, max_steps=config.max_steps,
                           env_kwargs=config.env_kwargs)
 
 
-def fit_bc(config: Config, bc: BCModel, data: demo_io.DemoDataset, epochs: int, fit_index: int) -> float:
+def fit_bc(config: Config, bc: BCModel, data: DemoDataset, epochs: int, fit_index: int) -> float:
     """Fit (or refit, warm-started) π_bc on D_demo; returns its training accuracy.
 
     The global seed is set from (run seed, fit index), so a resumed run refits identically.
@@ -181,7 +80,7 @@ def random_obs_scale(env: gym.Env, seed: int, steps: int = 2000) -> tuple[np.nda
 
 
 def build_learner(
-    config: Config, data: demo_io.DemoDataset | None, env: gym.Env, fit: bool
+    config: Config, data: DemoDataset | None, env: gym.Env, fit: bool
 ) -> tuple[DQfDAgent, BCModel | None]:
     """π_bc fitted on D_demo (BC-based losses; only built when `fit` is False, for a resume that
     restores its weights), and the agent with D_demo loaded."""
@@ -209,20 +108,20 @@ class DynamicDemos:
     steps is an interaction and is counted).
     """
 
-    def __init__(self, config: Config, data: demo_io.DemoDataset, env: gym.Env) -> None:
+    def __init__(self, config: Config, data: DemoDataset, env: gym.Env) -> None:
         self.config, self.env = config, env
         self.episodes = data.episodes()
         self.demo_average = float(np.mean(data.meta.episode_returns))
-        self.recent: list[demo_io.DemoDataset] = []
+        self.recent: list[DemoDataset] = []
         """`episodes` mode: the agent's training episodes since the last update (at most W)."""
 
-    def observe(self, episode: demo_io.DemoDataset) -> None:
+    def observe(self, episode: DemoDataset) -> None:
         """A training episode just ended (`episodes` mode)."""
         self.recent = (self.recent + [episode])[-self.config.dynamic_window:]
 
     @property
-    def dataset(self) -> demo_io.DemoDataset:
-        return demo_io.concatenate(self.episodes, source=self.episodes[0].meta.expert)
+    def dataset(self) -> DemoDataset:
+        return concatenate(self.episodes, source=self.episodes[0].meta.expert)
 
     def due(self, state: TrainingState) -> bool:
         """The moving average of the last W returns reaches a new best, at least the demos' average."""
@@ -235,21 +134,23 @@ class DynamicDemos:
             return True
         return False
 
-    def new_episodes(self, agent: DQfDAgent, state: TrainingState) -> list[demo_io.DemoDataset]:
+    def new_episodes(self, agent: DQfDAgent, state: TrainingState) -> list[DemoDataset]:
         """The episodes this update inserts: M greedy roll-outs, or the recent training episodes
         whose return reaches the new best average."""
         c = self.config
         if c.dynamic_demos == "rollouts":
             seeds = [episode_seed(c.seed, state.episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
-            return demo_io.rollout(self.env, GreedyPolicy.from_model(agent.q_network), seeds, task=c.task,
+            return rollout(self.env, GreedyPolicy.from_model(agent.q_network), seeds, task=c.task,
                                    source="agent", seed=c.seed, env_kwargs=c.env_kwargs).episodes()
         chosen = [e for e in self.recent if e.meta.episode_returns[0] >= state.best_average]
         self.recent = []
         return chosen
 
-    def update(self, agent: DQfDAgent, bc: BCModel, state: TrainingState) -> dict | None:
+    def update(self, agent: DQfDAgent, bc: BCModel, state: TrainingState, env_step: int,
+               interactions: int) -> DemoUpdate | None:
         """Insert the new episodes into D_demo (lowest returns dropped past capacity) and refit
-        π_bc; None when there is nothing new to insert."""
+        π_bc, at `env_step` and `interactions` (the episode's last); None when there is nothing
+        new to insert."""
         c = self.config
         new = self.new_episodes(agent, state)
         if not new:
@@ -263,23 +164,17 @@ class DynamicDemos:
         accuracy = fit_bc(c, bc, data, c.bc_refit_epochs, fit_index=state.bc_fits)
         agent.set_demos(data.obs, data.actions, data.rewards, data.next_obs, data.terminated, data.truncated)
         agent.refresh_expert_targets()
-        return {"episode": state.episode, "env_step": 0, "interactions": 0, "moving_average": state.best_average,
-                "mode": c.dynamic_demos, "new_returns": [e.meta.episode_returns[0] for e in new],
-                "new_transitions": sum(len(e) for e in new), "demo_transitions": len(data),
-                "demo_episodes": len(self.episodes), "bc_accuracy": accuracy}
+        return DemoUpdate(episode=state.episode, env_step=env_step, interactions=interactions,
+                          moving_average=state.best_average, mode=c.dynamic_demos,
+                          new_returns=[e.meta.episode_returns[0] for e in new],
+                          new_transitions=sum(len(e) for e in new), demo_transitions=len(data),
+                          demo_episodes=len(self.episodes), bc_accuracy=accuracy)
 
 
 def run_evaluation(config: Config, agent: DQfDAgent, episodes: int, seed: int) -> EvalResult:
     """Greedy episodes of the current Q-network on the plain env (and goal counts where that applies)."""
     return evaluate(GreedyPolicy.from_model(agent.q_network), config.task, episodes, seed,
                     timeout=config.timeout, max_steps=config.max_steps, env_kwargs=config.env_kwargs)
-
-
-def early_stop(config: Config, returns: list[float]) -> bool:
-    """CartPole's rule: the last `early_stop_window` episodes all return ≥ fraction × limit."""
-    n = config.early_stop_window
-    threshold = config.early_stop_fraction * config.limit
-    return n > 0 and len(returns) >= n and min(returns[-n:]) >= threshold
 
 
 @dataclass
@@ -293,7 +188,7 @@ class Learner:
     interaction: Interaction
     dynamic: DynamicDemos | None
     tally: Tally
-    demos: demo_io.DemoDataset | None
+    demos: DemoDataset | None
     """D_demo as given, before any interaction (None for plain DQN)."""
 
     @property
@@ -306,7 +201,7 @@ class Learner:
                                    rng=self.interaction.rng, **extra)
 
 
-def build(config: Config, dataset: demo_io.DemoDataset | None = None, fresh: bool = True) -> tuple[Learner, dict]:
+def build(config: Config, dataset: DemoDataset | None = None, fresh: bool = True) -> tuple[Learner, dict]:
     """Steps 1–2: demonstrations, π_bc, the pre-trained agent; returns the learner and
     pre-training's losses. `fresh=False` skips the fits: a resume restores their results."""
     tally = Tally()
@@ -355,7 +250,7 @@ def evaluate_due(learner: Learner, state: TrainingState, on_eval: Evaluate) -> N
 
 
 def train_episodes(
-    learner: Learner, state: TrainingState, on_episode: Callable[[Learner, TrainingState, dict], None],
+    learner: Learner, state: TrainingState, on_episode: Callable[[Learner, TrainingState, EpisodeRow], None],
     on_eval: Evaluate,
 ) -> TrainingState:
     """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs and saves,
@@ -377,19 +272,18 @@ def train_episodes(
         state.returns.append(stats.ret)
         state.episode += 1
         state.wall_time += time.perf_counter() - started
-        row = {"episode": state.episode, "env_step": steps(), "interactions": learner.interactions,
-               "return": stats.ret, "plain_return": stats.plain, "length": stats.length, "goals": stats.goals,
-               "epsilon": float(interaction.epsilon()), **losses,
-               "demo_size": int(agent.replay.demo_size.numpy()), "wall_time": state.wall_time}
+        row = EpisodeRow(episode=state.episode, env_step=steps(), interactions=learner.interactions,
+                         return_=stats.ret, plain_return=stats.plain, length=stats.length, goals=stats.goals,
+                         epsilon=float(interaction.epsilon()), losses=Losses(**losses),
+                         demo_size=int(agent.replay.demo_size.numpy()), wall_time=state.wall_time)
         state.metrics.append(row)
         if learner.dynamic is not None:
             if interaction.recorder is not None and done:
                 learner.dynamic.observe(interaction.recorder.dataset())
             if learner.dynamic.due(state):
                 started = time.perf_counter()
-                update = learner.dynamic.update(agent, learner.bc, state)
+                update = learner.dynamic.update(agent, learner.bc, state, row.env_step, learner.interactions)
                 if update is not None:
-                    update["env_step"], update["interactions"] = row["env_step"], learner.interactions
                     state.demo_updates.append(update)
                 state.wall_time += time.perf_counter() - started
         state.stopped_early = early_stop(c, state.returns)
@@ -402,6 +296,3 @@ def train_episodes(
         on_eval([point])
     return state
 
-
-def state_from_dict(fields: dict) -> TrainingState:
-    return TrainingState(**{f.name: fields[f.name] for f in dataclasses.fields(TrainingState) if f.name in fields})

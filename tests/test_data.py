@@ -1,6 +1,7 @@
 """Suites as the lab reads them: run files parsed, the archive deterministic, bad input named."""
 
 import io
+import json
 import re
 import shutil
 import tarfile
@@ -42,13 +43,37 @@ def test_runs_carry_their_demonstrations_updates_and_provenance(suite):
     assert bayes.demonstrations.source == "recorded" and bayes.demonstrations.episodes == 5
     assert bayes.demo_transitions == bayes.demonstrations.transitions == sum(bayes.demonstrations.plain_returns)
     assert bayes.demonstrator_return == pytest.approx(bayes.demo_transitions / 5)  # a CartPole return is its length
-    assert [u["new_transitions"] for u in bayes.dynamic_demos] == [1500, 2500]
+    assert [(u.episode, u.new_transitions, u.mode) for u in bayes.dynamic_demos] == [(12, 1500, "episodes"),
+                                                                                      (20, 2500, "episodes")]
     assert bayes.provenance.code_commit.startswith("1f0c2a9") and not bayes.provenance.dirty
     assert runs["cartpole", "ce", 2].provenance.dirty
     plain = runs["cartpole", "none", 1]
     assert (plain.demonstrations, plain.demo_transitions, plain.demonstrator_return) == (None, 0, None)
     assert plain.provenance is None and plain.dynamic_demos == []
-    assert "interactions" in bayes.metrics[0]  # columns are read by name, extra ones kept
+    first = bayes.metrics[0]
+    assert (first.episode, first.interactions, first.return_, first["return"]) == (1, first.env_step, 54.0, 54.0)
+    assert bayes.column("return")[0] == 54.0 and bayes.evals[0].mean_goals is None  # an empty cell
+
+
+def test_older_run_files_still_load(suite):
+    """Files written before `interactions` (metrics.csv), `source` (demonstrations.json) and the
+    mode and counts of a dynamic update (dynamic_demos.json) existed: those are None."""
+    run_dir = suite / "cartpole-naive-bayes" / "seed0"
+    metrics = run_dir / "metrics.csv"
+    lines = [line.split(",") for line in metrics.read_text().splitlines()]
+    metrics.write_text("".join(",".join(line[:2] + line[3:]) + "\n" for line in lines))
+    demos = json.loads((run_dir / "demonstrations.json").read_text())
+    (run_dir / "demonstrations.json").write_text(json.dumps({k: v for k, v in demos.items() if k != "source"}))
+    (run_dir / "dynamic_demos.json").write_text(json.dumps([{
+        "episode": 12, "env_step": 900, "moving_average": 30.5, "new_returns": [40.0], "demo_transitions": 140,
+        "demo_episodes": 6, "bc_accuracy": 0.75}]))
+    [run] = [r for r in load_runs(suite) if r.path == run_dir]
+    assert [row.interactions for row in run.metrics] == [None] * len(lines[1:])
+    assert [row.env_step for row in run.metrics] == [int(line[1]) for line in lines[1:]]
+    assert run.demonstrations.source is None and run.demonstrations.transitions == demos["transitions"]
+    [update] = run.dynamic_demos
+    assert (update.episode, update.interactions, update.mode, update.new_transitions) == (12, None, None, None)
+    assert (update.new_returns, update.bc_accuracy) == ([40.0], 0.75)
 
 
 def test_a_run_from_before_demonstrations_json_has_unknown_demonstrations(suite):

@@ -20,7 +20,7 @@ import tensorflow as tf
 
 from dqfd_bc_keras import cli, runs
 from dqfd_bc_keras.config import QUICK, Config
-from dqfd_bc_keras.errors import BrokenRunError, ConfigError, RunDirectoryError
+from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DemoFileError, RunDirectoryError
 from dqfd_bc_keras.files import DirectoryLock
 from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.experiments.sweep import run_suite
@@ -400,8 +400,7 @@ def test_a_kill_at_any_file_operation_of_the_final_phase_is_resumed_never_skippe
     with the same evaluation and no temporaries left."""
     import contextlib
 
-    from dqfd_bc_keras import demos as demos_module
-    from dqfd_bc_keras import files
+    from dqfd_bc_keras import demo_files, files, run_files
     from dqfd_bc_keras.experiments.sweep import Job
 
     run = tmp_path / "run"
@@ -416,7 +415,7 @@ def test_a_kill_at_any_file_operation_of_the_final_phase_is_resumed_never_skippe
                 snapshots.append((Path(path).name, tmp_path / f"snap{len(snapshots)}"))
                 shutil.copytree(run, snapshots[-1][1])
 
-    for module in (files, runs, demos_module):
+    for module in (files, runs, run_files, demo_files):
         monkeypatch.setattr(module, "atomic_path", snapshotting)
     assert cli.run(train_main, ["--quick", "--quiet", "--out", str(run), "--resume"]) == 0  # finishes again
     monkeypatch.undo()
@@ -525,7 +524,7 @@ def test_the_size_is_read_from_the_header_without_the_arrays(tmp_path, monkeypat
 
     demo_io.save(demo_io.record("cartpole", "imperfect", 2), tmp_path / "d.npz")
     monkeypatch.setattr(np, "load", lambda *a, **k: pytest.fail("the arrays were read"))
-    with pytest.raises(demo_io.DemoFileError, match="more than demo_capacity=10"):
+    with pytest.raises(DemoFileError, match="more than demo_capacity=10"):
         demo_io.load(tmp_path / "d.npz", max_transitions=10)
 
 

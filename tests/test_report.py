@@ -6,6 +6,8 @@ import csv
 import os
 import shutil
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +17,10 @@ from dqfd_bc_keras.experiments import figures
 from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.metrics import PER_RUN
 from dqfd_bc_keras.experiments.data import load_runs, open_suite
+from dqfd_bc_keras.demos import record, save
+from dqfd_bc_keras.experiments.baselines_table import demo_source
 from dqfd_bc_keras.experiments.report import NOTES, PER_SEED
+from dqfd_bc_keras.records import DemoSummary
 
 DATA = Path(__file__).with_name("data")
 FIXTURE = DATA / "suite.tar.xz"
@@ -154,3 +159,29 @@ def test_a_run_that_stopped_early_holds_its_last_value():
     np.testing.assert_allclose(mean, [3.0, 4.0, 4.0])
     np.testing.assert_allclose(running, [2, 2, 2])
 
+
+
+def test_a_run_given_demonstrations_in_a_file_is_reported_as_such(tmp_path):
+    """train.py --demos FILE, as a user runs it: the lab reads where the demonstrations came from
+    out of the run's own demonstrations.json, not the file's demonstrator."""
+    save(record("cartpole", "strong", 2, seed=7), tmp_path / "given.npz")
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, "train.py", "--quick", "--quiet", "--demos", str(tmp_path / "given.npz"),
+                           "--out", str(out)], cwd=DATA.parents[1], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    [run_] = load_runs(out)
+    assert (run_.demonstrations.source, run_.demonstrations.expert, run_.demonstrations.episodes) == (
+        "file", "strong", 2)
+    assert demo_source(run_.demonstrations) == "2 episodes from a file"
+
+
+def test_the_demonstrations_column_names_their_source():
+    def summary(source, expert="imperfect"):
+        return DemoSummary(transitions=100, episodes=2, expert=expert, episode_returns=[50.0, 50.0],
+                           plain_returns=[50.0, 50.0], pretrain_steps=10, source=source)
+
+    assert demo_source(summary("recorded")) == demo_source(summary(None)) == "2 × imperfect"
+    assert demo_source(summary("file")) == "2 episodes from a file"
+    assert demo_source(summary("minari", "minari:cartpole/expert-v0")) == "2 episodes from minari:cartpole/expert-v0"
+    with pytest.raises(ValueError, match="source 'disk' is not one of"):
+        summary("disk")

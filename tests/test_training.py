@@ -18,6 +18,8 @@ import dqfd_bc_keras  # noqa: F401  (first: TF settings, custom objects)
 from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras import runs, training
 from dqfd_bc_keras.agent import LOSS_TERMS
+from dqfd_bc_keras.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Losses
+from dqfd_bc_keras.run_state import TrainingState
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.envs import make_task
 from dqfd_bc_keras.errors import ConfigError, OutputExistsError
@@ -68,10 +70,18 @@ def test_early_stop_threshold_follows_the_step_limit():
 # --- episode seeds -------------------------------------------------------------------------------
 
 def test_run_state_round_trips_through_json():
-    state = training.TrainingState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[{"episode": 1}], bc_fits=2)
+    row = EpisodeRow(episode=1, env_step=20, interactions=20, return_=20.0, plain_return=20.0, length=20, goals=0,
+                     epsilon=0.5, losses=Losses(1.0, 0.5, 0.25, 0.125, 0.0625), demo_size=100, wall_time=1.5)
+    update = DemoUpdate(episode=1, env_step=20, interactions=25, moving_average=20.0, mode="rollouts",
+                        new_returns=[30.0], new_transitions=5, demo_transitions=105, demo_episodes=3, bc_accuracy=0.5)
+    state = TrainingState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[row], bc_fits=2, demo_updates=[update],
+                          evals=[EvalRow(env_step=0, interactions=0, episode=0, mean_return=9.5, std_return=0.5)])
     assert state.best_average == -np.inf
-    fields = json.loads(json.dumps(dataclasses.asdict(state)))
-    assert training.state_from_dict({**fields, "unknown": 1}) == state
+    fields = json.loads(json.dumps(state.to_dict()))
+    assert (fields["metrics"][0]["return"], fields["metrics"][0]["td"], fields["evals"][0]["mean_goals"]) == (
+        20.0, 0.5, None)
+    assert list(fields["metrics"][0]) == list(EpisodeRow.columns())  # state.json keys rows as metrics.csv does
+    assert TrainingState.from_dict({**fields, "unknown": 1}) == state
 
 
 # --- step 1: demonstrations ----------------------------------------------------------------------
@@ -276,8 +286,9 @@ def test_dynamic_update_adds_m_greedy_episodes_and_refits_bc(capped):
     weights0 = [w.numpy().copy() for w in bc.trainable_weights]
     state = training.TrainingState(episode=7, best_average=50.0)
 
-    update = dynamic.update(agent, bc, state)
+    update = dynamic.update(agent, bc, state, env_step=1234, interactions=1500)
 
+    assert (update.env_step, update.interactions, update.mode) == (1234, 1500, "rollouts")
     assert update["new_returns"] == expected.meta.episode_returns
     size = int(agent.replay.demo_size.numpy())
     assert size == size0 + len(expected)
@@ -303,7 +314,7 @@ def test_dynamic_update_past_capacity_drops_the_lowest_returns_first(capped):
     original = dynamic.config
     dynamic.config = dataclasses.replace(original, demo_capacity=capacity)
     try:
-        update = dynamic.update(agent, learner.bc, training.TrainingState(episode=8, bc_fits=1))
+        update = dynamic.update(agent, learner.bc, training.TrainingState(episode=8, bc_fits=1), 0, 0)
     finally:
         dynamic.config = original
 
@@ -334,11 +345,11 @@ def test_dynamic_update_from_training_episodes_inserts_those_reaching_the_new_be
         dynamic.observe(recorder.dataset())
     episodes0, size0, tally0 = len(dynamic.episodes), int(agent.replay.demo_size.numpy()), learner.interactions
     state = training.TrainingState(episode=3, best_average=30.0)
-    update = dynamic.update(agent, learner.bc, state)
+    update = dynamic.update(agent, learner.bc, state, 0, 0)
     assert sorted(update["new_returns"]) == [30.0, 40.0] and update["new_transitions"] == 70
     assert update["mode"] == "episodes" and len(dynamic.episodes) == episodes0 + 2
     assert int(agent.replay.demo_size.numpy()) == size0 + 70 and learner.interactions == tally0
-    assert dynamic.recent == [] and dynamic.update(agent, learner.bc, state) is None  # nothing new
+    assert dynamic.recent == [] and dynamic.update(agent, learner.bc, state, 0, 0) is None  # nothing new
 
 
 class CountSteps:
@@ -419,7 +430,7 @@ def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
     config, out, result = bayes_run
     assert Config.from_dict(json.loads((out / "config.json").read_text())) == config
     fields, rows = read_csv(out / "metrics.csv")
-    assert fields == list(training.METRIC_FIELDS)
+    assert fields == list(EpisodeRow.columns())
     assert result.out == out and result.episodes == len(rows) >= 1
     assert [int(r["episode"]) for r in rows] == list(range(1, len(rows) + 1))
     steps = [int(r["env_step"]) for r in rows]
@@ -436,12 +447,15 @@ def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
         assert all(np.isfinite(float(row[k])) for k in LOSS_TERMS)
     recorded = training.demonstrations(config, None)
     assert int(rows[0]["demo_size"]) == len(recorded)  # no dynamic update before W = 10 episodes
+    summary = DemoSummary.from_row(json.loads((out / "demonstrations.json").read_text()))
+    assert (summary.source, summary.expert, summary.transitions) == ("recorded", config.expert, len(recorded))
+    assert summary.plain_returns == recorded.meta.plain_returns and summary.pretrain_steps == config.pretrain_steps
 
 
 def test_train_evaluates_at_exactly_every_eval_every_interactions(bayes_run):
     config, out, result = bayes_run
     fields, evals = read_csv(out / "evals.csv")
-    assert fields == list(runs.EVAL_FIELDS)
+    assert fields == list(EvalRow.columns())
     assert (evals[0]["env_step"], evals[0]["interactions"], evals[0]["episode"]) == ("0", "0", "0")
     # 300 steps, E = 150, no roll-outs (no new best within W = 10 episodes): 0, 150, 300, whatever
     # the episode boundaries; an episode running across 150 was paused there and went on.
@@ -457,7 +471,7 @@ def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
     config, out, _ = bayes_run
     often = dataclasses.replace(config, eval_every=50)
     runs.train(often, tmp_path / "often", quiet=True)
-    columns = [f for f in training.METRIC_FIELDS if f != "wall_time"]  # interactions included
+    columns = [f for f in EpisodeRow.columns() if f != "wall_time"]  # interactions included
     rows = [[[r[f] for f in columns] for r in read_csv(d / "metrics.csv")[1]] for d in (out, tmp_path / "often")]
     assert rows[0] == rows[1]
     assert len(read_csv(tmp_path / "often" / "evals.csv")[1]) > len(read_csv(out / "evals.csv")[1])

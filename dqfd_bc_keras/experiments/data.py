@@ -24,6 +24,7 @@ import numpy as np
 from ..config import Config
 from ..errors import ConfigError
 from ..files import atomic_path
+from ..records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
 
 SWEEP_LOG = "sweeps.jsonl"
 """One line per sweep in the suite directory: what ran, on how many workers, in how many seconds, from
@@ -34,36 +35,12 @@ RUN_FILES = ("config.json", "metrics.csv", "evals.csv", "eval.json", "dynamic_de
 """What the lab reads of a run directory; the first four are in every complete run (eval.json,
 written last, marks a run complete), the others only where they apply."""
 REQUIRED = RUN_FILES[:4]
-COLUMNS = {"metrics.csv": ("episode", "env_step", "return", "plain_return", "length", "goals", "wall_time"),
-           "evals.csv": ("env_step", "interactions", "mean_return")}
-"""The columns the lab reads by name; further ones are kept and may be read by name too."""
+ROWS: dict[str, type[EpisodeRow] | type[EvalRow]] = {"metrics.csv": EpisodeRow, "evals.csv": EvalRow}
+"""The record each row of a run's CSV files parses into."""
 BENCHMARK_FILES = ("efficiency.json", "sb3-dqn", "calibration.json", "bc-alone")
 """Files the report reads besides the runs: benchmarks/bench_sample_efficiency.py's table and SB3's
 runs, `calibrate`'s measurements and BC alone's results (`imitation.py`)."""
 ARCHIVE_SUFFIX = ".tar.xz"
-
-
-@dataclass(frozen=True)
-class Demonstrations:
-    """demonstrations.json: the D_demo a run started from, before any dynamic demonstration."""
-
-    transitions: int
-    plain_returns: list[float]
-    """Return of each episode under the plain env's rewards."""
-    expert: str | None = None
-    source: str | None = None
-    """"recorded" (from `expert`) or "file" (a dataset given to the run)."""
-
-    @classmethod
-    def of(cls, fields: dict) -> Demonstrations:
-        transitions, returns = int(fields["transitions"]), [float(r) for r in fields["plain_returns"]]
-        if not returns:
-            raise ValueError("no episode in plain_returns")
-        return cls(transitions, returns, fields.get("expert"), fields.get("source"))
-
-    @property
-    def episodes(self) -> int:
-        return len(self.plain_returns)
 
 
 @dataclass(frozen=True)
@@ -90,16 +67,18 @@ class FinishedRun:
     path: Path
     """Where it was read from (inside an archive: the archive's path / the run's directory)."""
     config: Config
-    metrics: list[dict]
-    evals: list[dict]
+    metrics: list[EpisodeRow]
+    evals: list[EvalRow]
     final: dict
-    demonstrations: Demonstrations | None = None
+    """eval.json: the final evaluation (`evaluation.EvalResult.to_dict`)."""
+    demonstrations: DemoSummary | None = None
     """None for plain DQN, and for a run from before demonstrations.json was written."""
-    dynamic_demos: list[dict] = field(default_factory=list)
+    dynamic_demos: list[DemoUpdate] = field(default_factory=list)
     """dynamic_demos.json: one entry per dynamic-demonstration update."""
     provenance: Provenance | None = None
 
     def column(self, name: str) -> np.ndarray:
+        """metrics.csv's column `name`, one value per episode (None, a column older runs lack: NaN)."""
         return np.array([row[name] for row in self.metrics], dtype=float)
 
     @property
@@ -130,8 +109,8 @@ def _text(path: Path, file: PurePosixPath) -> str:
         raise RunFileError(file, "not UTF-8 text") from None
 
 
-def _read_csv(path: Path, file: PurePosixPath) -> list[dict]:
-    """Rows of numbers by column name (empty cells None); a truncated or garbled file is refused."""
+def _read_csv(path: Path, file: PurePosixPath) -> list[EpisodeRow] | list[EvalRow]:
+    """The rows of `path` as its records (`ROWS`); a truncated or garbled file is refused."""
     text = _text(path, file)
     if text and not text.endswith("\n"):
         raise RunFileError(file, "ends in the middle of a line (truncated?)")
@@ -140,7 +119,8 @@ def _read_csv(path: Path, file: PurePosixPath) -> list[dict]:
         header, *lines = list(reader) or [[]]
     except csv.Error as error:
         raise RunFileError(file, f"line {reader.line_num}: {error}") from None
-    missing = [c for c in COLUMNS[path.name] if c not in header]
+    record = ROWS[path.name]
+    missing = [c for c in record.required() if c not in header]
     if missing:
         raise RunFileError(file, f"no column(s) {missing} in the header")
     rows = []
@@ -148,7 +128,7 @@ def _read_csv(path: Path, file: PurePosixPath) -> list[dict]:
         if len(values) != len(header):
             raise RunFileError(file, f"line {line} has {len(values)} of {len(header)} fields (truncated?)")
         try:
-            rows.append({k: float(v) if v != "" else None for k, v in zip(header, values)})
+            rows.append(record.from_row(dict(zip(header, values))))
         except ValueError as error:
             raise RunFileError(file, f"line {line}: {error}") from None
     return rows
@@ -189,7 +169,8 @@ def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> Finished
         raise RunFileError(relative / "eval.json", "no mean_return")
     return FinishedRun(shown, read("config.json", dict, Config.from_dict), metrics,
                        _read_csv(directory / "evals.csv", relative / "evals.csv"), final,
-                       read("demonstrations.json", dict, Demonstrations.of), read("dynamic_demos.json", list) or [],
+                       read("demonstrations.json", dict, DemoSummary.from_row),
+                       read("dynamic_demos.json", list, lambda updates: [DemoUpdate.from_row(u) for u in updates]) or [],
                        read("provenance.json", dict, Provenance.of))
 
 

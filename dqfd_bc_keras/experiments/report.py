@@ -26,7 +26,8 @@ from ..config import Config
 from ..envs import get_task
 from ..files import write_text
 from .plans import PLANNED_SEEDS
-from .data import ARCHIVE_SUFFIX, Demonstrations, RunFileError, load_runs, open_suite
+from .baselines_table import baselines_section, demos_text
+from .data import ARCHIVE_SUFFIX, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
 from .estimators import estimators_section
 from .grid import grid_only, grid_section
@@ -47,22 +48,6 @@ archive behind it (finished runs are skipped, so the second also resumes a cut-o
 
 PER_SEED = "per_seed.csv"
 """Written beside RESULTS.md: one row per run with every per-run metric."""
-
-
-def _demos_text() -> str:
-    """Which demonstrations the arms get and why; how they return is read from the runs (baselines)."""
-    cartpole, mountaincar = Config.for_task("cartpole"), Config.for_task("mountaincar")
-    return ("Which demonstrations the paper's experiments get is not stated in the paper. Every arm that uses "
-            f"them starts from the same choice: **{cartpole.demo_episodes} episodes of the {cartpole.expert} "
-            "scripted expert on CartPole** (push with the pole's angular velocity, ignoring its angle) and "
-            f"**{mountaincar.demo_episodes} episodes of the {mountaincar.expert} expert on MountainCar** (follows "
-            "the velocity, always starting rightwards); how they return is the *demonstrator* column of the "
-            "baselines table, read from each run's demonstrations.json. Why: an imperfect teacher is the case the "
-            "paper's Bayesian loss is built for (an uncertain π_bc should weigh less), a handful of episodes is the "
-            "paper's \"few demonstrations\" regime, and a weak teacher leaves room to show that a method beats its "
-            "demonstrator. Seed k of every arm records the same episodes (reset seeds from `seeds.demo_seed(k)`), "
-            "so bayes and ce differ in the loss only and the spread over seeds includes the draw of the "
-            "demonstrations. The sensitivity suite swaps in the strong experts.")
 
 
 SMOOTH_ABOVE, SMOOTH_WINDOW = 150, 10
@@ -107,39 +92,6 @@ def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
                     sensitivity.append(f"| {claim.id} | {bayes.label} | {ce.name if ce else '—'} | {per_arm} | "
                                        f"{result.verdict} | {_flips(result.verdict, reference)} |")
     return claims, sensitivity
-
-
-def _span(values: list[int]) -> str:
-    low, high = min(values), max(values)
-    return f"{low:,}" if low == high else f"{low:,}–{high:,}"
-
-
-def _demo_source(demos: Demonstrations) -> str:
-    if demos.source == "file":
-        return f"{demos.episodes} episodes from a file"
-    return f"{demos.episodes} × {demos.expert or 'unknown expert'}"
-
-
-def _baseline_row(arm: ArmRuns) -> str:
-    """One arm: its demonstrations (as the runs record them), pre-training, outcome and demonstrator."""
-    steps = arm.values("interactions_to_threshold")
-    reached = int(np.isfinite(steps).sum())  # the median is finite once more than half reached it
-    median = f"{np.median(steps):,.0f}" if 2 * reached > len(steps) else "—"
-    final = Summary.of(arm.values("final_eval"))
-    source, transitions, pretrain, teacher, beats = "—", "0", "—", "none", "—"
-    if arm.config["expert_loss"] != "none":
-        pretrain = f"{arm.config['pretrain_steps']:,}"
-        records = [r.demonstrations for r in arm.runs]
-        if None in records:
-            source = transitions = teacher = "unknown"
-        else:
-            demonstrator = float(np.mean([r.demonstrator_return for r in arm.runs]))
-            source = " · ".join(sorted({_demo_source(d) for d in records}))
-            transitions = _span([d.transitions for d in records])
-            teacher, beats = f"{demonstrator:.1f}", f"{final.mean - demonstrator:+.1f}"
-    return (f"| {arm.setting} | {arm.name} | {len(arm.runs)} | {source} | {transitions} | {pretrain} | "
-            f"{final.format()} | {Summary.of(arm.values('mean_train_return')).format()} | "
-            f"{median} ({reached}/{len(steps)}) | {teacher} | {beats} |")
 
 
 def _per_seed(arms: list[ArmRuns]) -> str:
@@ -266,7 +218,7 @@ def _dynamic(arms: list[ArmRuns]) -> list[str]:
         cells = []
         for arm in (episodes, rollouts):
             steps = CensoredSummary.of(arm.values("interactions_to_threshold"))
-            extra = np.mean([sum(u.get("new_transitions", 0) for u in r.dynamic_demos) for r in arm.runs]
+            extra = np.mean([sum(u.new_transitions or 0 for u in r.dynamic_demos) for r in arm.runs]
                             ) if arm.config["dynamic_demos"] == "rollouts" else 0.0
             cells.append(f"{steps.format(0)} · {extra:,.0f} · {Summary.of(arm.values('final_eval')).format()}")
         rows.append(f"| {episodes.setting} {episodes.config['expert_loss']} | {len(episodes.runs)}, "
@@ -336,14 +288,7 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
             "| claim | setting | the paper | metric per arm | Δ bayes − ce | test | n · sd · power | verdict |",
             "| --- | --- | --- | --- | --- | --- | --- | --- |", *claims, "", "## Figures", "",
             *_figures(arms, figures_dir, out_markdown.parent), "", "## Baselines", "",
-            "Final evaluation on the plain env against the mean plain return of the demonstrations the run "
-            "started from (for cartpole-200 those are capped at 200 steps, the evaluation at 500). *Demos*, "
-            "*demo transitions* (range over seeds) and *demonstrator* are D_demo before any dynamic demonstration, "
-            "as each run's demonstrations.json records it (unknown: a run from before that file); *pre-training*: "
-            "gradient steps on D_demo alone before the first interaction (`pretrain_steps`).", "",
-            "| setting | arm | seeds | demos | demo transitions | pre-training | final eval | mean training return "
-            "| interactions to threshold (median, reached) | demonstrator | beats it by |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |", *map(_baseline_row, arms), "",
+            *baselines_section(arms), "",
             "## Sensitivity", "",
             "Each further bayes arm of a claim's setting (σ0², demonstrator, …) judged against its ce arm "
             "with the same rule; *flips*: holds ↔ does not hold against the reference pair's verdict (yes), the "
@@ -355,7 +300,7 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
             "## Ablations", "", *_ablations(arms), ""]
     doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators (issue I)", "", *estimators,
             "", "## Demonstration quality × quantity (issue I)", "", *grid, "",
-            "## Demonstrations", "", _demos_text(), "", "## Wall time", "", *sweeps, ""]
+            "## Demonstrations", "", demos_text(), "", "## Wall time", "", *sweeps, ""]
     # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
     text = "\n".join(doc).replace(str(directory), suite_name)
     write_text(out_markdown.with_name(PER_SEED), _per_seed(arms))

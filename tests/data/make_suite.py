@@ -5,15 +5,14 @@
 cartpole/naive: bayes and ce (3 seeds; runs stop early at different episodes, one never does)
 and plain DQN (2 seeds); mountaincar-goals/bootstrap: bayes and ce (2 seeds, 40 episodes). Runs
 carry demonstrations.json, provenance.json (two code commits, one dirty run, one run without
-it) and one dynamic_demos.json; the suite a sweep log. Numbers come from a seeded generator, so
+it) and one dynamic_demos.json; the suite a sweep log. The run files of records are written by
+`run_files`, the writer of real runs. Numbers come from a seeded generator, so
 the archive only changes when this script does; regenerate the golden RESULTS.md after it
 (see tests/test_report.py).
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import sys
 import tempfile
@@ -26,20 +25,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from dqfd_bc_keras.config import Config  # noqa: E402
 from dqfd_bc_keras.evaluation import EvalResult  # noqa: E402
 from dqfd_bc_keras.experiments.data import export_archive  # noqa: E402
-from dqfd_bc_keras.runs import EVAL_FIELDS  # noqa: E402
-from dqfd_bc_keras.training import METRIC_FIELDS  # noqa: E402
+from dqfd_bc_keras.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Losses  # noqa: E402
+from dqfd_bc_keras.run_files import (write_demonstrations, write_dynamic_demos, write_evals,  # noqa: E402
+                                     write_metrics)
 
 ARCHIVE = Path(__file__).with_name("suite.tar.xz")
 COMMITS = ("1f0c2a9e8d7b6c5a4f3e2d1c0b9a8f7e6d5c4b3a", "2b3c4d5e6f708192a3b4c5d6e7f8091a2b3c4d5e")
 RULES = "9e8d7c6b5a4f3e2d1c0b9a8f7e6d5c4b3a2f1e0d"
-
-
-def write_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    path.write_text(buffer.getvalue())
 
 
 def cartpole_lengths(rng: np.random.Generator, solve_at: int | None, episodes: int = 45) -> list[int]:
@@ -55,14 +47,13 @@ def write_run(root: Path, name: str, config: Config, rows: list[dict], final: li
     run = root / name / f"seed{config.seed}"
     run.mkdir(parents=True)
     (run / "config.json").write_text(json.dumps(config.to_dict(), indent=1))
-    steps = np.cumsum([r["length"] for r in rows])
-    metrics = [{**{f: 0.0 for f in METRIC_FIELDS}, **r, "episode": i + 1, "env_step": int(steps[i]),
-                "interactions": int(steps[i]), "epsilon": 0.01, "wall_time": round(1.5 * (i + 1), 1)}
-               for i, r in enumerate(rows)]
-    write_csv(run / "metrics.csv", METRIC_FIELDS, metrics)
-    evals = [{"env_step": int(s), "interactions": int(s), "episode": i, "mean_return": float(m), "std_return": 0.0,
-              "mean_goals": ""} for i, (s, m) in enumerate(zip((0, steps[len(steps) // 2], steps[-1]), final))]
-    write_csv(run / "evals.csv", EVAL_FIELDS, evals)
+    steps = [int(s) for s in np.cumsum([r["length"] for r in rows])]
+    write_metrics(run, [EpisodeRow(episode=i + 1, env_step=steps[i], interactions=steps[i], return_=r["return"],
+                                   plain_return=r["plain_return"], length=r["length"], goals=r["goals"], epsilon=0.01,
+                                   losses=Losses(0.0, 0.0, 0.0, 0.0, 0.0), demo_size=0,
+                                   wall_time=round(1.5 * (i + 1), 1)) for i, r in enumerate(rows)])
+    write_evals(run, [EvalRow(env_step=s, interactions=s, episode=i, mean_return=float(m), std_return=0.0)
+                      for i, (s, m) in enumerate(zip((0, steps[len(steps) // 2], steps[-1]), final))])
     returns = [float(final[-1])] * 4
     result = EvalResult(config.task, "q", 1_010_000, returns, [200] * 4,
                         [1] * 4 if config.task == "mountaincar-goals" else None, config.timeout)
@@ -70,13 +61,15 @@ def write_run(root: Path, name: str, config: Config, rows: list[dict], final: li
     if config.uses_demos:
         lengths = [int(x) for x in rng.integers(150, 250, config.demo_episodes)]
         plain = [float(-n) if config.task.startswith("mountaincar") else float(n) for n in lengths]
-        (run / "demonstrations.json").write_text(json.dumps(
-            {"transitions": sum(lengths), "episodes": len(lengths), "expert": config.expert, "source": "recorded",
-             "episode_returns": plain, "plain_returns": plain}, indent=1))
+        write_demonstrations(run, DemoSummary(transitions=sum(lengths), episodes=len(lengths), expert=config.expert,
+                                              episode_returns=plain, plain_returns=plain,
+                                              pretrain_steps=config.pretrain_steps, source="recorded"))
     if dynamic:
-        (run / "dynamic_demos.json").write_text(json.dumps(
-            [{"episode": 12, "new_transitions": 1500, "demo_transitions": 2500},
-             {"episode": 20, "new_transitions": 2500, "demo_transitions": 5000}], indent=1))
+        write_dynamic_demos(run, [
+            DemoUpdate(episode=episode, env_step=steps[episode - 1], interactions=steps[episode - 1],
+                       moving_average=average, mode="episodes", new_returns=[500.0] * (new // 500),
+                       new_transitions=new, demo_transitions=size, demo_episodes=size // 500, bc_accuracy=0.9)
+            for episode, average, new, size in ((12, 300.0, 1500, 2500), (20, 450.0, 2500, 5000))])
     if provenance is not None:
         (run / "provenance.json").write_text(json.dumps(provenance, indent=1))
 
