@@ -1,4 +1,6 @@
-"""Adam with TensorFlow's fused kernel: the same state and arithmetic as `keras.optimizers.Adam`.
+"""Adam with TensorFlow's fused kernel: the same state and update as `keras.optimizers.Adam`, to
+float32 rounding (the kernel forms 1 − β2 in float32, 1.3e-5 of itself from Keras's; see
+tests/test_optimizers.py). Its variables must be Keras variables, as a model's are.
 
 An update of our small networks costs in TensorFlow ops, not in arithmetic (each op a few µs,
 see README "Performance"). Keras's Adam spends ~15 ops per variable; `ResourceApplyAdam` does

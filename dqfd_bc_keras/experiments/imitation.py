@@ -1,6 +1,9 @@
 """BC alone: what imitation without RL reaches on each cell of the demonstration grid.
 
-    python -m dqfd_bc_keras.experiments imitate --out results
+There is no command of its own: `python -m dqfd_bc_keras.experiments grid --out results` runs it
+(`run_imitation`) after the grid's training runs, and GRID.md reports it as the "BC alone" row;
+`grid --quick` runs its quick cells. Its seeds are each cell's arm's own (`--seeds` sets only the
+training runs').
 
 Per cell and seed: the demonstrations a `ce` run of that seed records, the MLE BC model `ce`
 fits on them (`bc_epochs`), and its greedy policy over the final evaluation's episodes and seeds

@@ -1,0 +1,158 @@
+"""The readable reference (reference.py) against the graph loop (agent.py, replay.py).
+
+On one seed both pre-train on the strong expert's demonstrations, then learn from a replay that
+also holds a noisy expert's episodes (standing in for the agent's own: falls, time-limit cuts,
+and more than the ring's capacity, so old ones are evicted). They must compute the same loss
+terms and end with the same weights.
+
+Shared by both: the Q-network's initial weights; the transitions; the BC model's view of each
+state (π̄_bc, σ²: MC dropout draws it once, when the graph stores a row; the reference reads it
+from the graph's table); the sampler's uniforms (the graph replay's generator, replayed); and,
+where a uniform's mass lies within float rounding of the boundary between two rows, which of
+the two the graph took (its float32 sum tree and the reference's float64 cumulative sum may
+round either way there; such draws are a few in ten thousand, and every other row the
+reference draws itself must be the graph's).
+
+Independent: everything else: the reference's own priorities, its proportional draw and
+importance weights, β's schedule, the n-step returns (walked at sampling time, where the graph
+caches them when a row is written), the targets, every loss term, the gradient, Adam (written
+out, where the graph runs TensorFlow's fused kernel), the target refreshes and θ_prior.
+
+Tolerances (float32, 250 steps, seed 0): loss terms per graph call rtol 1e-4 (measured ≤ 1e-6);
+each weight variable within 1e-4 of its norm (measured ~3e-7); priorities rtol/atol 1e-4. A norm,
+not each element: where a ReLU pre-activation lands within rounding of 0, the two send that unit's
+gradient different ways and Adam carries it on (seen while writing this: ~1e-4 on a few elements,
+3e-5 of the norm). Changing one constant of the graph loop fails the test: the margin or ε_d by 1%,
+σ² of the bayes likelihood by 1%, its prior by 10%, β's schedule by one step, τ by one, Adam's ε.
+"""
+
+import keras
+import numpy as np
+import pytest
+import tensorflow as tf
+
+import dqfd_bc_keras  # noqa: F401
+from dqfd_bc_keras import reference
+from dqfd_bc_keras.agent import DQfDAgent, make_agent
+from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.demos import DemoDataset, record
+
+PRETRAIN, ROUNDS, STORE, LEARN = 100, 3, 100, 50
+"""Pre-training steps, then rounds of (store STORE agent transitions, LEARN steps)."""
+BOUNDARY = 1e-5
+"""How close (× the total) to a boundary between rows a mass may lie where the two disagree."""
+
+
+@pytest.fixture(scope="module")
+def agent_data() -> DemoDataset:
+    """300 transitions of a noisy imperfect expert, episodes cut at 60 steps."""
+    data = record("cartpole", "imperfect", episodes=12, seed=7, epsilon=0.3, max_steps=60)
+    assert len(data) >= ROUNDS * STORE and data.terminated.any() and data.truncated.any()
+    return data
+
+
+def config_for(loss: str) -> Config:
+    return Config.for_task("cartpole", expert_loss=loss, replay_capacity=150, target_update_period=50,
+                           beta_anneal_steps=200, seed=0)
+
+
+class GraphRows:
+    """The rows of every batch the graph loop draws, logged by a wrapper of its replay's `sample`
+    (traced into `learn`'s graph), and the uniforms its generator gives them, replayed."""
+
+    def __init__(self, agent: DQfDAgent, steps: int) -> None:
+        replay = agent.replay
+        self.demo_capacity, self.n_demo = replay.demo_capacity, int(replay.demo_size.numpy())
+        self.log = tf.Variable(tf.zeros([steps, agent.config.batch_size], tf.int32))
+        self.count = tf.Variable(0)
+        rng = replay.rng
+        self.uniform = tf.random.Generator.from_state(rng.state.numpy(), rng.algorithm).uniform
+        sample = replay.sample
+
+        def logged(batch_size, beta):
+            batch = sample(batch_size, beta)
+            self.log.scatter_nd_update(self.count[None, None], batch.indices[None])
+            self.count.assign_add(1)
+            return batch
+
+        replay.sample = logged
+        self.step, self.mismatches, self.draws = 0, 0, 0
+
+    def draw(self, p: np.ndarray, size: int) -> np.ndarray:
+        """The reference's own rows from the graph's uniforms; where a mass sits on a boundary, the graph's."""
+        u = self.uniform([size]).numpy().astype(np.float64)
+        mine = reference.proportional(p, u)
+        theirs = self.log.numpy()[self.step]
+        theirs = np.where(theirs < self.demo_capacity, theirs, theirs - self.demo_capacity + self.n_demo)
+        cumulative = np.cumsum(p)
+        for i in np.flatnonzero(mine != theirs):
+            boundary = cumulative[min(mine[i], theirs[i])]
+            assert abs(mine[i] - theirs[i]) == 1 and abs(u[i] * cumulative[-1] - boundary) <= BOUNDARY * cumulative[-1], (
+                f"step {self.step}: the graph drew row {theirs[i]}, the reference's priorities give {mine[i]}")
+        self.step, self.mismatches, self.draws = self.step + 1, self.mismatches + int((mine != theirs).sum()), self.draws + size
+        return theirs
+
+
+def transitions(agent: DQfDAgent, data: DemoDataset, rows: np.ndarray, part: slice = slice(None)) -> reference.Transitions:
+    """`data[part]` with the BC model's view of each state, as the graph stored it in table rows `rows`."""
+    table = agent.replay.table.numpy()[rows]
+    return reference.Transitions(*(x[part] for x in (data.obs, data.actions, data.rewards, data.next_obs,
+                                                     data.terminated, data.truncated)),
+                                 table[:, agent.replay.PI_BC], table[:, agent.replay.SIGMA_SQ])
+
+
+def standardization(agent: DQfDAgent) -> tuple[np.ndarray, np.ndarray]:
+    """(μ, σ) of the Q-network's input layer."""
+    layer = agent.q_network.get_layer("standardize")
+    return np.asarray(layer.mean)[0], np.sqrt(np.asarray(layer.variance))[0]
+
+
+def assert_same_weights(graph: list, ref: list) -> None:
+    """Each variable within 1e-4 of its norm (see the module's docstring for why a norm)."""
+    for a, b in zip(graph, ref, strict=True):
+        a, b = np.asarray(a), np.asarray(b)
+        assert np.linalg.norm(b - a) <= 1e-4 * np.linalg.norm(a), (np.linalg.norm(b - a), np.linalg.norm(a))
+
+
+def assert_same_terms(graph: dict, steps: list[dict]) -> None:
+    mean = {name: np.mean([s[name] for s in steps]) for name in steps[0]}
+    for name, value in graph.items():
+        np.testing.assert_allclose(mean[name], float(value), rtol=1e-4, err_msg=name)
+
+
+def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_model) -> tuple:
+    """Pre-training, then ROUNDS × (store, learn) in both; returns (agent, reference learner, the
+    graph's loss terms per call, the reference's per step grouped as those calls, the rows' log)."""
+    keras.utils.set_random_seed(0)
+    agent = make_agent(config, demos, bc_model)
+    rows = GraphRows(agent, PRETRAIN + ROUNDS * LEARN)
+    ref = reference.Learner(config, agent.q_network.get_weights(), standardization(agent),
+                            transitions(agent, demos, np.arange(len(demos))), draw=rows.draw)
+    graph_terms = [agent.pretrain(PRETRAIN)]
+    ref_terms = [ref.pretrain(PRETRAIN)]
+    store = tf.function(agent.store, autograph=False)
+    for r in range(ROUNDS):
+        chunk = slice(r * STORE, (r + 1) * STORE)
+        slots = (np.arange(STORE) + int(agent.replay.head.numpy())) % config.replay_capacity
+        for t in range(chunk.start, chunk.stop):
+            store(*(tf.constant(x[t]) for x in (agent_data.obs, agent_data.actions, agent_data.rewards,
+                                               agent_data.next_obs, agent_data.terminated, agent_data.truncated)))
+        ref.replay.store(transitions(agent, agent_data, agent.replay.demo_capacity + slots, chunk))
+        agent.reset_metrics()
+        graph_terms.append(agent.learn(tf.constant(LEARN)))
+        ref_terms.append(ref.learn(LEARN))
+    return agent, ref, graph_terms, ref_terms, rows
+
+
+@pytest.mark.parametrize("loss", ["margin", "bayes"])
+def test_reference_learns_what_the_graph_loop_learns(loss, demos, agent_data, bc_models):
+    agent, ref, graph_terms, ref_terms, rows = run_both(config_for(loss), demos, agent_data, bc_models.get(loss))
+    for graph, steps in zip(graph_terms, ref_terms):
+        assert_same_terms(graph, steps)
+    assert_same_weights(agent.q_network.weights, ref.theta)
+    assert_same_weights(agent.target_network.weights, ref.target)
+    assert_same_weights(agent.prior_weights, ref.prior)
+    graph_p = agent.replay.tree.leaves(agent.replay.stored_indices()).numpy()
+    # p = (|δ| + ε)^α is steep near δ = 0 (slope ≤ α·ε_a^(α−1) ≈ 25): atol 1e-4 is |δ| within 4e-6.
+    np.testing.assert_allclose(ref.replay.p[: len(graph_p)], graph_p, rtol=1e-4, atol=1e-4)
+    assert rows.mismatches <= 1e-3 * rows.draws
