@@ -38,7 +38,7 @@ REQUIRED = RUN_FILES[:4]
 ROWS: dict[str, type[EpisodeRow] | type[EvalRow]] = {"metrics.csv": EpisodeRow, "evals.csv": EvalRow}
 """The record each row of a run's CSV files parses into."""
 BENCHMARK_FILES = ("efficiency.json", "sb3-dqn", "calibration.json", "bc-alone")
-"""Files the report reads besides the runs: benchmarks/bench_sample_efficiency.py's table and SB3's
+"""Files the report reads besides the runs: `experiments efficiency`'s table and SB3's
 runs, `calibrate`'s measurements and BC alone's results (`imitation.py`)."""
 ARCHIVE_SUFFIX = ".tar.xz"
 

@@ -1,7 +1,7 @@
 """Sample efficiency against Stable-Baselines3's DQN: steps to threshold, ratios, the RESULTS table.
 
-`benchmarks/bench_sample_efficiency.py` runs the arms and writes EFFICIENCY_FILE into the suite
-directory: per arm and seed, the first step of the evaluation grid (every `eval_every` steps,
+`python -m dqfd_bc_keras.experiments efficiency` (baselines.py) runs the arms and writes EFFICIENCY_FILE
+into the suite directory: per arm and seed, the first step of the evaluation grid (every `eval_every` steps,
 10 greedy episodes with the run's fixed evaluation seeds) whose mean return reaches the plain
 env's solved threshold. Steps are environment interactions that produced training data: for
 our runs evals.csv's `interactions` (dynamic-demonstration roll-outs included, unlike
@@ -30,7 +30,7 @@ from .stats import bootstrap_ci
 SB3_METHOD = "SB3 DQN (rl-zoo3)"
 """The method name of the Stable-Baselines3 arms."""
 EFFICIENCY_FILE = "efficiency.json"
-"""Written into the suite directory by benchmarks/bench_sample_efficiency.py; quoted by the report."""
+"""Written into the suite directory by `experiments efficiency` (baselines.py); quoted by the report."""
 TEACHER = {name: spec.lab.teacher_return for name, spec in TASKS.items() if spec.lab.teacher_return is not None}
 """The imperfect teachers our final returns are compared with (each preset's `lab.teacher_return`, tasks/)."""
 RESAMPLES, RNG_SEED, LEVEL = 10_000, 0, 0.95
@@ -214,7 +214,7 @@ def efficiency_section(suite_dir: Path) -> list[str]:
     path = suite_dir / EFFICIENCY_FILE
     loaded = load(path)
     if loaded is None:
-        return [f"Not run (or {EFFICIENCY_FILE} predates the current protocol): `python benchmarks/bench_sample_efficiency.py "
+        return [f"Not run (or {EFFICIENCY_FILE} predates the current protocol): `python -m dqfd_bc_keras.experiments efficiency "
                 f"--out {suite_dir}` writes {EFFICIENCY_FILE}."]
     protocol, arms = loaded
     thresholds = ", ".join(f"{task} {threshold:g}" for task, threshold in {a.task: a.threshold for a in arms}.items())

@@ -22,7 +22,6 @@ from . import figures
 from .arms import ArmRuns, bayes_ce_pairs, group_arms, preset_distance
 from .claims import ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, judge, judge_ablation, rule_text
 from .metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
-from ..config import Config
 from ..envs import get_task
 from ..files import write_text
 from .plans import PLANNED_SEEDS
@@ -40,7 +39,7 @@ REGENERATE = (f"python -m dqfd_bc_keras.experiments report {ARCHIVE} --docs",
               "python -m dqfd_bc_keras.experiments run all --out results && "
               "python -m dqfd_bc_keras.experiments calibrate --out results/calibration.json && "
               "python -m dqfd_bc_keras.experiments grid --out results && "
-              "python benchmarks/bench_sample_efficiency.py --out results && "
+              "python -m dqfd_bc_keras.experiments efficiency --out results && "
               f"python -m dqfd_bc_keras.experiments export results --out {ARCHIVE}")
 """This report from the committed per-run data (no training), and every run, the benchmark and the
 archive behind it (finished runs are skipped, so the second also resumes a cut-off sweep)."""
@@ -298,8 +297,8 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
             *(sensitivity or ["| — | no sensitivity arms | | | | |"]), ""]
     doc += ["## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
             "## Ablations", "", *_ablations(arms), ""]
-    doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators (issue I)", "", *estimators,
-            "", "## Demonstration quality × quantity (issue I)", "", *grid, "",
+    doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators", "", *estimators,
+            "", "## Demonstration quality × quantity", "", *grid, "",
             "## Demonstrations", "", demos_text(), "", "## Wall time", "", *sweeps, ""]
     # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
     text = "\n".join(doc).replace(str(directory), suite_name)

@@ -134,7 +134,7 @@ def _dynamic() -> list[Arm]:
 
 
 def _efficiency() -> list[Arm]:
-    """Interactions to the plain env's threshold, against SB3's DQN (benchmarks/bench_sample_efficiency.py):
+    """Interactions to the plain env's threshold, against SB3's DQN (`experiments efficiency`, baselines.py):
     bayes, ce, DQfD's margin and DQN on the paper's envs; the default (bayes) alone on the others."""
     return [arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
             for task, episodes in EFFICIENCY_TASKS.items()
