@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import re
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -21,7 +20,7 @@ from .envs import get_task, step_limit, task_spaces
 from .errors import ConfigError, DqfdWarning
 from .methods import Method, get_method
 from .seeds import MAX_SEED
-from .tasks import ENV_DEFAULTS, EXPERT_NAMES, find_preset
+from .tasks import ENV_DEFAULTS, check_demonstrator, find_preset
 from .wrappers import TIMEOUT_MODES
 
 TARGETS = ("dqn", "double")
@@ -316,11 +315,7 @@ class Config:
             ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
             ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
         ]
-        scripted = tuple(dict.fromkeys((*EXPERT_NAMES, *task.experts)))
-        if self.expert not in scripted and not self.expert.endswith(".keras") \
-                and not re.fullmatch(r"[\w.]+:\w+", self.expert):
-            raise ConfigError(f"expert={self.expert!r} is none of {', '.join(scripted)}, module:function or "
-                              "a .keras model file")
+        check_demonstrator(self.expert, task)
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")

@@ -17,7 +17,7 @@ import numpy as np
 
 from .envs import get_task, task_spaces
 from .errors import ConfigError
-from .tasks import EXPERT_NAMES, Rule, families, family_preset
+from .tasks import EXPERT_NAMES, Rule, check_demonstrator, families, family_preset
 
 
 def _check_choice(kind: str, value: str, choices: Sequence[str]) -> None:
@@ -65,6 +65,7 @@ def make_demonstrator(spec: str, task: str, epsilon: float = 0.0, seed: int | No
     family (strong | imperfect), a rule `module:function` (an importable function of the
     observation as the networks see it, flattened, → action), or the greedy policy of a saved
     `.keras` Q-network or BC model (checked against the task's spaces)."""
+    check_demonstrator(spec, get_task(task))
     n_actions = task_spaces(task, env_kwargs).n_actions  # first: an env we cannot learn on is the error
     family = get_task(task).family
     if spec in EXPERT_NAMES or spec in get_task(task).experts:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -102,6 +103,14 @@ def find_preset(name: str) -> TaskSpec | None:
         except ImportError:
             return None  # `envs.env_task` reports it, with the Gymnasium id's own error
     return TASKS.get(bare)
+
+
+def check_demonstrator(spec: str, task: TaskSpec) -> None:
+    """A `ConfigError` unless `spec` names a demonstrator for `task`: a scripted expert's name,
+    a rule `module:function` or a `.keras` model file (what each is, is checked when it is made)."""
+    scripted = tuple(dict.fromkeys((*EXPERT_NAMES, *task.experts)))
+    if spec not in scripted and not spec.endswith(".keras") and not re.fullmatch(r"[\w.]+:\w+", spec):
+        raise ConfigError(f"expert={spec!r} is none of {', '.join(scripted)}, module:function or a .keras model file")
 
 
 def family_preset(family: str) -> TaskSpec:
