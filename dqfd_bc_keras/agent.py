@@ -19,7 +19,7 @@ from .bc import BCModel
 from .config import Config
 from .demos import DemoDataset
 from .errors import ConfigError
-from .networks import build_q_network
+from .networks import NetworkInput, as_input, build_q_network
 from .optimizers import FusedAdam
 from .replay import Batch, PrioritizedReplay
 
@@ -44,12 +44,14 @@ class MeanVector(keras.metrics.Metric):
 
 
 class DQfDAgent(keras.Model):
-    """Q(s, ·; θ), the target network θ', θ_prior, and the learning step over a replay."""
+    """Q(s, ·; θ), the target network θ', θ_prior, and the learning step over a replay.
+
+    `obs_dim` is the width of a vector state, or the `NetworkInput` of frames and their torso."""
 
     def __init__(
         self,
         config: Config,
-        obs_dim: int,
+        obs_dim: int | NetworkInput,
         n_actions: int,
         replay: PrioritizedReplay,
         bc_model: BCModel | None = None,
@@ -61,9 +63,10 @@ class DQfDAgent(keras.Model):
         self.config = config
         self.method = config.method
         self.expert_term = self.method.expert_term()
-        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
-        self.q_network = build_q_network(obs_dim, n_actions, config.hidden, obs_scale)
-        self.target_network = build_q_network(obs_dim, n_actions, config.hidden, obs_scale, name="target_network")
+        self.net_input = as_input(obs_dim)
+        self.obs_dim, self.n_actions = self.net_input.dim, int(n_actions)
+        self.q_network = build_q_network(self.net_input, n_actions, config.hidden, obs_scale)
+        self.target_network = build_q_network(self.net_input, n_actions, config.hidden, obs_scale, name="target_network")
         self.target_network.trainable = False
         self.replay = replay
         self.bc_model = bc_model
@@ -74,7 +77,7 @@ class DQfDAgent(keras.Model):
         self.train_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="train_steps")
         self.loss_means = MeanVector(len(LOSS_TERMS), name="losses")
         self.expert_view = tf.function(self.expert_targets, autograph=False,
-                                       input_signature=[tf.TensorSpec([None, self.obs_dim], tf.float32)])
+                                       input_signature=[tf.TensorSpec([None, *self.net_input.shape], self.net_input.dtype)])
         """`expert_targets` of many states outside a graph (D_demo, refits): traced once."""
         self.compile(optimizer=FusedAdam(config.learning_rate))
         self.optimizer.build(self.q_network.trainable_variables)
@@ -123,14 +126,18 @@ class DQfDAgent(keras.Model):
     def set_demos(self, obs, actions, rewards, next_obs, terminated, truncated) -> None:
         """Fill D_demo with these transitions (with the BC model's view of each state)."""
         rewards = np.ones_like(rewards) if self.sqil else rewards
-        pi_bc, sigma_sq = self.expert_view(tf.constant(obs, tf.float32))
+        pi_bc, sigma_sq = self.expert_view(tf.constant(obs, self.net_input.dtype))
+        if self.net_input.image:  # the table holds the frames' pool indices
+            obs, next_obs = self.replay.demo_frames(obs, next_obs, np.logical_or(terminated, truncated))
         self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated,
                                                pi_bc, sigma_sq))
 
     def store(self, obs, action, reward, next_obs, terminated, truncated) -> None:
         """Append one self-generated transition to D_replay (graph-compatible)."""
-        pi_bc, sigma_sq = self.expert_targets(tf.reshape(tf.cast(obs, tf.float32), [1, -1]))
+        pi_bc, sigma_sq = self.expert_targets(tf.cast(obs, self.net_input.dtype)[None])
         reward = 0.0 * tf.cast(reward, tf.float32) if self.sqil else reward
+        if self.net_input.image:
+            obs, next_obs = self.replay.store_frames(obs, next_obs)
         self.replay.store(self.replay.rows(obs[None], action, reward, next_obs[None], terminated, truncated,
                                            pi_bc, sigma_sq)[0])
 
@@ -139,8 +146,7 @@ class DQfDAgent(keras.Model):
         indices = self.replay.stored_indices()
         for start in range(0, int(indices.shape[0]), chunk):
             rows = indices[start:start + chunk]
-            obs = tf.gather(self.replay.table, rows)[:, self.replay.OBS]
-            self.replay.set_expert_targets(rows, *self.expert_view(obs))
+            self.replay.set_expert_targets(rows, *self.expert_view(self.replay.states(rows)))
 
     def expert_loss(self, q: tf.Tensor, batch: Batch) -> tf.Tensor:
         """J_E of the config's method (methods.py; the built-in terms are in expert_terms.py)."""
@@ -241,14 +247,17 @@ def make_agent(
     demos: DemoDataset | None,
     bc_model: BCModel | None = None,
     obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
-    spaces: tuple[int, int] | None = None,
+    spaces: tuple[int | NetworkInput, int] | None = None,
 ) -> DQfDAgent:
     """A fresh agent whose D_demo holds `demos`, networks scaled by `obs_scale` (default: the
-    demos' states). Without demos (plain DQN) give `obs_scale` and `spaces` = (obs_dim, n_actions)."""
+    demos' states). Without demos (plain DQN) give `spaces` = (obs_dim or `NetworkInput`,
+    n_actions) and, for vectors, `obs_scale`. Frames need no `obs_scale`: they are scaled to [0, 1]."""
     if demos is not None:
         spaces = spaces or (demos.meta.obs_dim, demos.meta.n_actions)
+    image = spaces is not None and as_input(spaces[0]).image
+    if demos is not None and not image:
         obs_scale = obs_scale or demos.obs_scale()
-    if spaces is None or obs_scale is None:
+    if spaces is None or (obs_scale is None and not image):
         raise ConfigError("an agent without demonstrations needs obs_scale and spaces")
     c = config
     replay = PrioritizedReplay(

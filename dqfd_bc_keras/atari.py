@@ -102,6 +102,18 @@ class AtariOptions:
 ATARI_OPTIONS = AtariOptions()
 """The defaults: CleanRL's and SB3's."""
 
+ATARI_STEP_LIMIT = 27_000
+"""An Atari task's step limit: the ALE's 108,000 frames at 4 frames a step."""
+ATARI_DEFAULTS: Mapping[str, object] = {
+    "hidden": (512,), "bc_hidden": (512,), "learning_rate": 1e-4, "batch_size": 32, "target_update_period": 1000,
+    "train_freq": 4, "replay_capacity": 100_000, "demo_capacity": 50_000, "total_steps": 1_000_000,
+    "eval_every": 50_000, "eval_episodes": 5, "final_eval_episodes": 10, "demo_episodes": 5,
+    "early_stop_window": 0, "checkpoint_every": 100_000,
+}
+"""The Config defaults of an Atari env: the Nature network's 512 dense units, CleanRL dqn_atari.py's
+learning rate, batch, target period and training frequency; D_replay 100k (not 1M: a frame
+costs two pool slots, 1.4 GB per 100k transitions here) and a 1M-step budget, ours."""
+
 _MINIMUM = {"noop_max": 0, "frame_skip": 1, "screen_size": 1, "frame_stack": 1}
 
 

@@ -17,14 +17,19 @@ import numpy as np
 import tensorflow as tf
 
 from .config import UNCERTAINTIES, Config
-from .networks import dense_stack, normalization
+from .networks import NetworkInput, dense_stack, torso_layers
+from .observations import Frames
 from .optimizers import FusedAdam
-from .uncertainty import NearestDemoVariance, bootstrap_counts, ensemble_stack, policy_variance
+from .uncertainty import NearestDemoVariance, bootstrap_counts, ensemble_stack, policy_variance, reference_rows
+
+DISTANCE_SIDE = 21
+"""Frames are average-pooled to about this side before the distance estimator reads them (84 → 21)."""
 
 
 @keras.saving.register_keras_serializable(package="dqfd_bc_keras")
 class BCModel(keras.Model):
-    """MLP classifier: state (d,) → action logits (A,); `call` returns logits."""
+    """Classifier: state (a vector (d,), or frames through a convolutional torso) → action logits
+    (A,); `call` returns logits."""
 
     def __init__(
         self,
@@ -40,6 +45,8 @@ class BCModel(keras.Model):
         obs_std: Sequence[float] | None = None,
         uncertainty: str = "mc_dropout",
         members: int = 5,
+        frames: dict | None = None,
+        torso: str = "mlp",
         **kwargs,
     ) -> None:
         """`prior_scale=None` fits by MLE; a number s fits by MAP with the prior N(0, s²I).
@@ -47,7 +54,10 @@ class BCModel(keras.Model):
         `obs_mean`/`obs_std` standardise the input (the demonstrations' statistics).
         `uncertainty` picks σ²'s estimator; `members` is K of the ensemble (one network otherwise).
         `mc_dropout=False` predicts with one deterministic pass even when trained with dropout
-        (the ablation "σ² fixed at σ0²").
+        (the ablation "σ² fixed at σ0²"). `frames` ({shape, scale, stack} of `observations.Frames`)
+        makes the input uint8 frames read by `torso` (networks.py); dropout and the ensemble's
+        members are in the dense layers after it, which is where they act on frames too (an
+        ensemble's members then share the torso, as Bootstrapped DQN's heads do: Osband et al. 2016).
         """
         super().__init__(**kwargs)
         if uncertainty not in UNCERTAINTIES:
@@ -59,22 +69,33 @@ class BCModel(keras.Model):
         self.obs_mean = None if obs_mean is None else [float(x) for x in obs_mean]
         self.obs_std = None if obs_std is None else [float(x) for x in obs_std]
         self.uncertainty, self.members = uncertainty, int(members) if uncertainty == "ensemble" else 1
-        self.standardize = [] if obs_mean is None else [normalization(self.obs_mean, self.obs_std)]
+        self.frames = None if frames is None else Frames(tuple(int(n) for n in frames["shape"]),
+                                                         float(frames["scale"]), int(frames.get("stack", 1)))
+        self.torso = torso if self.frames is not None else "mlp"
+        self.input_spec_ = NetworkInput(self.obs_dim, self.frames, self.torso)
+        scale = None if obs_mean is None or self.frames is not None else (self.obs_mean, self.obs_std)
+        self.body = torso_layers(self.input_spec_, scale)
+        """Standardisation (vectors) or the convolutional torso (frames): what the dense layers read."""
         self.stack = (ensemble_stack(self.members, self.hidden, self.n_actions) if self.ensemble
                       else dense_stack(self.hidden, self.n_actions, self.dropout))
-        self.distance = (NearestDemoVariance(self.obs_dim, self.n_actions, name="nearest_demo_variance")
+        self.distance = (NearestDemoVariance(self._distance_width(), self.n_actions, name="nearest_demo_variance",
+                                             length=None if self.frames is not None else 1.0)
                          if uncertainty == "distance" else None)
         # N of the prior's 1/N scaling: the size of the dataset being fitted (set by `fit_demos`).
         self.n_data = self.add_weight(shape=(), initializer="ones", trainable=False, name="n_data")
         self.loss_tracker = keras.metrics.Mean(name="loss")
         self.ce_tracker = keras.metrics.Mean(name="cross_entropy")
         self.accuracy = keras.metrics.SparseCategoricalAccuracy(name="accuracy")
-        self.build((None, self.obs_dim))
+        self._fit = tf.function(self._fit_graph, autograph=False, input_signature=[
+            tf.TensorSpec([None, *self.input_spec_.shape], self.input_spec_.dtype), tf.TensorSpec([None], tf.int32),
+            tf.TensorSpec([], tf.int32), tf.TensorSpec([], tf.int32), tf.TensorSpec([], tf.int64)])
+        self.build((None, *self.input_spec_.shape))
 
     def build(self, input_shape) -> None:
         shape = tuple(input_shape)
-        for layer in self.standardize:
+        for layer in self.body:
             layer.build(shape)
+            shape = layer.compute_output_shape(shape)
         shape = (self.members, *shape) if self.ensemble else shape
         for layer in self.stack:
             layer.build(shape)
@@ -93,19 +114,45 @@ class BCModel(keras.Model):
 
     def member_logits(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
         """(K, B, A) logits of each ensemble member, or (B, A) of the one network."""
-        x = self.standardized(obs)
+        return self.head_logits(self.features(obs), training)
+
+    def head_logits(self, x: tf.Tensor, training: bool = False) -> tf.Tensor:
+        """The dense layers (dropout, or the ensemble's members) on features `x` (B, f)."""
         if self.ensemble:
-            x = tf.broadcast_to(x[None], [self.members, tf.shape(x)[0], self.obs_dim])
+            x = tf.broadcast_to(x[None], [self.members, tf.shape(x)[0], x.shape[-1]])
         for layer in self.stack:
             x = layer(x, training=training)
         return x
 
-    def standardized(self, obs: tf.Tensor) -> tf.Tensor:
-        """The states in the demonstrations' standard units (as given without statistics)."""
-        x = tf.cast(obs, tf.float32)
-        for layer in self.standardize:
+    def features(self, obs: tf.Tensor) -> tf.Tensor:
+        """What the dense layers read: vectors in the demonstrations' standard units (as given
+        without statistics), or the torso's features of frames."""
+        x = obs if self.frames is not None else tf.cast(obs, tf.float32)
+        for layer in self.body:
             x = layer(x)
         return x
+
+    def distance_view(self, obs: tf.Tensor) -> tf.Tensor:
+        """The space the distance estimator measures in: standardised vectors, or the frames in
+        [0, 1] average-pooled to about `DISTANCE_SIDE` a side and flattened. Frames, not the
+        torso's features: those change at every refit and are trained to tell actions apart, not
+        to say how far a state is from the demonstrations; a MinAtar distance is then
+        √(cells that differ)."""
+        if self.frames is None:
+            return self.features(obs)
+        x = tf.cast(obs, tf.float32) * self.frames.scale
+        x = x[..., None] if len(self.frames.shape) == 2 else x
+        pool = max(1, min(self.frames.shape[:2]) // DISTANCE_SIDE)
+        if pool > 1:
+            x = tf.nn.avg_pool2d(x, pool, pool, "VALID")
+        return tf.reshape(x, [tf.shape(x)[0], -1])
+
+    def _distance_width(self) -> int:
+        if self.frames is None:
+            return self.obs_dim
+        height, width, *channels = self.frames.shape
+        pool = max(1, min(height, width) // DISTANCE_SIDE)
+        return (height // pool) * (width // pool) * int(np.prod(channels or [1]))
 
     @property
     def map_fit(self) -> bool:
@@ -169,12 +216,13 @@ class BCModel(keras.Model):
             probs = tf.nn.softmax(self.member_logits(obs))
             return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
         if self.distance is not None:
-            return tf.nn.softmax(self(obs)), self.sigma0_sq + self.distance(self.standardized(obs))
+            return tf.nn.softmax(self(obs)), self.sigma0_sq + self.distance(self.distance_view(obs))
         if self.dropout == 0.0 or not self.mc_dropout:
             probs = tf.nn.softmax(self(obs, training=False))
             return probs, tf.fill(tf.shape(probs)[:1], tf.constant(self.sigma0_sq, probs.dtype))
         batch = tf.shape(obs)[0]
-        logits = self(tf.tile(obs, [self.mc_passes, 1]), training=True)
+        # The body has no dropout: its features are computed once and the K passes share them.
+        logits = self.head_logits(tf.tile(self.features(obs), [self.mc_passes, 1]), training=True)
         probs = tf.reshape(tf.nn.softmax(logits), [self.mc_passes, batch, self.n_actions])
         return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
 
@@ -192,16 +240,14 @@ class BCModel(keras.Model):
         """
         self.n_data.assign(float(len(obs)))
         if self.distance is not None:
-            self.distance.set_references(self.standardized(obs).numpy(), seed)
+            rows = reference_rows(len(obs), self.distance.capacity, seed)
+            self.distance.set_references(self.distance_view(tf.constant(obs[rows])).numpy())
         if epochs > 0:
-            self._fit(tf.constant(obs, tf.float32), tf.constant(actions, tf.int32), tf.constant(epochs),
+            self._fit(tf.constant(obs, self.input_spec_.dtype), tf.constant(actions, tf.int32), tf.constant(epochs),
                       tf.constant(min(batch_size, len(obs))), tf.constant(seed, tf.int64))
         return {metric.name: float(metric.result()) for metric in self.metrics}
 
-    @tf.function(autograph=False, input_signature=[
-        tf.TensorSpec([None, None], tf.float32), tf.TensorSpec([None], tf.int32), tf.TensorSpec([], tf.int32),
-        tf.TensorSpec([], tf.int32), tf.TensorSpec([], tf.int64)])
-    def _fit(self, obs, actions, epochs, batch_size, seed) -> None:
+    def _fit_graph(self, obs, actions, epochs, batch_size, seed) -> None:
         n = tf.shape(obs)[0]
         batches = (n + batch_size - 1) // batch_size
         counts = bootstrap_counts(self.members, n, seed) if self.ensemble else None
@@ -230,11 +276,15 @@ class BCModel(keras.Model):
             "dropout": self.dropout, "prior_scale": self.prior_scale, "mc_passes": self.mc_passes,
             "sigma0_sq": self.sigma0_sq, "mc_dropout": self.mc_dropout, "obs_mean": self.obs_mean, "obs_std": self.obs_std,
             "uncertainty": self.uncertainty, "members": self.members,
+            "frames": None if self.frames is None else {"shape": list(self.frames.shape), "scale": self.frames.scale,
+                                                        "stack": self.frames.stack},
+            "torso": self.torso,
         }
 
 
 def build_bc_model(
-    config: Config, obs_dim: int, n_actions: int, obs_scale: tuple[np.ndarray, np.ndarray] | None = None
+    config: Config, obs_dim: int | NetworkInput, n_actions: int,
+    obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> BCModel:
     """The BC model `config.expert_loss` calls for: MLE for ce and bc_margin; MAP for bayes,
     with `config.uncertainty`'s estimator (dropout for mc_dropout and distance, whose π̄_bc is
@@ -242,8 +292,11 @@ def build_bc_model(
     bayesian = config.bayesian_bc
     uncertainty = config.uncertainty if bayesian else "mc_dropout"
     mean, std = (None, None) if obs_scale is None else obs_scale
+    spec = obs_dim if isinstance(obs_dim, NetworkInput) else NetworkInput(int(obs_dim))
+    frames = None if spec.frames is None else {"shape": list(spec.frames.shape), "scale": spec.frames.scale,
+                                               "stack": spec.frames.stack}
     model = BCModel(
-        obs_dim, n_actions, hidden=config.bc_hidden,
+        spec.dim, n_actions, hidden=config.bc_hidden, frames=frames, torso=spec.torso,
         dropout=config.bc_dropout if bayesian and uncertainty != "ensemble" else 0.0,
         prior_scale=config.bc_prior_scale if bayesian else None, mc_passes=config.mc_passes,
         sigma0_sq=config.sigma0_sq, mc_dropout=config.mc_dropout, obs_mean=mean, obs_std=std,

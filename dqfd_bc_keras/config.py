@@ -19,6 +19,7 @@ from typing import Any
 from .envs import get_task, step_limit, task_spaces
 from .errors import ConfigError, DqfdWarning
 from .methods import Method, get_method
+from .network_input import TORSOS, NetworkInput
 from .seeds import MAX_SEED
 from .tasks import ENV_DEFAULTS, check_demonstrator, find_preset
 from .wrappers import TIMEOUT_MODES
@@ -102,8 +103,12 @@ class Config:
     """K of the `ensemble` estimator (Lakshminarayanan et al. 2017's 5)."""
 
     # --- networks and optimisation (ours: the paper gives none) ----------------------------
+    torso: str = "auto"
+    """What reads the observation before the hidden layers (networks.py): mlp | minatar (one 3×3
+    conv of 16) | nature (Nature DQN's three convs) | auto (mlp for vectors, minatar for frames
+    under 36×36, nature from there). Shared by the Q-network and the BC model."""
     hidden: tuple[int, ...] = (64, 64)
-    """Hidden ReLU layers of the Q-network."""
+    """Hidden ReLU layers of the Q-network (after the torso)."""
     learning_rate: float = 1e-3
     """Adam step size of the Q-network."""
     batch_size: int = 64
@@ -225,6 +230,11 @@ class Config:
         return step_limit(self.task, self.max_steps)
 
     @property
+    def network_input(self) -> NetworkInput:
+        """What the networks take in this task: vectors or frames, and the torso that reads them."""
+        return task_spaces(self.task, self.env_kwargs).network_input(self.torso, self.timeout)
+
+    @property
     def method(self) -> Method:
         """The registered method `expert_loss` names (methods.py)."""
         return get_method(self.expert_loss)
@@ -257,13 +267,17 @@ class Config:
             raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
         if find_preset(self.task) is None or self.env_kwargs:  # a preset's own spaces are known; an env's are checked
             task_spaces(self.task, self.env_kwargs)
+        if self.torso != "auto" or self.timeout == "time-aware":  # a torso or the time feature the input cannot take
+            if self.torso not in TORSOS:
+                raise ConfigError(f"torso={self.torso!r} is not one of {TORSOS}")
+            self.network_input
         if not self.method.q_learning:
             raise ConfigError(f"expert_loss={self.expert_loss!r} trains no Q-network: behavioural cloning alone is "
                               "run by the lab's imitation arms (python -m dqfd_bc_keras.experiments grid)")
         choices = {
             "timeout": TIMEOUT_MODES, "target": TARGETS,
             "td_loss": TD_LOSSES, "prior_center": PRIOR_CENTERS, "dynamic_demos": DYNAMIC_MODES,
-            "uncertainty": UNCERTAINTIES,
+            "uncertainty": UNCERTAINTIES, "torso": TORSOS,
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:

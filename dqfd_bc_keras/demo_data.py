@@ -7,8 +7,9 @@ The arrays (`ARRAYS`), one row per transition:
     obs (N, d) float32   actions (N,) int64   rewards (N,) float32   next_obs (N, d) float32
     terminated (N,) bool   truncated (N,) bool   episode_ids (N,) int64
 
-`obs` are the flat vectors the networks take (`observations`: a Dict or a grid is flattened);
-`meta.observation` names the env's own space. Every episode is complete (its last transition is
+`obs` are the flat vectors the networks take (`observations`: a Dict is flattened), or, for a
+task observed in frames, uint8 arrays (N, *meta.obs_shape); `meta.observation` names the env's
+own space. Every episode is complete (its last transition is
 terminated or truncated), so n-step returns can be read off directly.
 """
 
@@ -60,6 +61,17 @@ class DemoMeta:
     """The keyword arguments the env was made with."""
     observation: str = ""
     """The env's own observation space and how it was flattened ("" in files that predate it)."""
+    obs_shape: list[int] | None = None
+    """The shape of one observation kept as uint8 frames; None for flat float32 vectors."""
+
+    @property
+    def obs_dtype(self) -> type:
+        return np.float32 if self.obs_shape is None else np.uint8
+
+    @property
+    def obs_ndim(self) -> int:
+        """Dimensions of the obs array: 2 for vectors (N, d), 1 + the frames' for frames."""
+        return 2 if self.obs_shape is None else 1 + len(self.obs_shape)
 
 
 @dataclass(frozen=True)
@@ -94,8 +106,11 @@ class DemoDataset:
             for i, (a, b) in enumerate(zip(starts, ends))
         ]
 
-    def obs_scale(self) -> tuple[np.ndarray, np.ndarray]:
-        """(mean, std) of the demonstrated states, per feature: the networks' input scaling."""
+    def obs_scale(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(mean, std) of the demonstrated states, per feature: the networks' input scaling; None
+        for frames, which the networks scale to [0, 1] themselves."""
+        if self.meta.obs_shape is not None:
+            return None
         return self.obs.mean(axis=0), self.obs.std(axis=0)
 
     def summary(self) -> str:
@@ -137,6 +152,8 @@ def validate(path: Path, ds: DemoDataset) -> None:
     naming `path` (a file, or a `minari:` id) and the first failure."""
     for name, (dtype, ndim) in ARRAYS.items():
         array = getattr(ds, name)
+        if name in ("obs", "next_obs"):
+            dtype, ndim = ds.meta.obs_dtype, ds.meta.obs_ndim
         if array.dtype != dtype or array.ndim != ndim:
             raise DemoFileError(path, f"{name} must be {np.dtype(dtype).name} with {ndim} dimension(s), "
                                       f"got {array.dtype} with shape {array.shape}")
@@ -147,7 +164,10 @@ def validate(path: Path, ds: DemoDataset) -> None:
         if len(getattr(ds, name)) != n:
             raise DemoFileError(path, f"{name} has {len(getattr(ds, name))} rows, actions has {n}")
     for name in ("obs", "next_obs"):
-        if getattr(ds, name).shape[1] != m.obs_dim:
+        if m.obs_shape is not None and list(getattr(ds, name).shape[1:]) != list(m.obs_shape):
+            raise DemoFileError(path, f"{name} has frames of shape {list(getattr(ds, name).shape[1:])}, meta says "
+                                      f"obs_shape={list(m.obs_shape)}")
+        if m.obs_shape is None and getattr(ds, name).shape[1] != m.obs_dim:
             raise DemoFileError(path, f"{name} has {getattr(ds, name).shape[1]} features, meta says obs_dim={m.obs_dim}")
     for name in ("obs", "rewards", "next_obs"):
         if not np.isfinite(getattr(ds, name)).all():

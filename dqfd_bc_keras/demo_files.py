@@ -89,6 +89,10 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
     if task is not None:  # the task's spaces now, which its env's package may have changed since
         spaces = task_spaces(task, env_kwargs)
         features = spaces.input_dim(meta.timeout)
+        frames = None if spaces.layout.frames is None else list(spaces.layout.frames.shape)
+        if meta.obs_shape != frames:
+            raise DemoFileError(path, f"holds observations of shape {meta.obs_shape or [meta.obs_dim]}, but task "
+                                      f"{task} observes {frames or [features]}")
         if meta.obs_dim != features or meta.n_actions != spaces.n_actions:
             raise DemoFileError(path, f"holds observations of {meta.obs_dim} features and {meta.n_actions} actions, "
                                       f"but task {task} has {features} features and {spaces.n_actions} actions")
@@ -114,7 +118,7 @@ def _rows(path: Path) -> int | None:
 META_TYPES: dict[str, tuple[type, ...]] = {
     "task": (str,), "env_id": (str,), "timeout": (str,), "obs_dim": (int,), "n_actions": (int,), "expert": (str,),
     "epsilon": (int, float), "seed": (int,), "episode_returns": (list,), "plain_returns": (list,),
-    "format_version": (int,), "env_kwargs": (dict,), "observation": (str,),
+    "format_version": (int,), "env_kwargs": (dict,), "observation": (str,), "obs_shape": (list, type(None)),
 }
 """The JSON type of each meta field (a bool is not a number here)."""
 
@@ -131,7 +135,7 @@ def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
     if fields.get("format_version") != FORMAT_VERSION:
         raise DemoFileError(path, f"format_version {fields.get('format_version')!r} is not {FORMAT_VERSION}")
     names = {field.name for field in dataclasses.fields(DemoMeta)}
-    optional = {"env_kwargs", "observation"}
+    optional = {"env_kwargs", "observation", "obs_shape"}
     missing = sorted(names - optional - fields.keys())
     if missing:
         raise DemoFileError(path, f"meta lacks {missing}")

@@ -37,14 +37,19 @@ from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
+from .atari import ATARI_DEFAULTS, ATARI_STEP_LIMIT, is_atari, split_kwargs, wrap_atari
 from .errors import ConfigError
-from .observations import FlattenObservation, ObservationLayout, is_flat, observation_layout
+from .network_input import NetworkInput, resolve_torso
+from .observations import FlattenObservation, FrameObservation, ObservationLayout, is_flat, observation_layout
 from .tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
+from .tasks.minatar import require_minatar
 from .wrappers import FallPenalty, GoalCount, TimeFeature, TimeLimitMode
 
 SUPPORTED_SPACES = ("a Discrete action space starting at 0 and an observation of Box, Discrete, MultiDiscrete or "
-                    "MultiBinary parts (Dicts and Tuples of them are flattened; images are not supported yet)")
+                    "MultiBinary parts (Dicts and Tuples of them are flattened), or frames (a 2-D or 3-D uint8 or "
+                    "bool Box)")
 
 RESERVED_KWARGS = {"render_mode": "is chosen by the command (evaluate.py --video)",
                    "max_episode_steps": "is the step limit: use --max-steps N"}
@@ -72,6 +77,9 @@ def env_task(env_id: str) -> TaskSpec:
         raise ConfigError(f"unknown task {env_id!r}: neither a preset ({', '.join(sorted(TASKS))}) nor a "
                           f"Gymnasium env id ({type(error).__name__}: {error})") from None
     threshold = None if spec.reward_threshold is None else float(spec.reward_threshold)
+    if is_atari(env_id):  # preprocessed (atari.py); the ALE's own cap of 108,000 frames as the limit
+        return TaskSpec(env_id, env_id, max_steps=spec.max_episode_steps or ATARI_STEP_LIMIT,
+                        solved_return=threshold, defaults=ATARI_DEFAULTS)
     return TaskSpec(env_id, env_id, max_steps=spec.max_episode_steps, solved_return=threshold, defaults=ENV_DEFAULTS)
 
 
@@ -90,6 +98,13 @@ class TaskSpaces:
         """The networks' input width: the flattened observation, and the time feature in time-aware mode."""
         return self.layout.dim + (timeout == "time-aware")
 
+    def network_input(self, torso: str = "auto", timeout: str = "bootstrap") -> NetworkInput:
+        """What the networks take in this task, read by torso `torso` (`networks.resolve_torso`)."""
+        if self.layout.image and timeout == "time-aware":
+            raise ConfigError("timeout='time-aware' appends the time left to a vector observation; this task "
+                              "observes frames: use timeout=bootstrap")
+        return NetworkInput(self.input_dim(timeout), self.layout.frames, resolve_torso(torso, self.layout.frames))
+
 
 def task_spaces(name: str, env_kwargs: Mapping[str, Any] | None = None) -> TaskSpaces:
     """The spaces of task `name` made with `env_kwargs`, checked once per process: a one-line
@@ -103,6 +118,9 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
     for key, why in RESERVED_KWARGS.items():
         if key in env_kwargs:
             raise ConfigError(f"--env-kwargs {key}: not an env kwarg here; it {why}")
+    if is_atari(env_id):
+        split_kwargs(env_kwargs)  # the preprocessing's options and the ALE's keywords, checked
+        return
     parameters = _constructor_parameters(env_id)
     if parameters is None or any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
         return  # nothing to check against: gym.make will say
@@ -148,18 +166,28 @@ def _kwargs_key(env_kwargs: Mapping[str, Any] | None) -> str:
 
 @functools.cache
 def _task_spaces(name: str, kwargs_key: str) -> TaskSpaces:
-    env = _make(name, json.loads(kwargs_key), max_episode_steps=-1)
+    env_kwargs = json.loads(kwargs_key)
+    env = _make(name, env_kwargs, max_episode_steps=-1)
     obs_space, action_space = env.observation_space, env.action_space
     env.close()
     if not (isinstance(action_space, gym.spaces.Discrete) and int(action_space.start) == 0):
         raise ConfigError(f"{name} has action space {action_space}; supported: {SUPPORTED_SPACES}")
-    return TaskSpaces(observation_layout(obs_space, name), int(action_space.n))
+    env_id = get_task(name).env_id
+    stack = split_kwargs(env_kwargs)[0].frame_stack if is_atari(env_id) else 1
+    return TaskSpaces(observation_layout(obs_space, name, stack), int(action_space.n))
 
 
-def _make(name: str, env_kwargs: Mapping[str, Any] | None, **options: Any) -> gym.Env:
-    """`gym.make` of task `name`'s plain env with `env_kwargs`; a bad keyword is one `ConfigError` line."""
+def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True, **options: Any) -> gym.Env:
+    """`gym.make` of task `name`'s plain env with `env_kwargs`; a bad keyword is one `ConfigError`
+    line. An Atari env gets its preprocessing (`atari.py`): the learner's when `learning`, else
+    the evaluation's (raw rewards, whole games)."""
     env_id, env_kwargs = get_task(name).env_id, dict(env_kwargs or {})
+    if env_id.rpartition(":")[2].startswith("MinAtar/"):
+        require_minatar()
     check_env_kwargs(env_id, env_kwargs)
+    if is_atari(env_id):
+        atari, make_kwargs = split_kwargs(env_kwargs)
+        return wrap_atari(gym.make(env_id.rpartition(":")[2], **options, **make_kwargs), atari, learning)
     try:
         return gym.make(env_id, **options, **env_kwargs)
     except (TypeError, ValueError, AssertionError) as error:
@@ -171,10 +199,14 @@ def _make(name: str, env_kwargs: Mapping[str, Any] | None, **options: Any) -> gy
 
 
 def _observe(env: gym.Env, name: str, env_kwargs: Mapping[str, Any] | None) -> gym.Env:
-    """`env` with its observations flattened, unless they are a flat Box already."""
+    """`env` with its observations as the networks take them: a flat Box unchanged, frames as
+    uint8, anything else flattened."""
     if is_flat(env.observation_space):
         return env
-    return FlattenObservation(env, task_spaces(name, env_kwargs).layout)
+    layout = task_spaces(name, env_kwargs).layout
+    if layout.image:
+        return env if env.observation_space.dtype == np.uint8 else FrameObservation(env)
+    return FlattenObservation(env, layout)
 
 
 def task_slug(name: str) -> str:
@@ -219,15 +251,18 @@ def make_plain_env(
     env_kwargs: Mapping[str, Any] | None = None,
 ) -> gym.Env:
     """The unmodified Gymnasium env of task `name` (made with `env_kwargs`), with its own time
-    limit (an env without one gets the training limit `max_steps`); observations flattened as
-    the networks take them.
+    limit (an env without one, as MinAtar's and the ALE's, gets the training limit); observations
+    as the networks take them, and an Atari env's preprocessing without the learner's reward
+    clipping and lives.
 
     With `timeout="time-aware"` the observation also carries the time feature the agent was
     trained with (fraction of the training limit `max_steps` left); rewards and ends are untouched.
     """
     spec = get_task(name)
-    own_limit = None if spec.max_steps is not None else step_limit(name, max_steps)
-    env = _observe(_make(name, env_kwargs, max_episode_steps=own_limit, **_rendering(render_mode)), name, env_kwargs)
+    registered = gym.spec(spec.env_id.rpartition(":")[2]).max_episode_steps
+    own_limit = None if registered is not None else step_limit(name, max_steps)
+    env = _observe(_make(name, env_kwargs, learning=False, max_episode_steps=own_limit, **_rendering(render_mode)),
+                   name, env_kwargs)
     if timeout == "time-aware":
         env = TimeFeature(env, step_limit(name, max_steps))
     return env

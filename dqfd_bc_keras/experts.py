@@ -12,7 +12,6 @@ import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-import gymnasium as gym
 import numpy as np
 
 from .envs import get_task, task_spaces
@@ -91,9 +90,12 @@ def make_demonstrator(spec: str, task: str, epsilon: float = 0.0, seed: int | No
 def expert_returns(
     family: str, name: str, episodes: int = 100, seed: int = 0, epsilon: float = 0.0
 ) -> np.ndarray:
-    """Undiscounted returns of the expert on the plain env; episode i is reset with seed + i."""
+    """Undiscounted returns of the expert on the plain env (`envs.make_plain_env`: frames as
+    uint8, the preset's limit where the env has none); episode i is reset with seed + i."""
+    from .envs import make_plain_env  # envs imports this module
+
     expert = make_expert(family, name, epsilon, seed)
-    env = gym.make(family_preset(family).env_id)
+    env = make_plain_env(family_preset(family).name)
     returns = np.zeros(episodes, dtype=np.float64)
     try:
         for i in range(episodes):

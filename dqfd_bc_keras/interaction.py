@@ -31,9 +31,8 @@ class Interaction(tf.Module):
         self.recorder = EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed,
                                                 env_kwargs=config.env_kwargs) \
             if record else None
-        obs_dim = agent.obs_dim
         self.play = tf.function(self._play, autograph=False, input_signature=[
-            tf.TensorSpec([obs_dim], tf.float32), tf.TensorSpec([], tf.int64)])
+            tf.TensorSpec(agent.net_input.shape, agent.net_input.dtype), tf.TensorSpec([], tf.int64)])
 
     def epsilon(self) -> tf.Tensor:
         """ε, linear from its start to `epsilon_end` over `epsilon_fraction` of the budget."""
@@ -51,16 +50,18 @@ class Interaction(tf.Module):
             self.recorder.reset(obs)
         return obs
 
-    def _env_step(self, action: np.ndarray) -> np.ndarray:
+    def _env_step(self, action: np.ndarray) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The Python side of `tf.numpy_function`: step the env, keep the episode's tallies.
 
         Returns one float32 vector [s' (d), r, terminated, truncated]: one array crosses the
-        boundary instead of four.
+        boundary instead of four. Frames cross as they are (uint8), beside [r, terminated, truncated].
         """
         obs, reward, terminated, truncated, info = self.env.step(int(action))
         self.episode.add(float(reward), info)
         if self.recorder is not None:
             self.recorder.step(int(action), obs, reward, terminated, truncated, info)
+        if self.agent.net_input.image:
+            return obs, np.array((reward, terminated, truncated), np.float32)
         return np.append(obs, (reward, terminated, truncated)).astype(np.float32)
 
     def _play(self, obs: tf.Tensor, max_steps: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
@@ -72,8 +73,13 @@ class Interaction(tf.Module):
             u = self.rng.uniform([2])
             random_action = tf.minimum(tf.cast(u[1] * agent.n_actions, tf.int32), agent.n_actions - 1)
             action = tf.where(u[0] < self.epsilon(), random_action, agent.greedy_actions(obs[None])[0])
-            step = tf.ensure_shape(tf.numpy_function(self._env_step, [action], tf.float32, stateful=True), [d + 3])
-            next_obs, reward, terminated, truncated = step[:d], step[d], step[d + 1] > 0, step[d + 2] > 0
+            if agent.net_input.image:
+                next_obs, step = tf.numpy_function(self._env_step, [action], [tf.uint8, tf.float32], stateful=True)
+                next_obs, step = tf.ensure_shape(next_obs, agent.net_input.shape), tf.ensure_shape(step, [3])
+            else:
+                step = tf.ensure_shape(tf.numpy_function(self._env_step, [action], tf.float32, stateful=True), [d + 3])
+                next_obs, step = step[:d], step[d:]
+            reward, terminated, truncated = step[0], step[1] > 0, step[2] > 0
             agent.store(obs, action, reward, next_obs, terminated, truncated)
             self.env_steps.assign_add(1)
             learns = tf.logical_and(self.env_steps % c.train_freq == 0, agent.replay.size >= c.batch_size)

@@ -1,6 +1,9 @@
-"""Observations: any supported Gymnasium space as the flat float32 vector the networks take.
+"""Observations: any supported Gymnasium space as what the networks take: a flat float32 vector,
+or frames kept in their own shape for a convolutional torso.
 
-A one-dimensional `Box` passes unchanged. Every other supported space is flattened by
+A one-dimensional `Box` passes unchanged. A `Box` of 2 or 3 dimensions of `uint8` or `bool`
+values at the top level (MinAtar's 10×10×C grids, Atari's 84×84×4 frames, MiniGrid's 7×7×3 view
+alone) is a frame: it stays in its shape as `uint8` (`Frames`), and the replay stores it as such. Every other supported space is flattened by
 `FlattenObservation`, always in this order (the order of `gymnasium.spaces.flatten`):
 
     Box of any shape        its values in C order (row by row), as float32
@@ -11,10 +14,9 @@ A one-dimensional `Box` passes unchanged. Every other supported space is flatten
     Tuple                   its parts in index order; Dicts and Tuples nest
 
 Parts that are not numeric (MiniGrid's `mission` text, a Graph, a Sequence) are dropped, with
-one warning naming them. Images are refused: a `uint8` Box of 2 or 3 dimensions bounded by 0
-and 255 with more than `MAX_IMAGE_VALUES` values is a frame of pixels, which needs a
-convolutional network. Smaller grids (MiniGrid's 7×7×3 view, 2048's 4×4×16 board) are
-flattened.
+one warning naming them. Inside a Dict or a Tuple, a grid is flattened with the rest (MiniGrid's
+7×7×3 view), and an image (`uint8`, 2 or 3 dimensions, bounds 0 and 255, more than
+`MAX_IMAGE_VALUES` values) is refused: one network input cannot be both a frame and a vector.
 
 >>> layout = observation_layout(gym.spaces.Dict({"a": gym.spaces.Discrete(3), "b": gym.spaces.Box(0, 1, (2, 2))}))
 >>> layout.dim, layout.flatten({"a": 1, "b": [[1, 2], [3, 4]]}).tolist()
@@ -33,8 +35,8 @@ import numpy as np
 from .errors import ConfigError, DqfdWarning
 
 MAX_IMAGE_VALUES = 64 * 64
-"""A uint8 grid 0–255 larger than 64×64 values is taken for an image; at or below it, for a
-small symbolic grid that a dense layer can read."""
+"""Inside a Dict, a uint8 grid 0–255 larger than 64×64 values is taken for an image (refused);
+at or below it, for a small symbolic grid that a dense layer can read (flattened)."""
 
 NUMERIC = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)
 
@@ -61,6 +63,36 @@ def is_image(space: gym.Space) -> bool:
             and int(np.prod(space.shape)) > MAX_IMAGE_VALUES)
 
 
+def is_frames(space: gym.Space) -> bool:
+    """A top-level observation the networks take as frames: a Box of 2 or 3 dimensions of uint8
+    or bool values ≥ 0 (a grid of pixels or of binary cells)."""
+    return (isinstance(space, gym.spaces.Box) and len(space.shape) in (2, 3)
+            and space.dtype in (np.uint8, np.bool_) and bool(np.all(space.low >= 0)))
+
+
+@dataclass(frozen=True)
+class Frames:
+    """An observation kept as `uint8` frames: its shape, the scale that brings it to [0, 1] in the
+    network, and how many frames are stacked on its last axis (Atari's 4, newest last; else 1)."""
+
+    shape: tuple[int, ...]
+    """(H, W) or (H, W, C), as the env gives it."""
+    scale: float
+    """1/255 for pixels bounded by 255; 1 for 0/1 cells (MinAtar's bool grids)."""
+    stack: int = 1
+
+    @property
+    def frame_shape(self) -> tuple[int, ...]:
+        """The shape of one stored frame: the observation without its stack axis."""
+        return self.shape[:-1] if self.stack > 1 else self.shape
+
+
+def frames_of(space: gym.spaces.Box, stack: int = 1) -> Frames:
+    """The `Frames` of a frame space (`is_frames`): 1/high as the scale, high ≥ 1."""
+    high = float(np.max(space.high)) if space.dtype != np.bool_ else 1.0
+    return Frames(tuple(int(n) for n in space.shape), 1.0 / max(high, 1.0), int(stack))
+
+
 def is_flat(space: gym.Space) -> bool:
     """A one-dimensional Box: the networks take it as it is."""
     return isinstance(space, gym.spaces.Box) and len(space.shape) == 1
@@ -77,12 +109,19 @@ class ObservationLayout:
     dropped: tuple[str, ...]
     """Paths of the dropped parts, e.g. ("mission",)."""
     dim: int
-    """Features of the flat vector."""
+    """Features of the flat vector (of a frame observation: its values)."""
+    frames: Frames | None = None
+    """Set when the observation is kept as uint8 frames for a convolutional torso."""
 
     @property
     def flat(self) -> bool:
         """True when observations pass unchanged (a one-dimensional Box)."""
         return is_flat(self.space)
+
+    @property
+    def image(self) -> bool:
+        """True when observations are frames (`Frames`), not vectors."""
+        return self.frames is not None
 
     def flatten(self, obs: Any, batch: int | None = None) -> np.ndarray:
         """One observation as a (dim,) float32 vector, or, with `batch`, `batch` observations whose
@@ -93,22 +132,31 @@ class ObservationLayout:
     def to_dict(self) -> dict:
         """What `config.json` records: the env's space, its shape, the features and what was dropped."""
         shape = getattr(self.space, "shape", None)
+        frames = None if self.frames is None else {"shape": list(self.frames.shape), "scale": self.frames.scale,
+                                                   "stack": self.frames.stack}
         return {"space": describe(self.space), "shape": None if shape is None else list(shape),
-                "features": self.dim, "flattened": not self.flat, "dropped": list(self.dropped)}
+                "features": self.dim, "flattened": not (self.flat or self.image), "dropped": list(self.dropped),
+                "frames": frames}
 
     def text(self) -> str:
         """One line: the space and how it becomes the network's input."""
         if self.flat:
             return describe(self.space)
+        if self.frames is not None:
+            stack = f", {self.frames.stack} stacked" if self.frames.stack > 1 else ""
+            return f"{describe(self.space)} as uint8 frames{stack}"
         dropped = f"; dropped {', '.join(self.dropped)}" if self.dropped else ""
         return f"{describe(self.space)} flattened to {self.dim} features{dropped}"
 
 
-def observation_layout(space: gym.Space, env_id: str = "the env") -> ObservationLayout:
-    """The layout of `space`, or a one-line `ConfigError` for images and for spaces with no
-    numeric part; warns once, naming them, when parts are dropped."""
+def observation_layout(space: gym.Space, env_id: str = "the env", stack: int = 1) -> ObservationLayout:
+    """The layout of `space` (frames stacked `stack` deep on the last axis, for a frame space), or a
+    one-line `ConfigError` for images inside a Dict or Tuple and for spaces with no numeric part;
+    warns once, naming them, when parts are dropped."""
     if is_flat(space):
         return ObservationLayout(space, space, (), int(space.shape[0]))
+    if is_frames(space):
+        return ObservationLayout(space, space, (), int(np.prod(space.shape)), frames_of(space, stack))
     dropped: list[str] = []
     kept = _numeric(space, "", dropped, env_id)
     if kept is None:
@@ -125,8 +173,9 @@ def _numeric(space: gym.Space, path: str, dropped: list[str], env_id: str) -> gy
     """`space` with its non-numeric parts removed (their paths appended to `dropped`); None if nothing is left."""
     if is_image(space):
         where = f" (part {path})" if path else ""
-        raise ConfigError(f"{env_id} observes images{where}: {describe(space)} needs a convolutional network, "
-                          "which is not supported yet (for Atari, try --env-kwargs obs_type='\"ram\"')")
+        raise ConfigError(f"{env_id} observes images{where}: {describe(space)} inside a Dict or Tuple "
+                          "is not supported (the convolutional torso takes frames as the whole observation: "
+                          "wrap the env to observe the image alone)")
     if isinstance(space, NUMERIC):
         return space
     if isinstance(space, (gym.spaces.Dict, gym.spaces.Tuple)):
@@ -165,6 +214,20 @@ def _flatten(space: gym.Space, x: Any, batch: int) -> np.ndarray:
         return np.concatenate([_flatten(part, x[key], batch) for key, part in space.spaces.items()], axis=1)
     indices = getattr(space, "indices", range(len(space.spaces)))
     return np.concatenate([_flatten(part, x[i], batch) for i, part in zip(indices, space.spaces)], axis=1)
+
+
+class FrameObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Frames as `uint8` arrays of their own shape (MinAtar's bool grids become 0/1 bytes)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
+        space = env.observation_space
+        self.observation_space = gym.spaces.Box(space.low.astype(np.uint8), space.high.astype(np.uint8),
+                                                dtype=np.uint8)
+
+    def observation(self, observation: Any) -> np.ndarray:
+        return np.asarray(observation, dtype=np.uint8)
 
 
 class FlattenObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):

@@ -50,7 +50,10 @@ class EpisodeRecorder:
                  env_kwargs: dict[str, Any] | None = None) -> None:
         self.task, self.source, self.epsilon, self.seed = task, source, float(epsilon), int(seed)
         self.env_kwargs = dict(env_kwargs or {})
-        self.obs_dim, self.n_actions = int(env.observation_space.shape[0]), int(env.action_space.n)
+        shape = env.observation_space.shape
+        self.frames = len(shape) > 1  # envs.make_task flattens all but frames
+        self.obs_dim, self.n_actions = int(np.prod(shape)), int(env.action_space.n)
+        self.obs_shape = [int(n) for n in shape] if self.frames else None
         self.timeout = env.get_wrapper_attr("mode")
         self.clear()
 
@@ -90,8 +93,10 @@ class EpisodeRecorder:
             n_actions=self.n_actions, expert=self.source, epsilon=self.epsilon, seed=self.seed,
             episode_returns=list(self.returns), plain_returns=list(self.plain_returns),
             env_kwargs=dict(self.env_kwargs), observation=task_spaces(self.task, self.env_kwargs).layout.text(),
+            obs_shape=self.obs_shape,
         )
-        arrays = {name: np.asarray(self.columns[name][:end], dtype=dtype) for name, (dtype, _) in ARRAYS.items()}
+        dtypes = {name: dtype for name, (dtype, _) in ARRAYS.items()} | {"obs": meta.obs_dtype, "next_obs": meta.obs_dtype}
+        arrays = {name: np.asarray(self.columns[name][:end], dtype=dtypes[name]) for name in ARRAYS}
         return DemoDataset(**arrays, meta=meta)
 
 

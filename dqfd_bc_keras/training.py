@@ -85,16 +85,16 @@ def build_learner(
     """π_bc fitted on D_demo (BC-based losses; only built when `fit` is False, for a resume that
     restores its weights), and the agent with D_demo loaded."""
     keras.utils.set_random_seed(config.seed)
-    obs_dim, n_actions = int(env.observation_space.shape[0]), int(env.action_space.n)
+    spec, n_actions = config.network_input, int(env.action_space.n)
     bc = None
     if config.uses_bc:
-        bc = build_bc_model(config, obs_dim, n_actions, data.obs_scale())
+        bc = build_bc_model(config, spec, n_actions, None if spec.image else data.obs_scale())
         if fit:
             fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
         else:
             bc.optimizer.build(bc.trainable_variables)
-    scale = None if data is not None else random_obs_scale(env, config.seed)
-    return make_agent(config, data, bc, obs_scale=scale, spaces=(obs_dim, n_actions)), bc
+    scale = None if data is not None or spec.image else random_obs_scale(env, config.seed)
+    return make_agent(config, data, bc, obs_scale=scale, spaces=(spec, n_actions)), bc
 
 
 class DynamicDemos:
@@ -263,7 +263,7 @@ def train_episodes(
         while not done and steps() < c.total_steps:
             evaluate_due(learner, state, on_eval)
             budget = min(c.total_steps - steps(), state.next_eval - learner.interactions)
-            obs, done = interaction.play(tf.constant(obs, tf.float32), tf.constant(budget, tf.int64))
+            obs, done = interaction.play(tf.constant(obs, agent.net_input.dtype), tf.constant(budget, tf.int64))
             obs, done = obs.numpy(), bool(done)
         stats = interaction.episode
         losses = {name: float(value) for name, value in agent.losses_so_far().items()}

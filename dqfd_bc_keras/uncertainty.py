@@ -84,6 +84,14 @@ def bootstrap_counts(members: int, n: int, seed: tf.Tensor) -> tf.Tensor:
     return tf.reshape(counts, [members, n])
 
 
+def reference_rows(n: int, capacity: int, seed: int) -> np.ndarray:
+    """Which of n demonstrated states the distance estimator keeps: all, or a uniform subsample
+    of `capacity` of them (in order)."""
+    if n <= capacity:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, capacity, replace=False))
+
+
 @keras.saving.register_keras_serializable(package="dqfd_bc_keras")
 class NearestDemoVariance(keras.layers.Layer):
     """σ²(s) − σ0² = v·(1 − exp(−d(s)²/ℓ²)), d(s) the distance from standardised s to the
@@ -97,25 +105,45 @@ class NearestDemoVariance(keras.layers.Layer):
     the cost of one distance matrix; its cost and its memory are fixed by the `capacity`
     reference states (a uniform subsample once D_demo is larger). ℓ = 1 demonstration standard
     deviation, the unit the states are standardised in; v = `max_policy_variance(A)`, the
-    most the other two estimators can express, so σ² is on their scale.
+    most the other two estimators can express, so σ² is on their scale. Frames have no such
+    unit (`length=None`): ℓ is then the median distance from a reference state to its nearest
+    other one, so a state as far from D_demo as the demonstrations are from each other gets
+    1 − e⁻¹ of v.
     """
 
-    def __init__(self, obs_dim: int, n_actions: int, capacity: int = 2048, length: float = 1.0, **kwargs) -> None:
+    def __init__(self, obs_dim: int, n_actions: int, capacity: int = 2048, length: float | None = 1.0,
+                 **kwargs) -> None:
         super().__init__(**kwargs)
         self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
-        self.capacity, self.length = int(capacity), float(length)
+        self.capacity, self.length = int(capacity), None if length is None else float(length)
         self.references = self.add_weight(shape=(self.capacity, self.obs_dim), initializer="zeros",
                                           trainable=False, name="references")
         self.count = self.add_weight(shape=(), initializer="zeros", trainable=False, name="count")
+        self.length_sq = self.add_weight(shape=(), initializer="ones", trainable=False, name="length_sq")
+        """ℓ², fixed, or set from the references (`length=None`)."""
+        if self.length is not None:
+            self.length_sq.assign(self.length**2)
 
-    def set_references(self, z: np.ndarray, seed: int) -> None:
-        """Remember standardised demonstrated states `z` (n, d), a uniform subsample past `capacity`."""
-        if len(z) > self.capacity:
-            z = z[np.sort(np.random.default_rng(seed).choice(len(z), self.capacity, replace=False))]
+    def set_references(self, z: np.ndarray) -> None:
+        """Remember demonstrated states `z` (n ≤ capacity, d) in the space distances are measured in
+        (`uncertainty.reference_rows` picks them)."""
         padded = np.zeros((self.capacity, self.obs_dim), np.float32)
         padded[: len(z)] = z
         self.references.assign(padded)
         self.count.assign(float(len(z)))
+        if self.length is None:
+            self.length_sq.assign(self._median_nearest_sq(z))
+
+    @staticmethod
+    def _median_nearest_sq(z: np.ndarray) -> float:
+        """The median over z of the squared distance to the nearest other row (1 with fewer than 2,
+        or when every row is a duplicate)."""
+        if len(z) < 2:
+            return 1.0
+        squared = (z**2).sum(1)[:, None] - 2.0 * z @ z.T + (z**2).sum(1)[None, :]
+        np.fill_diagonal(squared, np.inf)
+        median = float(np.median(np.maximum(squared.min(axis=1), 0.0)))
+        return median if median > 0 else 1.0
 
     def nearest_distance(self, z: tf.Tensor) -> tf.Tensor:
         """d(s) for standardised states z (B, d) → (B,)."""
@@ -128,7 +156,7 @@ class NearestDemoVariance(keras.layers.Layer):
 
     def call(self, z: tf.Tensor) -> tf.Tensor:
         d = self.nearest_distance(z)
-        return max_policy_variance(self.n_actions) * (1.0 - tf.exp(-tf.square(d) / self.length**2))
+        return max_policy_variance(self.n_actions) * (1.0 - tf.exp(-tf.square(d) / self.length_sq))
 
     def get_config(self) -> dict:
         return {**super().get_config(), "obs_dim": self.obs_dim, "n_actions": self.n_actions,

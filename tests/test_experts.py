@@ -54,9 +54,14 @@ def test_lunarlander_strong_is_gymnasiums_heuristic() -> None:
 
 
 OBS_DIM = {"cartpole": 4, "mountaincar": 2, "acrobot": 6, "lunarlander": 8}
+"""The families observed as vectors; MinAtar's frame experts are tested in test_minatar_tasks.py."""
 
 
-@pytest.mark.parametrize("family", FAMILIES)
+def test_every_family_is_a_vector_family_or_a_minatar_one() -> None:
+    assert set(FAMILIES) == set(OBS_DIM) | {"minatar-breakout", "minatar-freeway"}
+
+
+@pytest.mark.parametrize("family", list(OBS_DIM))
 @pytest.mark.parametrize("name", EXPERT_NAMES)
 def test_epsilon_zero_equals_rule_and_ignores_extra_feature(family: str, name: str) -> None:
     rng = np.random.default_rng(1)

@@ -57,12 +57,9 @@ def test_the_presets_are_registered_with_their_env_and_experts(task: str) -> Non
     env.close()
 
 
-def test_breakout_is_in_the_efficiency_suite_with_its_imperfect_teacher() -> None:
-    lab = TASKS["minatar-breakout"].lab
-    assert (lab.efficiency_demos, lab.target_ratio) == (10, 5.0)
-    assert TASKS["minatar-freeway"].lab.efficiency_demos is None
-    for task in PRESETS:
-        assert TASKS[task].lab.teacher_return == MEASURED[task, "imperfect"][0]
+def test_the_presets_record_their_teachers_and_stay_out_of_the_vector_suites() -> None:
+    for task in PRESETS:  # the MinAtar study is its own suite (its SB3 baseline differs)
+        assert TASKS[task].lab.efficiency_demos is None and TASKS[task].lab.teacher_return is None
         measured = {(name, 0.0): MEASURED[task, name][0] for name in ("strong", "imperfect")}
         assert TASKS[task].lab.grid_teachers == measured
 

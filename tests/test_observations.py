@@ -7,7 +7,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
-from dqfd_bc_keras.observations import MAX_IMAGE_VALUES, FlattenObservation, describe, is_image, observation_layout
+from dqfd_bc_keras.observations import (MAX_IMAGE_VALUES, FlattenObservation, FrameObservation, Frames, describe,
+                                        is_frames, is_image, observation_layout)
 
 Box, Discrete, MultiBinary, MultiDiscrete = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiBinary,
                                              gym.spaces.MultiDiscrete)
@@ -17,7 +18,7 @@ def test_a_flat_box_passes_unchanged():
     layout = observation_layout(Box(-1.0, 1.0, (3,), np.float32))
     assert layout.flat and layout.dim == 3 and layout.dropped == ()
     assert layout.to_dict() == {"space": "Box(3,) float32", "shape": [3], "features": 3, "flattened": False,
-                                "dropped": []}
+                                "dropped": [], "frames": None}
 
 
 def test_the_order_by_hand():
@@ -67,17 +68,37 @@ def test_non_numeric_parts_are_dropped_with_one_warning_naming_them():
     assert (flat[6:] == 5).all()
 
 
-def test_images_are_refused_small_grids_are_flattened():
-    assert is_image(Box(0, 255, (84, 84, 4), np.uint8)) and is_image(Box(0, 255, (210, 160), np.uint8))
-    assert not is_image(Box(0, 255, (7, 7, 3), np.uint8))  # MiniGrid's symbolic view
-    assert not is_image(Box(0, 1, (4, 4, 16), np.uint8))  # 2048's one-hot board
-    assert not is_image(Box(0, 255, (MAX_IMAGE_VALUES,), np.uint8))  # Atari RAM is one-dimensional
-    with pytest.raises(ConfigError, match=re.escape("pong observes images: Box(210, 160, 3) uint8 needs a "
-                                                    "convolutional network")):
-        observation_layout(Box(0, 255, (210, 160, 3), np.uint8), "pong")
-    with pytest.raises(ConfigError, match=re.escape("observes images (part pixels)")):
+def test_frames_are_kept_in_their_shape_and_images_inside_a_dict_are_refused():
+    assert is_frames(Box(0, 255, (84, 84, 4), np.uint8)) and is_frames(Box(0, 255, (210, 160), np.uint8))
+    assert is_frames(Box(0, 1, (10, 10, 4), np.bool_))  # MinAtar
+    assert not is_frames(Box(0, 255, (MAX_IMAGE_VALUES,), np.uint8))  # Atari RAM is one-dimensional
+    assert not is_frames(Box(0.0, 1.0, (5, 5), np.float32))  # highway-env's kinematics table: a vector
+    pong = observation_layout(Box(0, 255, (210, 160, 3), np.uint8), "pong")
+    assert pong.image and pong.frames == Frames((210, 160, 3), 1 / 255) and pong.dim == 210 * 160 * 3
+    assert pong.text() == "Box(210, 160, 3) uint8 as uint8 frames" and pong.to_dict()["frames"] == {
+        "shape": [210, 160, 3], "scale": 1 / 255, "stack": 1}
+    minatar = observation_layout(Box(0, 1, (10, 10, 4), np.bool_), stack=1)
+    assert minatar.frames.scale == 1.0 and minatar.frames.frame_shape == (10, 10, 4)
+    assert observation_layout(Box(0, 255, (84, 84, 4), np.uint8), stack=4).frames.frame_shape == (84, 84)
+    with pytest.raises(ConfigError, match=re.escape("observes images (part pixels): Box(64, 65, 1) uint8 inside "
+                                                    "a Dict or Tuple is not supported")):
         observation_layout(gym.spaces.Dict({"pixels": Box(0, 255, (64, 65, 1), np.uint8)}))
-    assert observation_layout(Box(0, 1, (4, 4, 16), np.uint8)).dim == 256
+    assert not is_image(Box(0, 255, (7, 7, 3), np.uint8))  # a small grid inside a Dict is flattened
+    assert observation_layout(gym.spaces.Dict({"board": Box(0, 1, (4, 4, 16), np.uint8)})).dim == 256
+
+
+def test_frame_observation_casts_bool_frames_to_bytes():
+    class Grid(gym.Env):
+        observation_space = Box(0, 1, (2, 2, 1), np.bool_)
+        action_space = gym.spaces.Discrete(2)
+
+        def reset(self, *, seed=None, options=None):
+            return np.array([[[True], [False]], [[False], [True]]]), {}
+
+    env = FrameObservation(Grid())
+    obs, _ = env.reset()
+    assert env.observation_space == Box(0, 1, (2, 2, 1), np.uint8)
+    assert obs.dtype == np.uint8 and obs[:, :, 0].tolist() == [[1, 0], [0, 1]]
 
 
 def test_nothing_numeric_is_an_error():

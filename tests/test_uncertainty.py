@@ -12,7 +12,7 @@ from dqfd_bc_keras.bc import BCModel, build_bc_model
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.evaluation import GreedyPolicy
-from dqfd_bc_keras.uncertainty import NearestDemoVariance, bootstrap_counts, max_policy_variance, policy_variance
+from dqfd_bc_keras.uncertainty import reference_rows, NearestDemoVariance, bootstrap_counts, max_policy_variance, policy_variance
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ def test_ensemble_members_differ_and_their_mean_imitates(demos, held_out, fitted
 
 def test_distance_variance_by_hand_and_monotone_in_the_distance():
     layer = NearestDemoVariance(obs_dim=2, n_actions=2, capacity=8)
-    layer.set_references(np.array([[0.0, 0.0], [10.0, 0.0]], np.float32), seed=0)
+    layer.set_references(np.array([[0.0, 0.0], [10.0, 0.0]], np.float32))
     d = np.array([0.0, 0.25, 0.5, 1.0, 2.0, 3.0, 5.0], np.float32)
     z = np.stack([np.zeros_like(d), d], axis=1)  # straight up from the reference at the origin
     variance = layer(tf.constant(z)).numpy()
@@ -86,12 +86,27 @@ def test_distance_variance_by_hand_and_monotone_in_the_distance():
 
 def test_distance_ignores_unused_reference_slots_and_subsamples_past_capacity():
     layer = NearestDemoVariance(obs_dim=2, n_actions=2, capacity=4)
-    layer.set_references(np.array([[3.0, 4.0]], np.float32), seed=0)  # slots 1–3 stay at zero
+    layer.set_references(np.array([[3.0, 4.0]], np.float32))  # slots 1–3 stay at zero
     np.testing.assert_allclose(layer.nearest_distance(tf.zeros([1, 2])), [5.0], rtol=1e-6)
     many = np.arange(20, dtype=np.float32).reshape(10, 2)
-    layer.set_references(many, seed=1)
-    kept = layer.references.numpy()
-    assert float(layer.count) == 4 and all(any(np.array_equal(r, m) for m in many) for r in kept)
+    rows = reference_rows(len(many), layer.capacity, seed=1)
+    assert len(rows) == 4 and len(set(rows)) == 4 and np.all(np.diff(rows) > 0)
+    np.testing.assert_array_equal(reference_rows(3, 4, seed=1), [0, 1, 2])  # all of them, in order
+    layer.set_references(many[rows])
+    assert float(layer.count) == 4 and np.array_equal(layer.references.numpy(), many[rows])
+
+
+def test_distance_on_frames_takes_the_median_nearest_neighbour_distance_as_its_length():
+    layer = NearestDemoVariance(obs_dim=2, n_actions=2, capacity=8, length=None)
+    # Nearest-neighbour distances: 1, 1, 2 (the third is 2 from the second): median 1 → ℓ² = 1.
+    layer.set_references(np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0]], np.float32))
+    assert float(layer.length_sq) == pytest.approx(1.0)
+    layer.set_references(np.array([[0.0, 0.0], [2.0, 0.0], [6.0, 0.0]], np.float32))  # 2, 2, 4: ℓ² = 4
+    assert float(layer.length_sq) == pytest.approx(4.0)
+    z = tf.constant([[0.0, 2.0]])
+    assert float(layer(z)[0]) == pytest.approx(0.25 * (1 - np.exp(-4.0 / 4.0)), rel=1e-5)
+    layer.set_references(np.zeros((3, 2), np.float32))  # all duplicates: no scale to read, ℓ² = 1
+    assert float(layer.length_sq) == 1.0
 
 
 def test_distance_estimator_is_standardised_by_the_demonstrations(demos, held_out, fitted):

@@ -1,6 +1,6 @@
 """The registry of task presets: one module per family holds everything about it.
 
-A family module (cartpole.py, mountaincar.py, acrobot.py, lunarlander.py) declares, for each of
+A family module (cartpole.py, mountaincar.py, acrobot.py, lunarlander.py, minatar.py) declares, for each of
 its presets, which plain Gymnasium env it wraps and how (ALGORITHM.md §6), the preset's Config
 defaults, its scripted experts, and the thresholds the lab judges it by. Adding a family to the
 package is one such module (imported below) and its tests. A preset of your own registers from
@@ -16,7 +16,7 @@ This package imports neither TensorFlow nor Gymnasium: reading a config.json loa
 
 from .registry import (ENV_DEFAULTS, EXPERT_NAMES, ID_NAMESPACE, TASKS, LabSettings, Rule, TaskSpec, check_demonstrator,
                        families, family_preset, find_preset, register_task)
-from . import cartpole, mountaincar, acrobot, lunarlander  # noqa: E402,F401,I001  (they register, in this order)
+from . import cartpole, mountaincar, acrobot, lunarlander, minatar  # noqa: E402,F401,I001  (they register, in this order)
 
 __all__ = ["ENV_DEFAULTS", "EXPERT_NAMES", "ID_NAMESPACE", "TASKS", "LabSettings", "Rule", "TaskSpec", "check_demonstrator", "families",
            "family_preset", "find_preset", "register_task"]

@@ -248,8 +248,7 @@ register_task(TaskSpec(
     "minatar-breakout", "MinAtar/Breakout-v1", "minatar-breakout", 1000, defaults=DEFAULTS,
     experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
     doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
-    lab=LabSettings(efficiency_demos=10, target_ratio=5.0, teacher_return=8.58,
-                    grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
+    lab=LabSettings(grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
 ))
 
 # Freeway ends itself after 2501 frames, on a clock the frame does not show; the 2500-step limit ends
@@ -258,5 +257,5 @@ register_task(TaskSpec(
     "minatar-freeway", "MinAtar/Freeway-v1", "minatar-freeway", 2500, defaults=DEFAULTS,
     experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
     doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
-    lab=LabSettings(teacher_return=15.72, grid_teachers={("strong", 0.0): 65.85, ("imperfect", 0.0): 15.72}),
+    lab=LabSettings(grid_teachers={("strong", 0.0): 65.85, ("imperfect", 0.0): 15.72}),
 ))
