@@ -21,7 +21,7 @@ from .errors import ConfigError, DqfdWarning
 from .methods import Method, get_method
 from .network_input import TORSOS, NetworkInput
 from .seeds import MAX_SEED
-from .tasks import ENV_DEFAULTS, check_demonstrator, find_preset
+from .tasks import check_demonstrator, find_preset
 from .wrappers import TIMEOUT_MODES
 
 TARGETS = ("dqn", "double")
@@ -346,12 +346,12 @@ class Config:
 
 
 def preset_defaults(task: str) -> dict[str, object]:
-    """The defaults of `task` (its preset's, `ENV_DEFAULTS` for any env), without validating them:
-    an env without a time limit has no valid defaults until `max_steps` is given."""
-    preset = find_preset(task)
+    """The defaults of `task` (its preset's; for any env `ENV_DEFAULTS`, for an Atari env
+    `atari.ATARI_DEFAULTS`), without validating them: an env without a time limit has no valid
+    defaults until `max_steps` is given."""
     shared = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
               for f in dataclasses.fields(Config)}
-    return {**shared, **(preset.defaults if preset else ENV_DEFAULTS), "task": task}
+    return {**shared, **get_task(task).defaults, "task": task}
 
 
 DERIVED_KEYS = ("observation",)

@@ -24,7 +24,7 @@ sys.path.insert(0, str(REPO))  # train.py, imported to call its main in this pro
 CHAIN = "toy_envs:ToyChain-v0"
 NO_LIMIT = "toy_envs:ToyChainNoLimit-v0"
 SUPPORTED = "supported: a Discrete action space starting at 0 and an observation of Box"
-IMAGES = "observes images: Box(84, 84, 3) uint8 needs a convolutional network, which is not supported yet"
+IMAGES = "observes images (part pixels): Box(84, 84, 3) uint8 inside a Dict or Tuple is not supported"
 
 
 def run(*args, timeout=300):

@@ -86,7 +86,15 @@ gym.register("ToyChainNoLimit-v0", entry_point="toy_envs:Chain")
 gym.register("ToyDictChainNoLimit-v0", entry_point="toy_envs:Chain", kwargs={"observe": "dict"})
 gym.register("ToyGridChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "grid"})
 gym.register("ToyDictChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "dict"})
-gym.register("ToyImage-v0", entry_point="toy_envs:Unsupported", kwargs={
-    "observation_space": gym.spaces.Box(0, 255, (84, 84, 3), np.uint8), "action_space": gym.spaces.Discrete(2)})
+gym.register("ToyImage-v0", entry_point="toy_envs:Unsupported", kwargs={  # frames inside a Dict: still refused
+    "observation_space": gym.spaces.Dict({"pixels": gym.spaces.Box(0, 255, (84, 84, 3), np.uint8),
+                                          "speed": gym.spaces.Box(-1.0, 1.0, (1,), np.float32)}),
+    "action_space": gym.spaces.Discrete(2)})
 gym.register("ToyTextOnly-v0", entry_point="toy_envs:Unsupported", kwargs={
     "observation_space": gym.spaces.Dict({"mission": gym.spaces.Text(5)}), "action_space": gym.spaces.Discrete(2)})
+
+
+def breakout_rule(obs: np.ndarray) -> int:
+    """An Atari demonstrator for the tests (`--expert toy_envs:breakout_rule`): FIRE, then left or
+    right by the newest frame's brightness, a deterministic function of the frame."""
+    return 1 if obs[..., -1].sum() % 3 == 0 else 2 + int(obs[..., -1].sum() % 2)

@@ -248,7 +248,7 @@ register_task(TaskSpec(
     "minatar-breakout", "MinAtar/Breakout-v1", "minatar-breakout", 1000, defaults=DEFAULTS,
     experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
     doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
-    lab=LabSettings(grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
+    lab=LabSettings(target_ratio=5.0, grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
 ))
 
 # Freeway ends itself after 2501 frames, on a clock the frame does not show; the 2500-step limit ends

@@ -1,0 +1,167 @@
+"""The MinAtar study: DQfD on frames against SB3's DQN with MinAtar's network (its rules are
+docs/PREREGISTRATION.md §9, committed before its runs).
+
+Ours: `bayes`, `ce`, `margin` (DQfD) from 10 episodes of the imperfect Breakout expert, and `none`
+(DQN without demonstrations), on `minatar-breakout` with its preset (MinAtar's network and DQN
+settings, one update per step), 30,000 interactions each. The baseline: SB3's DQN with the same
+network and rl-zoo3's Atari schedule (`sb3_pixels.py`), one `learn()` of 100,000 steps per seed.
+Both are evaluated on one grid, at 0 and every 2,000 interactions: 10 greedy episodes of the plain
+env (at most 1,000 steps) with the seed's fixed evaluation seeds. Per arm: the median and 95%
+bootstrap CI over seeds of the first grid point whose mean reaches `THRESHOLD` (never: ∞), the final
+returns, and SB3's median ÷ ours against the 5× goal (`efficiency.table`); MinAtar's published DQN
+curve is the second anchor. The seeds are few (`SEEDS`), so the study is exploratory: no power plan.
+
+    python -m dqfd_bc_keras.experiments.pixels --out results/pixels [--seeds 3] [--workers 2]
+    python -m dqfd_bc_keras.experiments.pixels --out docs/data/pixels --no-run --report docs/PIXELS.md
+    python -m dqfd_bc_keras.experiments.pixels --out /tmp/pixels --quick     # a minute: one seed, tiny budgets
+
+Writes only under --out (our runs in <arm>/seed<k>/, SB3's in sb3-dqn/seed<k>.json, the summary
+pixels.json) and, with --report, that one file.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from ..cli import ArgumentParser, positive_int, run
+from ..config import QUICK
+from ..envs import get_task
+from ..files import write_text
+from .data import load_runs
+from .efficiency import SB3_METHOD, ArmSteps, interaction_evals, save, table
+from .stats import bootstrap_ci
+from .suites import Arm, arm
+from .sweep import run_suite
+
+TASK, ENV_ID = "minatar-breakout", "MinAtar/Breakout-v1"
+THRESHOLD = 10.0
+"""Greedy return to reach: MinAtar's published DQN on Breakout after 5M frames (≈ 10, read off its
+curve; `sb3_pixels.MINATAR_DQN_RETURNS`), above the imperfect teacher's 8.58."""
+SEEDS = 5
+PROTOCOL = {"eval_every": 2_000, "eval_episodes": 10}
+OURS_STEPS, SB3_STEPS = 30_000, 100_000
+"""Interactions of each of our runs, and of SB3's one `learn()`: SB3 gets more than three times ours."""
+LOSSES = ("bayes", "ce", "margin", "none")
+QUICK_STEPS = {"ours": 600, "sb3": 1000, "every": 300}
+
+
+def arms(quick: bool = False) -> list[Arm]:
+    """Our arms of the study (with `quick`: one, on the QUICK budget)."""
+    if quick:
+        return [Arm(TASK, "bootstrap", "bayes", tuple({**QUICK, "eval_every": QUICK_STEPS["every"]}.items()),
+                    "pixels-quick", 1)]
+    return [arm(TASK, "bootstrap", loss, SEEDS, total_steps=OURS_STEPS, **PROTOCOL) for loss in LOSSES]
+
+
+def sb3(seeds: int, workers: int, out: Path, quick: bool, no_run: bool,
+        progress: Callable[[str], None] = print) -> ArmSteps | None:
+    """SB3's seeds whose files under `out/sb3-dqn/` are missing or stale, on a process pool (none
+    with `no_run`), then the arm of every current file."""
+    from . import sb3_pixels
+
+    budget = QUICK_STEPS["sb3"] if quick else SB3_STEPS
+    every = QUICK_STEPS["every"] if quick else PROTOCOL["eval_every"]
+    episodes = 2 if quick else PROTOCOL["eval_episodes"]
+    limit = get_task(TASK).max_steps
+    jobs = {seed: (ENV_ID, seed, budget, every, episodes, limit,
+                   out / "sb3-dqn" / f"seed{seed}{'-quick' if quick else ''}.json") for seed in range(seeds)}
+    wanted = {seed: sb3_pixels.settings(*job[:6]) for seed, job in jobs.items()}
+    todo = [] if no_run else [job for seed, job in jobs.items() if not sb3_pixels.current(job[6], wanted[seed])]
+    progress(f"SB3 DQN on {ENV_ID}: {len(jobs)} runs, {len(jobs) - len(todo)} current, {len(todo)} to run")
+    if todo:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(sb3_pixels.sb3_minatar_run, *job) for job in todo]
+            for done, future in enumerate(as_completed(futures), start=1):
+                record = future.result()
+                progress(f"[{done}/{len(todo)}] sb3 seed{record['seed']}: final mean return "
+                         f"{record['evaluations'][-1]['mean_return']:.2f} ({record['seconds']:.0f} s)")
+    records = [json.loads(job[6].read_text()) for seed, job in jobs.items() if sb3_pixels.current(job[6], wanted[seed])]
+    if not records:
+        return None
+    evals = [[(e["interactions"], e["mean_return"]) for e in r["evaluations"]] for r in records]
+    return ArmSteps.of(TASK, SB3_METHOD, evals, [e[-1][1] for e in evals], THRESHOLD)
+
+
+def measure(seeds: int, workers: int, out: Path, quick: bool = False, no_run: bool = False,
+            progress: Callable[[str], None] = print) -> list[ArmSteps]:
+    """Run what is missing (with `no_run`, nothing), then every arm's steps, saved to out/pixels.json."""
+    seeds = 1 if quick else seeds
+    suite = arms(quick)
+    if not no_run:
+        run_suite(suite, seeds, out, workers=workers, progress=progress, name="pixels")
+    steps = ours(suite, seeds, out)
+    baseline = sb3(seeds, workers, out, quick, no_run, progress)
+    steps += [baseline] if baseline is not None else []
+    save(out / "pixels.json", {**PROTOCOL, "threshold": THRESHOLD, "ours_steps": OURS_STEPS,
+                               "sb3_steps": SB3_STEPS}, steps)
+    return steps
+
+
+def ours(suite: Sequence[Arm], seeds: int, out: Path) -> list[ArmSteps]:
+    """Each arm's complete runs under `out`, stepped by `interactions` (every one counted)."""
+    steps = []
+    for a in suite:
+        runs = [r for seed in range(seeds) if (out / a.name / f"seed{seed}" / "eval.json").is_file()
+                for r in load_runs(out / a.name / f"seed{seed}")]
+        if runs:
+            steps.append(ArmSteps.of(a.task, a.expert_loss, map(interaction_evals, runs),
+                                     [r.final["mean_return"] for r in runs], THRESHOLD))
+    return steps
+
+
+def final_table(steps: Sequence[ArmSteps]) -> list[str]:
+    """Final greedy returns per arm: mean over seeds with its 95% bootstrap CI, and the seeds'."""
+    lines = ["| arm | final return, mean [95% CI] | per seed |", "| --- | --- | --- |"]
+    for s in steps:
+        low, high = bootstrap_ci(np.array(s.final), np.mean, 0.95, 10_000, 0)
+        lines.append(f"| {s.label} | {np.mean(s.final):.2f} [{low:.2f}, {high:.2f}] | "
+                     f"{', '.join(f'{f:.1f}' for f in s.final)} |")
+    return lines
+
+
+def report(steps: Sequence[ArmSteps]) -> str:
+    """The study as markdown: protocol, interactions to the threshold, final returns, the anchor."""
+    from .sb3_pixels import MINATAR_DQN_RETURNS
+
+    anchor = ", ".join(f"{frames:,} frames ≈ {value:g}" for frames, value in MINATAR_DQN_RETURNS["MinAtar/Breakout"].items())
+    return "\n".join([
+        "# MinAtar Breakout: DQfD on frames against SB3's DQN", "",
+        "Generated by `python -m dqfd_bc_keras.experiments.pixels --out docs/data/pixels --no-run --report "
+        "docs/PIXELS.md` from the per-run files in docs/data/pixels (rules: docs/PREREGISTRATION.md §9).", "",
+        f"Protocol: {TASK} (MinAtar/Breakout-v1, minimal actions, sticky actions 0.1, at most "
+        f"{get_task(TASK).max_steps} steps), evaluations of {PROTOCOL['eval_episodes']} greedy episodes at 0 and "
+        f"every {PROTOCOL['eval_every']:,} interactions, threshold {THRESHOLD:g}; ours {OURS_STEPS:,} interactions "
+        f"per run (10 demonstrated episodes of the imperfect expert, 8.58 over 100 episodes, are interactions of the "
+        f"expert, not the learner's), SB3 {SB3_STEPS:,}. Exploratory: {SEEDS} seeds per arm, no power plan.", "",
+        "## Interactions to the threshold", "", *table(list(steps)), "",
+        "## Final greedy returns", "", *final_table(steps), "",
+        "## Second anchor", "",
+        f"MinAtar's own DQN on Breakout (Young & Tian 2019; read off the MinAtar README's curves, ε = 0.1 training "
+        f"returns, 30 seeds, 6 actions): {anchor}. The threshold is its 5M-frame level.", ""])
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments.pixels", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, required=True, help="directory of the study's runs and summary")
+    parser.add_argument("--seeds", type=positive_int, default=SEEDS, help="seeds per arm (default %(default)s)")
+    parser.add_argument("--workers", type=positive_int, default=2, help="parallel runs (default %(default)s)")
+    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs")
+    parser.add_argument("--no-run", action="store_true", help="summarise the runs under --out, run nothing")
+    parser.add_argument("--report", type=Path, help="also write the markdown report to this file")
+    args = parser.parse_args(argv)
+    steps = measure(args.seeds, args.workers, args.out, args.quick, args.no_run)
+    text = report(steps)
+    print(text)
+    if args.report is not None:
+        write_text(args.report, text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(run(main))
