@@ -1,7 +1,8 @@
 """Online env steps per second with learning on MinAtar Breakout, ours against Stable-Baselines3's
 DQN, and pre-training updates per second.
 
-Ours: the `minatar-breakout` preset (its conv torso, batch and train_freq) driven by the training
+Ours: the `minatar-breakout` preset (its conv torso and batch; one update every `--train-freq` env
+steps, 4 by default as SB3's schedule, so both sides do the same work per step) driven by the training
 loop itself (`training.build`, then `training.train_episodes`): ε-greedy acting, storing, one
 prioritized update every `train_freq` env steps, episode bookkeeping and dynamic-demonstration
 updates, timed from a warm-up of `WARMUP` env steps to the end of `--steps` more; and
@@ -19,7 +20,7 @@ median, min and max, the versions, CPU count, load average and thread settings. 
 runs SB3 alone (our side reports nothing and the ratios are None).
 
     python benchmarks/bench_pixels.py [--steps 5000] [--updates 2000] [--rounds 3] [--sides ours,sb3]
-                                      [--expert-loss bayes] [--json] [--quick]
+                                      [--expert-loss bayes] [--train-freq 4] [--json] [--quick]
 """
 
 from __future__ import annotations
@@ -41,8 +42,9 @@ WARMUP = 500
 learning under way on both sides."""
 
 
-def our_figures(steps: int, updates: int, expert_loss: str) -> dict[str, float]:
-    """Our online env steps/s (the loop a run runs, after `WARMUP` steps) and pre-training updates/s."""
+def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int) -> dict[str, float]:
+    """Our online env steps/s (the loop a run runs, after `WARMUP` steps, one update every
+    `train_freq` steps) and pre-training updates/s."""
     import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 
     from dqfd_bc_keras.config import Config
@@ -50,7 +52,7 @@ def our_figures(steps: int, updates: int, expert_loss: str) -> dict[str, float]:
     from dqfd_bc_keras.training import build, train_episodes
 
     config = Config.for_task(TASK, expert_loss=expert_loss, total_steps=WARMUP + steps, pretrain_steps=WARMUP,
-                             bc_epochs=2, eval_every=WARMUP, early_stop_window=0)
+                             bc_epochs=2, eval_every=WARMUP, early_stop_window=0, train_freq=train_freq)
     learner, _ = build(config)
     figures = {}
     if config.uses_demos:
@@ -104,6 +106,9 @@ def main(argv=None) -> int:
     parser.add_argument("--sides", type=sides_list, default=list(interleave.SIDES),
                         help="the sides to run (default ours,sb3; sb3 alone runs without our MinAtar support)")
     parser.add_argument("--expert-loss", default="bayes")
+    parser.add_argument("--train-freq", type=int, default=4,
+                        help="our env steps per update (default 4, SB3's schedule, so both sides do the same work "
+                             "per step; the preset trains every step, as MinAtar's DQN)")
     interleave.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.quick:
@@ -112,7 +117,8 @@ def main(argv=None) -> int:
         parser.error(f"--steps must be ≥ {WARMUP} (the clock runs between evaluation-grid points that far apart) "
                      "and --updates ≥ 1")
 
-    sides = {"ours": lambda: our_figures(args.steps, args.updates, args.expert_loss) if "ours" in args.sides else None,
+    sides = {"ours": lambda: our_figures(args.steps, args.updates, args.expert_loss, args.train_freq)
+             if "ours" in args.sides else None,
              "sb3": lambda: sb3_figures(args.steps, args.updates) if "sb3" in args.sides else None}
     ratios = {"env_steps_per_s": ("env_steps_per_s", "env_steps_per_s")}
     if args.expert_loss != "none":  # plain DQN has no demonstrations to pre-train on
@@ -121,8 +127,9 @@ def main(argv=None) -> int:
     return interleave.main("bench_pixels", __file__, argv, args, sides, ratios,
                            settings={"env": ENV_ID, "task": TASK, "steps": args.steps, "warmup": WARMUP,
                                      "updates": args.updates, "sides": args.sides, "expert_loss": args.expert_loss,
+                                     "train_freq": args.train_freq,
                                      "ours": f"{TASK} preset, {args.expert_loss}: training.train_episodes, one "
-                                             "prioritized update every train_freq env steps (the preset's)",
+                                             f"prioritized update of batch 32 every {args.train_freq} env steps",
                                      "sb3": "DQN as experiments/sb3_pixels.py: MinAtarCNN, uniform replay, "
                                             "train_freq=4, gradient_steps=1, batch 32"},
                            describe=lambda _: not_run)

@@ -3,8 +3,9 @@
     .venv/bin/python docs/model_gifs.py --out docs/figures [--seed 12345]
 
 Plays `models/<name>/` on its plain env with `render_mode="rgb_array"` (the episode of
-evaluate.py's first seed), keeps every `--every`-th frame at half size, and writes
-`<out>/model-<name>.gif` atomically with Pillow (installed with matplotlib).
+evaluate.py's first seed), keeps every `--every`-th frame at half size (a MinAtar grid, 10×10
+cells in [0, 1], at 16 pixels a cell), and writes `<out>/model-<name>.gif` atomically with Pillow
+(installed with matplotlib).
 """
 
 from __future__ import annotations
@@ -39,6 +40,17 @@ def episode_frames(name: str, seed: int) -> tuple[list, float]:
     return frames, total
 
 
+def picture(frame) -> Image.Image:
+    """A rendered frame as a GIF frame: half size, or a small grid of [0, 1] colours (MinAtar's)
+    blown up with square cells."""
+    if frame.dtype != "uint8":
+        frame = (frame * 255).round().astype("uint8")
+    image = Image.fromarray(frame)
+    if max(image.size) < 100:
+        return image.resize((image.width * 16, image.height * 16), Image.NEAREST)
+    return image.reduce(2)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", required=True, help="directory of the GIFs (the README shows docs/figures)")
@@ -47,7 +59,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     for folder in sorted(p for p in MODELS.iterdir() if (p / "q_network.keras").is_file()):
         frames, total = episode_frames(folder.name, args.seed)
-        images = [Image.fromarray(f).reduce(2) for f in frames[::args.every]]
+        images = [picture(f) for f in frames[::args.every]]
         path = Path(args.out) / f"model-{folder.name}.gif"
         with atomic_path(path, overwrite=True) as tmp:
             images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=40 * args.every,

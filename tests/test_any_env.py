@@ -177,7 +177,8 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
     config = json.loads((out / "config.json").read_text())
     assert (config["env_kwargs"], config["max_steps"]) == ({"size": 7}, 12)
     assert config["observation"] == {"space": "Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7))",
-                                     "shape": None, "features": 14, "flattened": True, "dropped": ["mission"]}
+                                     "shape": None, "features": 14, "flattened": True, "dropped": ["mission"],
+                                     "frames": None}
     result = json.loads((out / "eval.json").read_text())
     assert (result["env_kwargs"], result["lengths"], result["mean_return"]) == ({"size": 7}, [6, 6], 1.0)
 
@@ -216,7 +217,8 @@ def test_a_grid_observation_is_flattened_in_c_order(tmp_path):
                "--quick", "--quiet", "--out", out)
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "config.json").read_text())["observation"] == {
-        "space": "Box(5, 2) float32", "shape": [5, 2], "features": 10, "flattened": True, "dropped": []}
+        "space": "Box(5, 2) float32", "shape": [5, 2], "features": 10, "flattened": True, "dropped": [],
+        "frames": None}
     assert json.loads((out / "eval.json").read_text())["mean_return"] == 1.0
     data = demos.load(out / "demos.npz")
     assert data.meta.observation == "Box(5, 2) float32 flattened to 10 features"

@@ -93,7 +93,8 @@ def test_a_task_name_not_a_preset_lists_the_presets():
     done = Done("evaluate.py", "models/cartpole", "--task", "pong")
     assert done.code == 2 and done.stderr == [
         "evaluate.py: error: argument --task: invalid choice: 'pong' (choose from 'acrobot', 'cartpole', "
-        "'cartpole-200', 'lunarlander', 'mountaincar', 'mountaincar-goals'; any Gymnasium env: --env ID)"]
+        "'cartpole-200', 'lunarlander', 'minatar-breakout', 'minatar-freeway', 'mountaincar', 'mountaincar-goals'; "
+        "any Gymnasium env: --env ID)"]
 
 
 @pytest.mark.parametrize("assignment, message", [
