@@ -44,7 +44,7 @@ from .errors import ConfigError
 from .network_input import NetworkInput, resolve_torso
 from .observations import FlattenObservation, FrameObservation, ObservationLayout, is_flat, observation_layout
 from .tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
-from .tasks.minatar import require_minatar
+from .tasks.minatar import forget_last_action, require_minatar
 from .wrappers import FallPenalty, GoalCount, TimeFeature, TimeLimitMode
 
 SUPPORTED_SPACES = ("a Discrete action space starting at 0 and an observation of Box, Discrete, MultiDiscrete or "
@@ -182,14 +182,16 @@ def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True
     line. An Atari env gets its preprocessing (`atari.py`): the learner's when `learning`, else
     the evaluation's (raw rewards, whole games)."""
     env_id, env_kwargs = get_task(name).env_id, dict(env_kwargs or {})
-    if env_id.rpartition(":")[2].startswith("MinAtar/"):
+    minatar = env_id.rpartition(":")[2].startswith("MinAtar/")
+    if minatar:
         require_minatar()
     check_env_kwargs(env_id, env_kwargs)
     if is_atari(env_id):
         atari, make_kwargs = split_kwargs(env_kwargs)
         return wrap_atari(gym.make(env_id.rpartition(":")[2], **options, **make_kwargs), atari, learning)
     try:
-        return gym.make(env_id, **options, **env_kwargs)
+        env = gym.make(env_id, **options, **env_kwargs)
+        return forget_last_action(env) if minatar else env
     except (TypeError, ValueError, AssertionError) as error:
         if not env_kwargs:
             raise
@@ -237,6 +239,8 @@ def make_task(
     """Build the task env `name` with the paper's settings; `max_steps` overrides the limit,
     `env_kwargs` go to the env's constructor."""
     spec, limit = get_task(name), step_limit(name, max_steps)
+    if timeout == "time-aware":
+        task_spaces(name, env_kwargs).network_input("auto", timeout)  # frames take no time feature: one line
     env = _observe(_make(name, env_kwargs, max_episode_steps=-1, **_rendering(render_mode)), name, env_kwargs)
     if spec.fall_penalty is not None:
         env = FallPenalty(env, spec.fall_penalty)

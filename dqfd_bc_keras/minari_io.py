@@ -139,6 +139,9 @@ def from_minari(dataset_id: str, task: str, timeout: str = "bootstrap",
         raise DemoFileError(where, f"was recorded with env kwargs {json.dumps(recorded)}, but the task is made with "
                                    f"{json.dumps(made)}")
     layout = spaces.layout
+    if layout.image:
+        raise DemoFileError(where, f"task {task!r} observes frames ({layout.text()}); reading Minari datasets of "
+                                   "frames is not supported yet: convert it to an .npz (docs/DEMONSTRATIONS.md)")
     if max_transitions is not None and source.total_steps > max_transitions:
         raise DemoFileError(where, f"holds {source.total_steps} transitions, more than demo_capacity={max_transitions} "
                                    "(raise it with --set demo_capacity=N)")
@@ -205,7 +208,11 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
         raise ConfigError(f"{where}: the dataset was recorded with timeout={m.timeout!r}, so its flags at the "
                           "time limit do not mean what Gymnasium's do; record it again with --timeout bootstrap")
     _refuse_shaped(get_task(m.task), where)  # also imports the env's module (`module:Env-v0`)
-    if not task_spaces(m.task, m.env_kwargs).layout.flat:
+    layout = task_spaces(m.task, m.env_kwargs).layout
+    if layout.image:
+        raise ConfigError(f"{where}: the dataset's observations are frames ({m.observation}); writing Minari "
+                          "datasets of frames is not supported yet (keep them as .npz)")
+    if not layout.flat:
         raise ConfigError(f"{where}: the dataset's observations were flattened from {m.observation}; a Minari "
                           "dataset holds the env's own observations, so record it with Minari's DataCollector")
     env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec

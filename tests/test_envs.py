@@ -112,13 +112,45 @@ def test_mountaincar_without_goal_count_terminates_at_the_flag():
     assert steps[-1][1] is True and steps[-1][0] == -1.0 and "goals" not in steps[-1][3]
 
 
-@pytest.mark.parametrize("task", sorted(TASKS))
+MINATAR = ("minatar-breakout", "minatar-freeway")
+"""MinAtar's own gym wrapper seeds its game, not `Env.np_random` (no `super().reset(seed=seed)`),
+which `check_env` asserts; its presets are checked by the test after this one."""
+
+
+@pytest.mark.parametrize("task", sorted(set(TASKS) - set(MINATAR)))
 @pytest.mark.parametrize("mode", TIMEOUT_MODES)
 def test_check_env_passes_on_every_preset(task, mode):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # CartPole's own infinite bounds, the wrapper notice
         check_env(make_task(task, timeout=mode), skip_render_check=True)
         check_env(gym.make(TASKS[task].gym_id, timeout=mode), skip_render_check=True)
+
+
+@pytest.mark.parametrize("task", MINATAR)
+def test_the_minatar_presets_are_seeded_frames_with_their_limit(task):
+    env = make_task(task)
+    assert env.observation_space == gym.spaces.Box(0, 1, env.observation_space.shape, np.uint8)
+
+    def play(seed: int) -> list[np.ndarray]:
+        obs, _ = env.reset(seed=seed)
+        frames = [obs]
+        for t in range(60):
+            obs, _, terminated, truncated, _ = env.step(t % 3)
+            frames.append(obs)
+            if terminated or truncated:
+                break
+        return frames
+
+    first, again, other = play(3), play(3), play(4)
+    assert all(f.dtype == np.uint8 and env.observation_space.contains(f) for f in first)
+    assert len(first) == len(again) and all(np.array_equal(a, b) for a, b in zip(first, again))
+    assert len(first) != len(other) or any(not np.array_equal(a, b) for a, b in zip(first, other))
+    limited = make_task(task, max_steps=5)
+    limited.reset(seed=0)
+    flags = [limited.step(0)[2:4] for _ in range(5)]
+    assert flags[-1] == (False, True) or flags[-1][0]  # truncated at the limit, unless the game ended on it
+    with pytest.raises(ConfigError, match="appends the time left to a vector observation"):
+        make_task(task, timeout="time-aware")
 
 
 def test_registered_ids_build_the_presets():

@@ -210,3 +210,17 @@ def test_an_unknown_atari_option_is_one_line(tmp_path):
     assert done.returncode == 2 and "did you mean 'frame_skip'?" in done.stderr
     assert len([line for line in done.stderr.strip().splitlines() if "A.L.E" not in line and "Stella" not in line]) == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_what_frames_do_not_support_yet_is_refused_in_one_line(tmp_path):
+    demos_file = tmp_path / "d.npz"
+    done = run("-m", "dqfd_bc_keras.demos", "record", "--task", "minatar-breakout", "--expert", "imperfect",
+               "--episodes", "1", "--out", demos_file)
+    assert done.returncode == 0, done.stderr
+    done = run("-m", "dqfd_bc_keras.demos", "export", demos_file, "--minari", "breakout/frames-v0")
+    assert done.returncode == 2 and "writing Minari datasets of frames is not supported yet" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    done = run("train.py", "--task", "minatar-breakout", "--timeout", "time-aware", "--quick", "--out", tmp_path / "t")
+    assert done.returncode == 2 and "appends the time left to a vector observation" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not (tmp_path / "t").exists()
