@@ -1,6 +1,6 @@
 """The README's pictures of the shipped models: one greedy episode of each as a small GIF.
 
-    .venv/bin/python docs/model_gifs.py --out docs/figures [--seed 12345]
+    .venv/bin/python docs/model_gifs.py --out docs/figures [--seed 12345] [--models minatar-breakout,...]
 
 Plays `models/<name>/` on its plain env with `render_mode="rgb_array"` (the episode of
 evaluate.py's first seed), keeps every `--every`-th frame at half size (a MinAtar grid, 10×10
@@ -56,8 +56,11 @@ def main(argv=None) -> int:
     parser.add_argument("--out", required=True, help="directory of the GIFs (the README shows docs/figures)")
     parser.add_argument("--seed", type=int, default=12345)
     parser.add_argument("--every", type=int, default=3, help="keep every N-th frame (default 3)")
+    parser.add_argument("--models", help="comma-separated folders of models/ (default: all)")
     args = parser.parse_args(argv)
-    for folder in sorted(p for p in MODELS.iterdir() if (p / "q_network.keras").is_file()):
+    wanted = None if args.models is None else set(args.models.split(","))
+    for folder in sorted(p for p in MODELS.iterdir() if (p / "q_network.keras").is_file()
+                         and (wanted is None or p.name in wanted)):
         frames, total = episode_frames(folder.name, args.seed)
         images = [picture(f) for f in frames[::args.every]]
         path = Path(args.out) / f"model-{folder.name}.gif"

@@ -187,3 +187,23 @@ def test_sample_efficiency_refuses_an_unknown_task(capsys):
     with pytest.raises(SystemExit) as exit:
         module.main(["--tasks", "cartpole,pong", "--no-run"])
     assert exit.value.code == 2 and "unknown task(s) ['pong']" in capsys.readouterr().err
+
+
+def test_bench_pixels_quick_reports_both_sides_on_minatar():
+    report = bench("bench_pixels.py", "--quick", "--json")
+    assert report["settings"]["task"] == "minatar-breakout" and report["settings"]["train_freq"] == 4
+    ours, sb3 = report["sides"]["ours"], report["sides"]["sb3"]
+    assert ours["env_steps_per_s"]["median"] > 0 and ours["pretrain_updates_per_s"]["median"] > 0
+    assert sb3["env_steps_per_s"]["median"] > 0 and sb3["train_updates_per_s"]["median"] > 0
+    assert set(report["ratios"]) == {"env_steps_per_s", "pretrain_vs_sb3_train"}
+
+
+def test_memory_frames_quick_states_the_pool_and_the_alternatives():
+    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "memory_frames.py"), "--quick"],
+                          capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert done.returncode == 0, done.stderr
+    rows = {line[:30].strip(): line[30:].split() for line in done.stdout.splitlines()[2:]}
+    # Atari at 1,000 transitions, scaled to 100k: 2 slots × 7,056 bytes × (1,000 + 10 + 4) rows ÷ 1,000 × 100k.
+    assert float(rows["Atari (84×84, 4 stacked)"][1].replace(",", "")) == pytest.approx(
+        2 * 84 * 84 * 1014 * 100 / 1e6, abs=0.1)
+    assert float(rows["cartpole (4 floats)"][1]) == 0.0  # no pool for vectors

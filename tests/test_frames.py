@@ -224,3 +224,20 @@ def test_what_frames_do_not_support_yet_is_refused_in_one_line(tmp_path):
     assert done.returncode == 2 and "appends the time left to a vector observation" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert not (tmp_path / "t").exists()
+
+
+def test_the_pixels_study_runs_both_sides_and_reports_from_its_archive(tmp_path):
+    out = tmp_path / "pixels"
+    done = run("-m", "dqfd_bc_keras.experiments.pixels", "--out", out, "--quick")
+    assert done.returncode == 0, done.stderr
+    assert (out / "sb3-dqn" / "seed0-quick.json").is_file() and (out / "pixels.json").is_file()
+    archive = tmp_path / "pixels.tar.xz"
+    assert run("-m", "dqfd_bc_keras.experiments", "export", out, "--out", archive).returncode == 0
+    report = tmp_path / "PIXELS.md"
+    done = run("-m", "dqfd_bc_keras.experiments.pixels", "--out", archive, "--quick", "--no-run", "--report", report)
+    assert done.returncode == 0, done.stderr
+    text = report.read_text()
+    assert "| minatar-breakout bayes |" in text and "| minatar-breakout SB3 DQN (rl-zoo3) |" in text
+    assert "threshold 10" in text and "5,000,000 frames ≈ 10" in text
+    done = run("-m", "dqfd_bc_keras.experiments.pixels", "--out", archive)
+    assert done.returncode == 2 and "an archive is read, never run into: add --no-run" in done.stderr
