@@ -10,6 +10,7 @@ No TensorFlow, no numpy: reading a run's files needs neither.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import types
 import typing
 from collections.abc import Mapping
@@ -65,7 +66,10 @@ class Record:
         return self.to_row()[column]
 
 
+@functools.cache
 def _fields(cls: type) -> list[tuple[str, Any]]:
+    """(name, type) of each field of record class `cls`, resolved once per class: `get_type_hints`
+    costs far more than parsing a row, and the lab parses hundreds of thousands of them."""
     hints = typing.get_type_hints(cls)
     return [(f.name, hints[f.name]) for f in dataclasses.fields(cls)]
 
