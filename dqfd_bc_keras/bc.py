@@ -148,11 +148,10 @@ class BCModel(keras.Model):
         return tf.reshape(x, [tf.shape(x)[0], -1])
 
     def _distance_width(self) -> int:
+        """Features of `distance_view`: the observation's width, or what pooling leaves of the frames."""
         if self.frames is None:
             return self.obs_dim
-        height, width, *channels = self.frames.shape
-        pool = max(1, min(height, width) // DISTANCE_SIDE)
-        return (height // pool) * (width // pool) * int(np.prod(channels or [1]))
+        return int(self.distance_view(tf.zeros([1, *self.frames.shape], tf.uint8)).shape[1])
 
     @property
     def map_fit(self) -> bool:

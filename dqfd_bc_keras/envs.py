@@ -44,8 +44,8 @@ from .errors import ConfigError
 from .network_input import NetworkInput, resolve_torso
 from .observations import FlattenObservation, FrameObservation, ObservationLayout, is_flat, observation_layout
 from .tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
-from .tasks.minatar import forget_last_action, require_minatar
-from .wrappers import FallPenalty, GoalCount, TimeFeature, TimeLimitMode
+from .tasks.minatar import require_minatar
+from .wrappers import FallPenalty, ForgetLastAction, GoalCount, TimeFeature, TimeLimitMode
 
 SUPPORTED_SPACES = ("a Discrete action space starting at 0 and an observation of Box, Discrete, MultiDiscrete or "
                     "MultiBinary parts (Dicts and Tuples of them are flattened), or frames (a 2-D or 3-D uint8 or "
@@ -191,7 +191,7 @@ def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True
         return wrap_atari(gym.make(env_id.rpartition(":")[2], **options, **make_kwargs), atari, learning)
     try:
         env = gym.make(env_id, **options, **env_kwargs)
-        return forget_last_action(env) if minatar else env
+        return ForgetLastAction(env) if minatar else env
     except (TypeError, ValueError, AssertionError) as error:
         if not env_kwargs:
             raise

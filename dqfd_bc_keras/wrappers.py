@@ -4,6 +4,7 @@ bootstrap fix is `TimeLimitMode`), the time feature, and the count of interactio
     FallPenalty (CartPole) or GoalCount (MountainCar goal variant)   reward shaping
     TimeLimitMode                                                    the step limit, in one of three modes
     TimeFeature                                                      time-aware mode's observation
+    ForgetLastAction                                                 MinAtar: an episode independent of the last
     CountInteractions                                                every env a learner's data comes from
 
 `envs.make_task` stacks them; each one knows nothing of learning.
@@ -147,6 +148,19 @@ class TimeFeature(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     def observation(self, observation: np.ndarray) -> np.ndarray:
         remaining = max(0.0, 1.0 - self._t / self.max_steps)
         return np.append(observation, remaining).astype(np.float32)
+
+
+class ForgetLastAction(gym.Wrapper):
+    """MinAtar: each reset also resets the sticky action's memory.
+
+    MinAtar repeats the previous action with probability 0.1, and its `reset` keeps that previous
+    action from the last episode: an episode's first step then depends on how the one before it
+    ended, so `reset(seed=s)` alone does not fix an episode. This makes it what a fresh env does
+    (the no-op, MinAtar's initial `last_action`)."""
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self.env.unwrapped.game.last_action = 0
+        return self.env.reset(**kwargs)
 
 
 @dataclass

@@ -74,22 +74,6 @@ if importlib.util.find_spec("minatar") is not None:
     _register_ids()
 
 
-def forget_last_action(env):
-    """`env` (a MinAtar gym env) with each reset also resetting the sticky action's memory.
-
-    MinAtar repeats the previous action with probability 0.1, and its `reset` keeps that previous
-    action from the last episode: an episode's first step then depends on how the one before it
-    ended, so `reset(seed=s)` alone does not fix an episode. This makes it what a fresh env does
-    (the no-op, MinAtar's initial `last_action`)."""
-    import gymnasium as gym
-
-    class ForgetLastAction(gym.Wrapper):
-        def reset(self, **kwargs):
-            self.env.unwrapped.game.last_action = 0
-            return self.env.reset(**kwargs)
-
-    return ForgetLastAction(env)
-
 
 # --- Breakout -------------------------------------------------------------------------------------
 # Channels paddle 0, ball 1, trail 2 (the ball's previous cell), brick 3. The minimal action set is
