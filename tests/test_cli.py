@@ -120,9 +120,11 @@ def test_expert_loss_takes_any_name_and_config_refuses_an_unknown_one():
 def test_the_light_choices_are_the_modules_names():
     """Spelled beside their parsers so that a bad name is refused before TensorFlow loads."""
     from dqfd_bc_keras.evaluation import POLICY_FILES
-    from dqfd_bc_keras.experiments.sweep import BACKENDS as SWEEP_BACKENDS
+    from dqfd_bc_keras.experiments import __main__ as lab
+    from dqfd_bc_keras.experiments import sweep
 
-    assert set(POLICIES) == set(POLICY_FILES) and BACKENDS == SWEEP_BACKENDS
+    assert set(POLICIES) == set(POLICY_FILES) and BACKENDS == sweep.BACKENDS
+    assert lab.RUNS_PER_WORKER == sweep.RUNS_PER_WORKER
 
 
 def test_the_package_imports_without_tensorflow_and_sets_its_threads_when_it_loads():

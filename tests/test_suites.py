@@ -1,5 +1,6 @@
 """The experiment runner: suites as declared, the quick suite end to end on both backends."""
 
+import csv
 import json
 
 import pytest
@@ -9,7 +10,7 @@ from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.plans import planned_seeds
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, suite_arms
-from dqfd_bc_keras.experiments.sweep import run_suite, sweep_jobs
+from dqfd_bc_keras.experiments.sweep import Job, run_suite, sweep_jobs
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -77,7 +78,7 @@ def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
 def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
     from dqfd_bc_keras.experiments import sweep
 
-    def cut_after_one(jobs, workers):
+    def cut_after_one(jobs, workers, runs_per_worker):
         yield sweep.Outcome(jobs[0], 3, 300, 10.0, 1.0)
         raise KeyboardInterrupt
 
@@ -93,6 +94,29 @@ def test_unknown_suite_or_backend_is_refused(tmp_path):
         suite_arms("everything")
     with pytest.raises(ConfigError, match="unknown backend 'slurm'"):
         run_suite("quick", 1, tmp_path, backend="slurm")
+
+
+def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path):
+    """Three runs in one worker process, in an order that puts bayes seed 0 last, against bayes
+    seed 0 alone in a fresh process: the same episodes, losses and evaluations, to the bit."""
+    from dqfd_bc_keras.experiments.sweep import run_jobs
+
+    bayes, ce = SUITES["quick"]
+    jobs = [Job(bayes, 1, tmp_path / "reused"), Job(ce, 0, tmp_path / "reused"), Job(bayes, 0, tmp_path / "reused")]
+    reused = run_jobs(jobs, tmp_path / "reused", "reused", 2, workers=1, runs_per_worker=3, progress=lambda _: None)
+    fresh = run_jobs([Job(bayes, 0, tmp_path / "fresh")], tmp_path / "fresh", "fresh", 1, workers=1,
+                     runs_per_worker=1, progress=lambda _: None)
+    assert len({o.pid for o in reused}) == 1 and fresh[0].pid not in {o.pid for o in reused}
+    assert not any(o.error for o in reused + fresh)
+
+    def results(root):
+        run = root / bayes.name / "seed0"
+        metrics = [{k: v for k, v in row.items() if k != "wall_time"}
+                   for row in csv.DictReader((run / "metrics.csv").open())]
+        return metrics, (run / "evals.csv").read_text(), json.loads((run / "eval.json").read_text())["returns"]
+
+    metrics, evals, returns = results(tmp_path / "reused")
+    assert len(metrics) > 1 and (metrics, evals, returns) == results(tmp_path / "fresh")
 
 
 @pytest.mark.parametrize("backend", ["local", "ray"])

@@ -21,6 +21,8 @@ EXIT_SKIPPED = 1
 BACKENDS = ("local", "ray")
 """`run --backend`: sweep.BACKENDS, spelled here so that a wrong name is refused before TensorFlow
 loads (a test keeps the two equal)."""
+RUNS_PER_WORKER = 25
+"""`run --runs-per-worker`'s default: sweep.RUNS_PER_WORKER, spelled here for the same reason."""
 
 
 def comma_list(allowed: Sequence[str], what: str):
@@ -48,6 +50,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_task_arguments(go)  # the suite's arms on this task instead of their own
     go.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a Config field for every arm, e.g. expert=my_rules:swing on an env without scripted experts")
+    go.add_argument("--runs-per-worker", type=positive_int, default=RUNS_PER_WORKER,
+                    help="runs a worker process takes in turn before a fresh one replaces it (default %(default)s; "
+                         "1: a fresh process per run)")
     go.add_argument("--restart-broken", action="store_true",
                     help="start over every run whose checkpoint cannot be resumed (default: report it as failed)")
     exp = commands.add_parser(
@@ -148,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             arms = on_task(SUITES[suite], task, assignments) if moved else SUITES[suite]
             run_suite(arms, args.seeds, args.out, args.workers, args.backend, args.address,
                       progress=lambda line: print(line, flush=True), name=f"{suite} on {task}" if task else suite,
-                      restart_broken=args.restart_broken)
+                      restart_broken=args.restart_broken, runs_per_worker=args.runs_per_worker)
     elif args.command == "export":
         from .data import export_archive
 

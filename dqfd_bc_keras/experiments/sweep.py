@@ -1,4 +1,4 @@
-"""Running a suite: every (arm, seed) a fresh process on a local pool or a Ray task.
+"""Running a suite: every (arm, seed) a run in a worker process of a local pool, or a Ray task.
 
 A run is complete when its `complete.json` exists (written last): running a suite again skips
 complete runs and resumes one that was cut off from its last checkpoint (if its config is still
@@ -62,13 +62,22 @@ class Outcome:
     error: str = ""
     busy: str = ""
     """Why the run was left alone: another live runner holds its directory."""
+    pid: int = 0
+    """The worker process that ran it."""
 
 
 def run_job(job: Job) -> Outcome:
-    """One run (in a worker process): train, resuming a run cut off before, and summarise it."""
+    """One run (in a worker process): train, resuming a run cut off before, and summarise it. A run
+    sets its own seeds when it is built, so it gives what it gives in a fresh process whatever ran
+    before it in the worker (tested); the Keras session is cleared first so that the earlier runs'
+    graphs and names are let go."""
+    import keras
+
     from ..runs import differences, saved_config, train
 
-    started = time.perf_counter()
+    keras.backend.clear_session()
+
+    started, pid = time.perf_counter(), os.getpid()
     resume = (job.directory / "checkpoints" / "latest.json").is_file()
     config = job.arm.config(job.seed)
     try:
@@ -83,64 +92,121 @@ def run_job(job: Job) -> Outcome:
                 raise BrokenRunError(f"{error} (or rerun the sweep with --restart-broken)") from None
             result = train(config, job.directory, force=True, quiet=True)
     except DirectoryInUseError as error:  # another runner's: it will finish it
-        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, busy=str(error))
+        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, busy=str(error), pid=pid)
     except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
-        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}")
+        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}",
+                       pid=pid)
     return Outcome(job, result.episodes, result.env_steps, result.evaluation.mean_return,
-                   time.perf_counter() - started)
+                   time.perf_counter() - started, pid=pid)
 
 
 STOP_GRACE = 60.0
 """Seconds a stopped run gets to reach its safe point before it is killed (its last checkpoint is
 kept either way; every file of a run is written atomically)."""
+RUNS_PER_WORKER = 25
+"""Runs a worker process takes in turn before it retires and a fresh one takes its place (as
+`multiprocessing.Pool(maxtasksperchild=…)`): TensorFlow's import (~5 s) is paid once per worker,
+not once per run, and whatever a run leaves behind in the process is bounded."""
 
 
-def _local(jobs: Sequence[Job], workers: int) -> Iterator[Outcome]:
-    """Up to `workers` runs at once, each in a fresh process (no TensorFlow state carried between
-    runs). If the sweep is stopped (Ctrl-C, SIGTERM, or its consumer closing this generator), no
-    run is started after it and each running one is sent SIGTERM and awaited."""
+@dataclass
+class _Worker:
+    """A worker process, the pipes that give it jobs and bring back outcomes, and its runs so far."""
+
+    process: object
+    jobs: object
+    outcomes: object
+    job: Job | None = None
+    runs: int = 0
+
+    @classmethod
+    def start(cls, context) -> _Worker:
+        take, give = context.Pipe(duplex=False)
+        receive, send = context.Pipe(duplex=False)
+        process = context.Process(target=_serve, args=(take, send), daemon=True)
+        process.start()
+        take.close()
+        send.close()
+        return cls(process, give, receive)
+
+    def give(self, job: Job) -> None:
+        self.job = job
+        self.jobs.send(job)
+
+    def retire(self) -> None:
+        """Tell an idle worker to exit, and wait for it."""
+        try:
+            self.jobs.send(None)
+        except OSError:
+            pass  # it is gone already
+        self.process.join(STOP_GRACE)
+        if self.process.is_alive():
+            self.process.kill()
+
+
+def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WORKER) -> Iterator[Outcome]:
+    """Up to `workers` runs at once, in worker processes that take up to `runs_per_worker` runs
+    each, one after the other (each run starts from a cleared Keras session and its own seeds, so
+    its results are those of a fresh process). If the sweep is stopped (Ctrl-C, SIGTERM, or its
+    consumer closing this generator), no run is started after it and each running one is sent
+    SIGTERM and awaited."""
     context = get_context("spawn")
-    queue, running = list(jobs), {}
+    queue, idle, busy = list(jobs), [], {}
     try:
-        while queue or running:
-            while queue and len(running) < workers:
-                job = queue.pop(0)
-                receive, send = context.Pipe(duplex=False)
-                process = context.Process(target=_worker, args=(job, send), daemon=True)
-                process.start()
-                send.close()
-                running[process.sentinel] = (process, receive, job)
-            for sentinel in wait_for(list(running)):
-                process, receive, job = running.pop(sentinel)
-                outcome = receive.recv() if receive.poll() else None
-                process.join()
-                yield outcome or Outcome(job, 0, 0, float("nan"), 0.0, f"its process died (exit code {process.exitcode})")
+        while queue or busy:
+            while queue and len(busy) < workers:
+                worker = idle.pop() if idle else _Worker.start(context)
+                worker.give(queue.pop(0))
+                busy[worker.process.sentinel] = worker
+            ready = set(wait_for([*busy, *(w.outcomes for w in busy.values())]))
+            for sentinel, worker in list(busy.items()):
+                if sentinel not in ready and worker.outcomes not in ready:
+                    continue
+                del busy[sentinel]
+                outcome = worker.outcomes.recv() if worker.outcomes.poll() else None
+                if outcome is None:  # it died during the run
+                    worker.process.join()
+                    yield Outcome(worker.job, 0, 0, float("nan"), 0.0,
+                                  f"its process died (exit code {worker.process.exitcode})")
+                    continue
+                worker.runs += 1
+                if worker.runs >= runs_per_worker or not queue:
+                    worker.retire()
+                else:
+                    idle.append(worker)
+                yield outcome
     except BaseException:
-        for process, _, _ in running.values():
-            process.terminate()  # SIGTERM: the run stops at its next safe point
-        for process, _, _ in running.values():
-            process.join(STOP_GRACE)
-            if process.is_alive():
-                process.kill()
+        for worker in busy.values():
+            worker.process.terminate()  # SIGTERM: the run stops at its next safe point
+        for worker in busy.values():
+            worker.process.join(STOP_GRACE)
+            if worker.process.is_alive():
+                worker.process.kill()
         raise
+    finally:
+        for worker in idle:
+            worker.retire()
 
 
-def _worker(job: Job, send) -> None:
-    """One run in a worker process; Ctrl-C is the sweep's to relay (as SIGTERM), not the run's."""
+def _serve(jobs, outcomes) -> None:
+    """A worker: run the jobs it is given until it is given None. Ctrl-C is the sweep's to relay
+    (as SIGTERM), not the run's."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _stop)
     try:
-        send.send(run_job(job))
-    except Terminated:
-        pass  # stopped: nothing to report, the run resumes next time
+        while (job := jobs.recv()) is not None:
+            outcomes.send(run_job(job))
+    except (Terminated, EOFError):
+        pass  # stopped (nothing to report, the run resumes next time), or the sweep is gone
 
 
 def _stop(signum: int, frame: object) -> None:
     raise Terminated
 
 
-def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Outcome]:
-    """Each run a Ray task on one CPU; joins `address` (a running cluster) or starts a local Ray."""
+def _ray(jobs: Sequence[Job], workers: int, address: str | None, runs_per_worker: int) -> Iterator[Outcome]:
+    """Each run a Ray task on one CPU, a worker taking up to `runs_per_worker` of them (Ray's
+    `max_calls`); joins `address` (a running cluster) or starts a local Ray."""
     try:
         import ray
     except ImportError:
@@ -150,7 +216,7 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[Out
         ray.init(address=address, num_cpus=None if address else workers, include_dashboard=False,
                  log_to_driver=False, runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2])}})
     try:
-        task = ray.remote(num_cpus=1, max_calls=1)(run_job)
+        task = ray.remote(num_cpus=1, max_calls=runs_per_worker)(run_job)
         pending = [task.remote(job) for job in jobs]
         while pending:
             finished, pending = ray.wait(pending, num_returns=1)
@@ -170,7 +236,7 @@ def sweep_jobs(arms: Sequence[Arm], seeds: int | None, out: Path, restart_broken
 def run_suite(
     suite: str | Sequence[Arm], seeds: int | None, out: str | Path, workers: int = 2, backend: str = "local",
     address: str | None = None, progress: Callable[[str], None] = print, name: str = "arms",
-    restart_broken: bool = False,
+    restart_broken: bool = False, runs_per_worker: int = RUNS_PER_WORKER,
 ) -> list[Outcome]:
     """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms called `name` in the
     progress lines and the sweep log), seeds 0 … `seeds` − 1, or each arm's own number when
@@ -179,14 +245,15 @@ def run_suite(
     name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
     jobs = sweep_jobs(arms, seeds, Path(out), restart_broken)
     return run_jobs(jobs, Path(out), name, seeds or max(arm.seeds for arm in arms), workers, backend, address,
-                    progress)
+                    progress, runs_per_worker)
 
 
 def run_jobs(
     jobs: Sequence[Job], out: Path, name: str, seeds: int | str, workers: int = 2, backend: str = "local",
-    address: str | None = None, progress: Callable[[str], None] = print,
+    address: str | None = None, progress: Callable[[str], None] = print, runs_per_worker: int = RUNS_PER_WORKER,
 ) -> list[Outcome]:
-    """Run the incomplete ones of `jobs`, logged in `out`'s sweep log as `name` with `seeds`."""
+    """Run the incomplete ones of `jobs`, logged in `out`'s sweep log as `name` with `seeds`; a
+    worker process takes up to `runs_per_worker` runs in turn (1: a fresh process per run)."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
     todo = [job for job in jobs if not job.complete]
@@ -194,7 +261,8 @@ def run_jobs(
              f"on {workers} {backend} worker(s)")
     os.environ.setdefault("DQFD_TF_THREADS", "1")  # one core per run
     outcomes, started, interrupted = [], time.perf_counter(), True
-    stream = _local(todo, workers) if backend == "local" else _ray(todo, workers, address)
+    stream = (_local(todo, workers, runs_per_worker) if backend == "local" else
+              _ray(todo, workers, address, runs_per_worker))
     try:
         for outcome in stream:
             outcomes.append(outcome)
@@ -214,7 +282,7 @@ def run_jobs(
         if outcomes or interrupted:  # every sweep that ran something, and one cut off (as such)
             log = out / SWEEP_LOG
             entry = {"suite": name, "seeds": seeds, "runs": len(outcomes),
-                     "workers": workers, "backend": backend, "seconds": round(time.perf_counter() - started, 1),
+                     "workers": workers, "backend": backend, "runs_per_worker": runs_per_worker, "seconds": round(time.perf_counter() - started, 1),
                      "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **({"interrupted": True} if interrupted else {}),
                      **provenance()}
             write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
