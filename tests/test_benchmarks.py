@@ -207,3 +207,11 @@ def test_memory_frames_quick_states_the_pool_and_the_alternatives():
     assert float(rows["Atari (84×84, 4 stacked)"][1].replace(",", "")) == pytest.approx(
         2 * 84 * 84 * 1014 * 100 / 1e6, abs=0.1)
     assert float(rows["cartpole (4 floats)"][1]) == 0.0  # no pool for vectors
+
+
+def test_bench_sweep_quick_times_both_sides_and_finds_the_same_results():
+    report = bench("bench_sweep.py", "--quick", "--json")
+    assert report["same_results"] and set(report["seconds"]) == {"fresh", "reused"}
+    fresh, reused = report["seconds"]["fresh"]["per_round"], report["seconds"]["reused"]["per_round"]
+    assert report["ratio_fresh_over_reused"]["per_round"] == pytest.approx(
+        [f / r for f, r in zip(fresh, reused)], rel=1e-2)
