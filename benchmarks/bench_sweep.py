@@ -69,11 +69,12 @@ def main(argv=None) -> int:
     load_start = os.getloadavg()
     seconds: dict[str, list[float]] = {side: [] for side in SIDES}
     same: list[bool] = []
-    with tempfile.TemporaryDirectory(dir=args.keep) as scratch:
+    with tempfile.TemporaryDirectory() as temporary:
+        scratch = Path(args.keep or temporary)
         for r in range(args.rounds):
             found = {}
             for side in (list(SIDES) if r % 2 == 0 else list(SIDES)[::-1]):
-                out = Path(scratch) / f"round{r + 1}-{side}"
+                out = scratch / f"round{r + 1}-{side}"
                 jobs = sweep_jobs(chosen, args.seeds, out)
                 start = time.perf_counter()
                 run_jobs(jobs, out, f"bench_sweep {side}", args.seeds, args.workers,
