@@ -118,6 +118,22 @@ class DQfDAgent(keras.Model):
             return tf.fill([n, self.n_actions], 1.0 / self.n_actions), tf.fill([n], self.config.sigma0_sq)
         return self.bc_model.predictive(obs)
 
+    def imitation_weights(self) -> tuple[float | None, float | None]:
+        """The weight 1/(2σ²) of the Bayesian likelihood (losses.bayes_likelihood_loss) averaged over
+        D_demo's rows and over D_replay's, with σ² as the rows hold it for the loss: how much more
+        the loss imitates on demonstrated states than on the agent's own. None for a method that
+        reads no σ², and for an empty replay."""
+        if "sigma0_sq" not in self.method.reads:
+            return None, None
+        r = self.replay
+        start, demos, agents = r.demo_capacity, int(r.demo_size.numpy()), int(r.agent_size.numpy())
+
+        def mean_weight(rows: slice) -> float | None:
+            sigma_sq = r.table[rows, r.SIGMA_SQ]
+            return float(tf.reduce_mean(0.5 / sigma_sq)) if sigma_sq.shape[0] else None
+
+        return mean_weight(slice(0, demos)), mean_weight(slice(start, start + agents))
+
     @property
     def sqil(self) -> bool:
         """SQIL learns from rewards 1 on demonstrations and 0 on its own data, in balanced batches."""

@@ -135,6 +135,11 @@ class EpisodeRow(Record):
     """Transitions in D_demo after the episode."""
     wall_time: float
     """Seconds of training so far."""
+    imitation_weight_demo: float | None = None
+    """The Bayesian likelihood's weight 1/(2σ²(s)) averaged over D_demo's rows after the episode
+    (None: the method reads no σ², or the run is from before it was kept)."""
+    imitation_weight_agent: float | None = None
+    """The same over D_replay's rows, the agent's own states (None also while D_replay is empty)."""
 
 
 @dataclass(frozen=True, kw_only=True)

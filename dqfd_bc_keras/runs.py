@@ -127,7 +127,7 @@ class RunDirectory:
         step = row.env_step
         with self.tb.as_default(step=row.interactions):  # TensorBoard's x axis: interactions
             for key, value in row.to_row().items():
-                if key not in TB_SKIPS:
+                if key not in TB_SKIPS and value is not None:
                     tf.summary.scalar(f"train/{key}", value)
         if self.progress is not None:
             self.progress.update(step - self.progress.n)

@@ -272,10 +272,12 @@ def train_episodes(
         state.returns.append(stats.ret)
         state.episode += 1
         state.wall_time += time.perf_counter() - started
+        on_demos, off_demos = agent.imitation_weights()
         row = EpisodeRow(episode=state.episode, env_step=steps(), interactions=learner.interactions,
                          return_=stats.ret, plain_return=stats.plain, length=stats.length, goals=stats.goals,
                          epsilon=float(interaction.epsilon()), losses=Losses(**losses),
-                         demo_size=int(agent.replay.demo_size.numpy()), wall_time=state.wall_time)
+                         demo_size=int(agent.replay.demo_size.numpy()), wall_time=state.wall_time,
+                         imitation_weight_demo=on_demos, imitation_weight_agent=off_demos)
         state.metrics.append(row)
         if learner.dynamic is not None:
             if interaction.recorder is not None and done:

@@ -196,7 +196,7 @@ def _serve(jobs, outcomes) -> None:
     try:
         while (job := jobs.recv()) is not None:
             outcomes.send(run_job(job))
-    except (Terminated, EOFError):
+    except (Terminated, EOFError, BrokenPipeError):
         pass  # stopped (nothing to report, the run resumes next time), or the sweep is gone
 
 
