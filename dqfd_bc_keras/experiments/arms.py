@@ -41,6 +41,12 @@ class ArmRuns:
         return np.array([PER_RUN[metric](run) for run in self.runs], dtype=float)
 
 
+def find_arm(arms: list[ArmRuns], config: Config) -> ArmRuns | None:
+    """The arm whose runs have `config` (its seed aside), if any ran."""
+    fields = {k: v for k, v in config.to_dict().items() if k != "seed"}
+    return next((a for a in arms if a.config == fields), None)
+
+
 def common_seeds(first: ArmRuns, second: ArmRuns) -> tuple[ArmRuns, ArmRuns]:
     """The two arms restricted to the seeds both ran: a comparison the pre-registration plans
     within one suite stays the same when one of its arms gets more seeds in another suite."""

@@ -40,7 +40,7 @@ from ..tasks import TASKS as PRESETS
 from ..seeds import demo_seed
 from ..config import UNCERTAINTIES
 from ..uncertainty import max_policy_variance
-from .arms import ArmRuns
+from .arms import ArmRuns, find_arm
 from .claims import CLAIMS, judge
 from .efficiency import ratio_ci
 from .stats import CensoredSummary, Summary
@@ -182,22 +182,17 @@ CALIBRATION_FILE = "calibration.json"
 """`calibrate --out SUITE/calibration.json` writes it into the suite directory; the report reads it."""
 
 
-def _find(arms: list[ArmRuns], config: Config) -> ArmRuns | None:
-    fields = {k: v for k, v in config.to_dict().items() if k != "seed"}
-    return next((a for a in arms if a.config == fields), None)
-
-
 def verdict_rows(arms: list[ArmRuns]) -> list[str]:
     """Per estimator arm of the `estimators` suite that ran: its claim's verdict against ce beside
     MC dropout's, interactions to threshold and ce's median ÷ its median."""
     rows = []
     for estimator in SUITES["estimators"]:
         config = estimator.config(0)
-        found = _find(arms, config)
+        found = find_arm(arms, config)
         if found is None:
             continue
-        mc = _find(arms, dataclasses.replace(config, uncertainty="mc_dropout"))
-        ce = _find(arms, dataclasses.replace(config, expert_loss="ce", uncertainty="mc_dropout"))
+        mc = find_arm(arms, dataclasses.replace(config, uncertainty="mc_dropout"))
+        ce = find_arm(arms, dataclasses.replace(config, expert_loss="ce", uncertainty="mc_dropout"))
         claim = next((c for c in CLAIMS for s in c.settings if c.id in ("C3", "C4") and s.task == config.task), None)
         verdicts = ["—", "—"] if claim is None else [
             judge(claim, bayes, ce).verdict if bayes is not None else "not run" for bayes in (found, mc)]

@@ -30,6 +30,7 @@ from .data import ARCHIVE_SUFFIX, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
 from .estimators import estimators_section
 from .grid import grid_only, grid_section
+from .sigma0 import sigma0_section
 from .stats import CensoredSummary, Summary
 
 
@@ -298,7 +299,8 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
     doc += ["## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
             "## Ablations", "", *_ablations(arms), ""]
     doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators", "", *estimators,
-            "", "## Demonstration quality × quantity", "", *grid, "",
+            "", "## The Bayesian loss where it can act: σ0² below the variance cap", "", *sigma0_section(arms), "",
+            "## Demonstration quality × quantity", "", *grid, "",
             "## Demonstrations", "", demos_text(), "", "## Wall time", "", *sweeps, ""]
     # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
     text = "\n".join(doc).replace(str(directory), suite_name)

@@ -97,6 +97,21 @@ def mann_whitney(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
     return float(result.statistic), float(result.pvalue)
 
 
+def holm(p: Sequence[float], family: int | None = None) -> list[float]:
+    """Holm–Bonferroni adjusted p-values, in the order given: the k-th smallest is multiplied by
+    m − k + 1, then made monotone and capped at 1 (Holm 1979). `family` (≥ len(p)) is m, the
+    pre-registered number of comparisons: those not yet run count as p = 1, so a partial study is
+    adjusted as strictly as the whole one."""
+    m = len(p) if family is None else family
+    if m < len(p):
+        raise ValueError(f"a family of {m} comparisons cannot hold {len(p)}")
+    adjusted, running = [1.0] * len(p), 0.0
+    for rank, i in enumerate(np.argsort(np.asarray(p, dtype=float), kind="stable")):
+        running = max(running, (m - rank) * float(p[i]))
+        adjusted[i] = min(1.0, running)
+    return adjusted
+
+
 def fisher_exact(successes_a: int, n_a: int, successes_b: int, n_b: int) -> tuple[float, float]:
     """Two-sided Fisher's exact test of two proportions: (odds ratio, p).
 

@@ -211,6 +211,40 @@ def _estimators() -> list[Arm]:
             **PROTOCOL))]
 
 
+SIGMA0_VALUES = (0.02, 0.1)
+"""σ0² below the variance cap (1 − 1/A)/A, where 1/(2σ²) can vary 3.5–13.5× between states (§10)."""
+SIGMA0_ESTIMATORS = (BEST_OTHER_ESTIMATOR, "mc_dropout")
+BAD_TEACHERS = (("imperfect", 0.0), ("strong", 0.5))
+"""The grid's teachers whose demonstrations an unsure expert loss should down-weight (§10)."""
+
+
+def sigma0_settings() -> list[tuple[str, str, int, dict[str, object]]]:
+    """(setting, task, seeds, Config fields) of the σ0² study (PREREGISTRATION §10), in its order:
+    C3's, the grid's bad-teacher cells, MountainCar's efficiency setting."""
+    cells = [cell for cell in grid_cells() if (cell["expert"], cell["expert_epsilon"]) in BAD_TEACHERS]
+    return [("C3", "cartpole", claim_seeds("C3", "cartpole"), {}),
+            *((f"grid {c['expert']} ε={c['expert_epsilon']:g} × {c['demo_episodes']}", GRID_TASK, GRID_SEEDS,
+               {**c, **PROTOCOL}) for c in cells),
+            ("MountainCar efficiency", "mountaincar", 10,
+             {"demo_episodes": EFFICIENCY_TASKS["mountaincar"], **PROTOCOL})]
+
+
+def _sigma0() -> list[Arm]:
+    """bayes at each low σ0² with each estimator on every setting of the study, in the pre-registered
+    order (each estimator on C3 and the grid, the distance one first; then MountainCar); the ce
+    arms it is judged against are those of the `paper`, `demos` and `efficiency` suites."""
+    def arms(settings: list, uncertainty: str) -> list[Arm]:
+        return [arm(task, "bootstrap", "bayes", seeds, uncertainty=uncertainty, sigma0_sq=s, **fields)
+                for _, task, seeds, fields in settings for s in SIGMA0_VALUES]
+
+    *cartpole, mountaincar = sigma0_settings()
+    ordered = [a for part in (cartpole, [mountaincar]) for u in SIGMA0_ESTIMATORS for a in arms(part, u)]
+    unique: dict[str, Arm] = {}
+    for a in ordered:  # the grid's imperfect × 5 cell is C3's setting: its arms run once, at C3's seeds
+        unique.setdefault(a.name, a)
+    return list(unique.values())
+
+
 SUITES: dict[str, list[Arm]] = {
     "dynamic": _dynamic(),
     "efficiency": _efficiency(),
@@ -220,9 +254,10 @@ SUITES: dict[str, list[Arm]] = {
     "sensitivity": _sensitivity(),
     "demos": grid_arms(),
     "estimators": _estimators(),
+    "sigma0": _sigma0(),
     "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick", 2) for loss in ("bayes", "ce")],
 }
-ALL = ("dynamic", "efficiency", "paper", "ablations", "baselines", "sensitivity", "estimators", "demos")
+ALL = ("dynamic", "efficiency", "paper", "ablations", "baselines", "sensitivity", "estimators", "demos", "sigma0")
 """`run all`: every suite of RESULTS.md, in this order, into one directory (shared arms run once)."""
 
 
