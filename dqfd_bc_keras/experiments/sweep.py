@@ -163,7 +163,10 @@ def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WO
                 if sentinel not in ready and worker.outcomes not in ready:
                     continue
                 del busy[sentinel]
-                outcome = worker.outcomes.recv() if worker.outcomes.poll() else None
+                try:
+                    outcome = worker.outcomes.recv() if worker.outcomes.poll() else None
+                except EOFError:  # its end of the pipe closed without an outcome
+                    outcome = None
                 if outcome is None:  # it died during the run
                     worker.process.join()
                     yield Outcome(worker.job, 0, 0, float("nan"), 0.0,
