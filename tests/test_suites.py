@@ -1,6 +1,7 @@
 """The experiment runner: suites as declared, the quick suite end to end on both backends."""
 
 import csv
+import dataclasses
 import json
 
 import pytest
@@ -117,6 +118,20 @@ def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path
 
     metrics, evals, returns = results(tmp_path / "reused")
     assert len(metrics) > 1 and (metrics, evals, returns) == results(tmp_path / "fresh")
+
+
+def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_one(tmp_path):
+    from dqfd_bc_keras.experiments.sweep import run_jobs
+
+    _, ce = SUITES["quick"]
+    dying = dataclasses.replace(ce, overrides=(*ce.overrides, ("expert", "toy_envs:dies")), label="quick-dies")
+    lines = []
+    with pytest.raises(ConfigError, match=r"1 of 2 runs failed; first: .*quick-dies/seed0: its process died "
+                                          r"\(exit code 3\)"):
+        run_jobs([Job(dying, 0, tmp_path), Job(ce, 0, tmp_path)], tmp_path, "dies", 1, workers=1,
+                 progress=lines.append)
+    assert (tmp_path / ce.name / "seed0" / "complete.json").is_file()
+    assert "its process died (exit code 3)" in lines[1] and "episodes" in lines[2]
 
 
 @pytest.mark.parametrize("backend", ["local", "ray"])

@@ -98,3 +98,11 @@ def breakout_rule(obs: np.ndarray) -> int:
     """An Atari demonstrator for the tests (`--expert toy_envs:breakout_rule`): FIRE, then left or
     right by the newest frame's brightness, a deterministic function of the frame."""
     return 1 if obs[..., -1].sum() % 3 == 0 else 2 + int(obs[..., -1].sum() % 2)
+
+
+def dies(obs: np.ndarray) -> int:
+    """A demonstrator whose process dies the moment it is asked to act (`expert=toy_envs:dies`):
+    the sweep's test of a worker that dies in the middle of a run."""
+    import os
+
+    os._exit(3)
