@@ -5,7 +5,7 @@ Ours: the `minatar-breakout` preset (its conv torso and batch; one update every 
 steps, 4 by default as SB3's schedule, so both sides do the same work per step) driven by the training
 loop itself (`training.build`, then `training.train_episodes`): ε-greedy acting, storing, one
 prioritized update every `train_freq` env steps, episode bookkeeping and dynamic-demonstration
-updates, timed from a warm-up of `WARMUP` env steps to the end of `--steps` more; and
+updates, timed from a warm-up of `--warmup` env steps to the end of `--steps` more; and
 pre-training (`agent.pretrain`) on its demonstrations, timed after `build`'s own warm-up
 pre-training. SB3 (when installed, `pip install -r benchmarks/requirements.txt`): the pixels
 baseline exactly (`experiments/sb3_pixels.py`: MinAtar's network, rl-zoo3's Atari schedule, one
@@ -38,12 +38,13 @@ import interleave  # noqa: E402  (the parent imports neither TensorFlow nor torc
 
 TASK, ENV_ID = "minatar-breakout", "MinAtar/Breakout-v1"
 WARMUP = 500
-"""Env steps (and, for ours, pre-training updates) before the clock starts: graphs traced,
-learning under way on both sides."""
+"""`--warmup`'s default: env steps (and, for ours, pre-training updates) before the clock starts:
+graphs traced, learning under way on both sides."""
+QUICK_WARMUP = 100
 
 
-def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int) -> dict[str, float]:
-    """Our online env steps/s (the loop a run runs, after `WARMUP` steps, one update every
+def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int, warmup: int) -> dict[str, float]:
+    """Our online env steps/s (the loop a run runs, after `warmup` steps, one update every
     `train_freq` steps) and pre-training updates/s."""
     import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 
@@ -51,15 +52,15 @@ def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int) -> 
     from dqfd_bc_keras.run_state import TrainingState
     from dqfd_bc_keras.training import build, train_episodes
 
-    config = Config.for_task(TASK, expert_loss=expert_loss, total_steps=WARMUP + steps, pretrain_steps=WARMUP,
-                             bc_epochs=2, eval_every=WARMUP, early_stop_window=0, train_freq=train_freq)
+    config = Config.for_task(TASK, expert_loss=expert_loss, total_steps=warmup + steps, pretrain_steps=warmup,
+                             bc_epochs=2, eval_every=warmup, early_stop_window=0, train_freq=train_freq)
     learner, _ = build(config)
     figures = {}
     if config.uses_demos:
         start = time.perf_counter()
         learner.agent.pretrain(updates)
         figures["pretrain_updates_per_s"] = updates / (time.perf_counter() - start)
-    # The evaluation grid (every WARMUP env steps, where `train_episodes` pauses an episode) is the
+    # The evaluation grid (every `warmup` env steps, where `train_episodes` pauses an episode) is the
     # clock: each point marks the time and the env steps played; no evaluation is run.
     marks: list[tuple[float, int]] = []
     train_episodes(learner, TrainingState(), on_episode=lambda *_: None,
@@ -69,16 +70,16 @@ def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int) -> 
     return figures
 
 
-def sb3_figures(steps: int, updates: int) -> dict[str, float] | None:
-    """SB3's env steps/s of `learn()` with the pixels baseline's schedule, after `WARMUP` steps, and
+def sb3_figures(steps: int, updates: int, warmup: int) -> dict[str, float] | None:
+    """SB3's env steps/s of `learn()` with the pixels baseline's schedule, after `warmup` steps, and
     its `train()` updates/s; None if SB3 is absent."""
     if not interleave.sb3_installed():
         return None
     from dqfd_bc_keras.experiments.sb3_pixels import hyperparameters, sb3_model
 
-    budget = WARMUP + steps
+    budget = warmup + steps
     model = sb3_model(ENV_ID, seed=0, budget=budget, max_steps=10_000)
-    model.learn(max(WARMUP, model.learning_starts))  # the timed steps learn
+    model.learn(max(warmup, model.learning_starts))  # the timed steps learn
     start = time.perf_counter()
     model.learn(steps, reset_num_timesteps=False)
     figures = {"env_steps_per_s": steps / (time.perf_counter() - start)}
@@ -102,6 +103,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=5000, help="env steps timed for each side in each round")
+    parser.add_argument("--warmup", type=int, default=WARMUP, help="env steps before the clock starts (default %(default)s)")
     parser.add_argument("--updates", type=int, default=2000, help="pre-training (SB3: train()) updates timed per round")
     parser.add_argument("--sides", type=sides_list, default=list(interleave.SIDES),
                         help="the sides to run (default ours,sb3; sb3 alone runs without our MinAtar support)")
@@ -112,20 +114,21 @@ def main(argv=None) -> int:
     interleave.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.quick:
-        args.steps, args.updates, args.rounds = WARMUP, 50, 2
-    if args.steps < WARMUP or args.updates < 1:
-        parser.error(f"--steps must be ≥ {WARMUP} (the clock runs between evaluation-grid points that far apart) "
+        args.warmup, args.steps, args.updates, args.rounds = QUICK_WARMUP, QUICK_WARMUP, 20, 2
+    if args.steps < args.warmup or args.updates < 1:
+        parser.error(f"--steps must be ≥ --warmup {args.warmup} (the clock runs between evaluation-grid points that "
+                     "far apart) "
                      "and --updates ≥ 1")
 
-    sides = {"ours": lambda: our_figures(args.steps, args.updates, args.expert_loss, args.train_freq)
+    sides = {"ours": lambda: our_figures(args.steps, args.updates, args.expert_loss, args.train_freq, args.warmup)
              if "ours" in args.sides else None,
-             "sb3": lambda: sb3_figures(args.steps, args.updates) if "sb3" in args.sides else None}
+             "sb3": lambda: sb3_figures(args.steps, args.updates, args.warmup) if "sb3" in args.sides else None}
     ratios = {"env_steps_per_s": ("env_steps_per_s", "env_steps_per_s")}
     if args.expert_loss != "none":  # plain DQN has no demonstrations to pre-train on
         ratios["pretrain_vs_sb3_train"] = ("pretrain_updates_per_s", "train_updates_per_s")
     not_run = [f"{side}: not run (--sides {','.join(args.sides)})" for side in interleave.SIDES if side not in args.sides]
     return interleave.main("bench_pixels", __file__, argv, args, sides, ratios,
-                           settings={"env": ENV_ID, "task": TASK, "steps": args.steps, "warmup": WARMUP,
+                           settings={"env": ENV_ID, "task": TASK, "steps": args.steps, "warmup": args.warmup,
                                      "updates": args.updates, "sides": args.sides, "expert_loss": args.expert_loss,
                                      "train_freq": args.train_freq,
                                      "ours": f"{TASK} preset, {args.expert_loss}: training.train_episodes, one "

@@ -55,14 +55,16 @@ PROTOCOL = {"eval_every": 2_000, "eval_episodes": 10}
 OURS_STEPS, SB3_STEPS = 30_000, 100_000
 """Interactions of each of our runs, and of SB3's one `learn()`: SB3 gets more than three times ours."""
 LOSSES = ("bayes", "ce", "margin", "none")
-QUICK_STEPS = {"ours": 600, "sb3": 1000, "every": 300}
+QUICK_STEPS = {"ours": 300, "sb3": 500, "every": 150}
+"""`--quick`: interactions of our one run and of SB3's, and the evaluation grid: seconds, for the tests."""
 
 
 def arms(quick: bool = False) -> list[Arm]:
     """Our arms of the study (with `quick`: one, on the QUICK budget)."""
     if quick:
-        return [Arm(TASK, "bootstrap", "bayes", tuple({**QUICK, "eval_every": QUICK_STEPS["every"]}.items()),
-                    "pixels-quick", 1)]
+        budget = {"total_steps": QUICK_STEPS["ours"], "eval_every": QUICK_STEPS["every"],
+                  "checkpoint_every": QUICK_STEPS["every"]}
+        return [Arm(TASK, "bootstrap", "bayes", tuple({**QUICK, **budget}.items()), "pixels-quick", 1)]
     return [arm(TASK, "bootstrap", loss, SEEDS, total_steps=OURS_STEPS, **PROTOCOL) for loss in LOSSES]
 
 
