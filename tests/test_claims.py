@@ -314,10 +314,10 @@ def test_planned_seeds():
     assert plans[("C1", "cartpole/naive")] == (pytest.approx(36.13, abs=0.01), 25.0, 36)  # 17.128 · 36.13² / 25²
     assert plans[("C1", "cartpole-200/naive")] == (pytest.approx(11.73, abs=0.01), 10.0, 24)  # 17.128 · 1.3755
     assert plans[("C2", today)] == (pytest.approx(0.4), 0.2, 69)  # 17.128 · 4 = 68.51
-    assert plans[("C2", paper)] == (0.5, 0.2, 108)  # 17.128 · 6.25 = 107.05
+    assert plans[("C2", paper)] == (pytest.approx(0.4583, abs=1e-4), 0.2, 90)  # 17.128 · 0.21 / 0.04 = 89.92
     assert plans[("C3", "cartpole/bootstrap")] == (pytest.approx(30.21, abs=0.01), 25.0, 26)  # 25.01
     assert plans[("C4", "mountaincar-goals/*")] == (pytest.approx(0.0767, abs=1e-4), 0.25, 10)  # 12.37 · 0.094 → 2
-    assert planning.planned_seeds("C2", analysis.CLAIMS[1].settings[1]) == planning.planned_seeds("C2", paper) == 108
+    assert planning.planned_seeds("C2", analysis.CLAIMS[1].settings[1]) == planning.planned_seeds("C2", paper) == 90
     with pytest.raises(planning.ConfigError, match="no planned seeds for claim 'C2' on setting 'cartpole/naive'"):
         planning.planned_seeds("C2", Setting("cartpole", "naive"))
 

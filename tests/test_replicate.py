@@ -4,13 +4,16 @@ import json
 import os
 import subprocess
 import sys
+import tarfile
 from pathlib import Path
 
 import pytest
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments.data import export_archive
-from dqfd_bc_keras.experiments.replicate import Comparison, parse_seeds, replicate
+from dqfd_bc_keras.experiments.arms import group_arms
+from dqfd_bc_keras.experiments.data import REPLICATIONS, export_archive, load_runs
+from dqfd_bc_keras.experiments.replicate import Comparison, parse_seeds, replicate, replication_section
+from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.experiments.suites import arm
 from dqfd_bc_keras.runs import train
 
@@ -28,7 +31,10 @@ def archive(tmp_path_factory) -> Path:
 
 
 def test_a_replication_reruns_the_arm_at_fresh_seeds_and_compares(archive, tmp_path):
-    out = tmp_path / "replica"
+    suite = tmp_path / "suite"
+    with tarfile.open(archive) as tar:
+        tar.extractall(suite, filter="data")
+    out = suite / REPLICATIONS  # the reruns travel with the suite
     done = subprocess.run([sys.executable, "-m", "dqfd_bc_keras.experiments", "replicate", ARM.name, "--seeds", "0-0",
                            "--archive", str(archive), "--out", str(out)], capture_output=True, text=True, cwd=REPO,
                           env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
@@ -43,6 +49,18 @@ def test_a_replication_reruns_the_arm_at_fresh_seeds_and_compares(archive, tmp_p
     report = (out / "REPLICATE.md").read_text()
     assert "| final return | 1 |" in report and "| mean training return | 1 |" in report
     assert report in done.stdout
+    # Read apart from the suite's own runs (same config: they would join its arm), exported with them,
+    # and compared in the report and its summary.
+    assert [r.config.seed for r in load_runs(suite)] == [0]
+    export_archive(suite, tmp_path / "again.tar.xz")
+    with tarfile.open(tmp_path / "again.tar.xz") as tar:
+        assert f"{REPLICATIONS}/{ARM.name}/seed7/eval.json" in tar.getnames()
+    arms = group_arms(load_runs(tmp_path / "again.tar.xz"))
+    assert len(arms) == 1 and len(arms[0].runs) == 1
+    rows = [line for line in replication_section(arms, suite) if line.startswith("| cartpole")]
+    assert len(rows) == 3 and all("| seeds 7–7 | " in row for row in rows)
+    assert any(line.startswith("- Replications at fresh seeds: 1 arms, 3 rank tests, 0 with p < 0.05")
+               for line in summary(arms, suite))
 
 
 def test_unknown_arms_and_bad_seeds_are_one_line(archive, tmp_path):

@@ -9,6 +9,7 @@ import pytest
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
+from dqfd_bc_keras.experiments.claims import PAPER
 from dqfd_bc_keras.experiments.plans import planned_seeds
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, suite_arms
 from dqfd_bc_keras.experiments.sweep import Job, run_suite, sweep_jobs
@@ -25,6 +26,8 @@ def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readi
     paper_reading = [arm.config(0) for arm in arms[8:]]
     assert [(c.task, c.timeout, c.expert_loss, c.early_stop_window, c.total_steps // c.limit)
             for c in paper_reading] == [("cartpole-200", "naive", loss, 0, 300) for loss in ("ce", "bayes")]
+    # §11: 7 of 10 collapsed in each arm, p = 0.7: ⌈2 (1.645 + 1.282)² · 0.21 / 0.2²⌉ = 90 seeds per arm
+    assert [arm.seeds for arm in arms[8:]] == [90, 90] == [planned_seeds("C2", PAPER)] * 2
     baselines = {arm.expert_loss for arm in SUITES["baselines"]}
     assert baselines == {"none", "margin", "bc_margin"}
     config = arms[2].config(seed=7)

@@ -174,15 +174,26 @@ def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> Finished
                        read("provenance.json", dict, Provenance.of))
 
 
+REPLICATIONS = "replications"
+"""A suite directory's subdirectory of reruns at fresh seeds (`experiments replicate --out
+SUITE/replications`): read apart from the suite's own runs, whose arms they would join (their
+configs are the same), and exported with them."""
+
+
+def _own(directory: Path, path: Path) -> bool:
+    return path.relative_to(directory).parts[0] != REPLICATIONS
+
+
 def _run_dirs(directory: Path) -> list[Path]:
-    """Every complete run (a directory with eval.json) below `directory`, in path order."""
-    return sorted(final.parent for final in directory.rglob("eval.json"))
+    """Every complete run (a directory with eval.json) below `directory`, in path order, its
+    REPLICATIONS left out."""
+    return sorted(final.parent for final in directory.rglob("eval.json") if _own(directory, final))
 
 
 def _unfinished(directory: Path) -> list[Path]:
     """Run directories below `directory` that have started (config.json, checkpoints/) but hold no eval.json."""
-    return sorted(config.parent for config in directory.rglob("config.json")
-                  if (config.parent / "checkpoints").is_dir() and not (config.parent / "eval.json").is_file())
+    return sorted(config.parent for config in directory.rglob("config.json") if _own(directory, config)
+                  and (config.parent / "checkpoints").is_dir() and not (config.parent / "eval.json").is_file())
 
 
 def _load(directory: Path, shown: Path, skipped: list[RunFileError] | None) -> list[FinishedRun]:
@@ -244,8 +255,9 @@ def load_runs(source: str | os.PathLike, skipped: list[RunFileError] | None = No
 
 def lab_files(directory: Path) -> list[str]:
     """The files of the suite in `directory` that the report reads, relative and sorted: the
-    RUN_FILES of every complete run, every sweep log and the benchmark's files."""
-    files = {run_dir / name for run_dir in _run_dirs(directory) for name in RUN_FILES if (run_dir / name).is_file()}
+    RUN_FILES of every complete run (its REPLICATIONS' too), every sweep log and the benchmark's files."""
+    run_dirs = [*_run_dirs(directory), *_run_dirs(directory / REPLICATIONS)]
+    files = {run_dir / name for run_dir in run_dirs for name in RUN_FILES if (run_dir / name).is_file()}
     files |= set(directory.rglob(SWEEP_LOG))
     for name in BENCHMARK_FILES:
         files |= {p for p in [directory / name, *(directory / name).rglob("*")] if p.is_file()}

@@ -73,8 +73,10 @@ PLANNED_SEEDS: dict[tuple[str, str], Plan] = {
     ("C2", TODAY.name): Plan("unfinished", float(np.sqrt(0.2 * 0.8)),
                              "assumed: unfinished runs uncommon, as the paper says (§4); the previous round had "
                              "none in either arm, which leaves no spread to measure", SHARE_MARGIN),
-    ("C2", PAPER.name): Plan("collapsed", 0.5, "assumed: the largest spread a share can have (p = ½); no round has "
-                             "run this reading", SHARE_MARGIN),
+    ("C2", PAPER.name): Plan("collapsed", float(np.sqrt(0.7 * 0.3)),
+                             "observed: 7 of 10 runs collapsed in each arm at the archive's 10 seeds per arm "
+                             "(docs/PREREGISTRATION.md §11; the plan before them assumed the worst case p = ½)",
+                             SHARE_MARGIN),
     ("C3", "cartpole/bootstrap"): Plan("mean_train_return", _previous((365.1, 402.3), (363.1, 400.8)),
                                        PREVIOUS_ROUND, RETURN_MARGIN * _limit("cartpole")),
     # The previous round put Δ near 0, so the decisive question is showing it below +margin.

@@ -4,6 +4,10 @@ without trusting the machine it came from.
 
     python -m dqfd_bc_keras.experiments replicate cartpole-bootstrap-bayes --seeds 100-107 --out replica
 
+Into a suite directory's `replications/` (`--out results/replications`), the reruns travel with
+the suite: `export` archives them, and the report compares them with the suite's own runs
+(`replication_section`), which they do not join.
+
 The reruns train with the config of the arm's archived runs, only the seed changed, into
 `OUT/<arm>/seed<N>/` (a sweep like any other: cut off, it resumes). Reruns are bit-identical
 only on the same code, seed and machine kind (`provenance.py`); on another machine, or at other
@@ -26,7 +30,8 @@ import numpy as np
 from ..errors import ConfigError
 from ..files import write_text
 from .metrics import interactions_to_threshold
-from .data import FinishedRun, load_runs
+from .arms import ArmRuns, find_arm, group_arms
+from .data import REPLICATIONS, FinishedRun, load_runs
 from .stats import mann_whitney
 from .suites import arm
 from .sweep import Job, run_jobs
@@ -115,3 +120,30 @@ def replicate(name: str, seeds: range, out: str | Path, archive: str | Path = DE
     write_text(out / "REPLICATE.md", table)
     progress(table)
     return comparisons
+
+
+def replicated(arms: list[ArmRuns], directory: Path) -> list[tuple[ArmRuns, ArmRuns, list[Comparison]]]:
+    """(archived arm, its rerun, the comparisons) for each arm rerun under the suite's REPLICATIONS."""
+    fresh = group_arms(load_runs(directory / REPLICATIONS)) if (directory / REPLICATIONS).is_dir() else []
+    found = []
+    for rerun in fresh:
+        archived = find_arm(arms, rerun.runs[0].config)
+        if archived is not None:
+            found.append((archived, rerun, [Comparison(metric, [f(r) for r in archived.runs], [f(r) for r in rerun.runs])
+                                            for metric, f in METRICS.items()]))
+    return found
+
+
+def replication_section(arms: list[ArmRuns], directory: Path) -> list[str]:
+    """Each arm rerun under the suite's REPLICATIONS against the suite's runs of the same config."""
+    rows = [f"| {archived.label} | seeds {rerun.runs[0].config.seed}–{rerun.runs[-1].config.seed} {c.row()}"
+            for archived, rerun, comparisons in replicated(arms, directory) for c in comparisons]
+    if not rows:
+        return [f"Not run: `python -m dqfd_bc_keras.experiments replicate ARM --seeds 100-107 --out "
+                f"SUITE/{REPLICATIONS}` reruns an arm at fresh seeds."]
+    return ["Arms rerun at fresh seeds (`experiments replicate`), against the archive's runs of the same config: "
+            "medians, and a two-sided Mann–Whitney test per metric (a small p says the two samples differ; a "
+            "large one does not prove they agree). The reruns are of newer code than most archived runs "
+            "(*Provenance*), so they check the distributions, not the bits.", "",
+            "| arm | fresh | metric | archived runs | archived median | fresh runs | fresh median | rank test p |",
+            "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |", *rows]

@@ -30,7 +30,8 @@ from .data import ARCHIVE_SUFFIX, RunFileError, load_runs, open_suite
 from .efficiency import efficiency_section
 from .estimators import estimators_section
 from .grid import grid_only, grid_section
-from .sigma0 import sigma0_section
+from .replicate import replication_section
+from .summary import summary
 from .stats import CensoredSummary, Summary
 
 
@@ -264,11 +265,13 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
         efficiency, sweeps = efficiency_section(directory), _sweeps(directory)
         estimators = estimators_section(arms, directory, figures_dir, out_markdown.parent)
         grid = grid_section(arms, directory, figures_dir, out_markdown.parent)
+        opening = summary(arms, directory)
+        replications = replication_section(arms, directory)
     for error in skipped:
         warn(f"{Path(source) / error.file}: {error.problem}; run skipped")
     claims, sensitivity = _claim_rows(arms)
     wall = sum(r.metrics[-1]["wall_time"] for a in arms for r in a.runs)
-    doc = ["# Results: the paper's claims over seeds", "",
+    doc = ["# Results: the paper's claims over seeds", "", *opening,
            f"{sum(len(a.runs) for a in arms)} complete runs in {len(arms)} arms of `{suite_name}`; total training "
            f"wall time {wall / 60:.1f} min (sum over runs); every run's metrics in [{PER_SEED}]({PER_SEED}). "
            "Regenerate it from the committed per-run data, without training:", "", f"    {REGENERATE[0]}", "",
@@ -296,11 +299,11 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
             "| claim | bayes arm | ce arm | metric per arm | verdict | flips |",
             "| --- | --- | --- | --- | --- | --- |",
             *(sensitivity or ["| — | no sensitivity arms | | | | |"]), ""]
-    doc += ["## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
+    doc += ["## Replications", "", *replications, "",
+            "## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
             "## Ablations", "", *_ablations(arms), ""]
     doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators", "", *estimators,
-            "", "## The Bayesian loss where it can act: σ0² below the variance cap", "", *sigma0_section(arms), "",
-            "## Demonstration quality × quantity", "", *grid, "",
+            "", "## Demonstration quality × quantity", "", *grid, "",
             "## Demonstrations", "", demos_text(), "", "## Wall time", "", *sweeps, ""]
     # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
     text = "\n".join(doc).replace(str(directory), suite_name)

@@ -23,7 +23,7 @@ from ..config import QUICK, Config, parse_assignments, preset_defaults
 from ..envs import task_slug
 from ..errors import ConfigError
 from ..tasks import TASKS
-from .claims import CLAIMS, PAPER_READING_STEPS
+from .claims import CLAIMS, PAPER as PAPER_READING, PAPER_READING_STEPS
 from .plans import planned_seeds
 
 @dataclass(frozen=True)
@@ -94,12 +94,6 @@ def on_task(arms: Sequence[Arm], task: str | None, assignments: Sequence[str] = 
 PAPER_SETTINGS = (("C1", "cartpole", "naive"), ("C1", "cartpole-200", "naive"), ("C3", "cartpole", "bootstrap"),
                   ("C4", "mountaincar-goals", "bootstrap"))
 """The paper's settings (ALGORITHM.md §7) and the claim whose power plan sets each one's seeds."""
-C2_PAPER_READING_SEEDS = 10
-"""C2's plan asks for 69–108 seeds per arm (docs/PREREGISTRATION.md §5), beyond any session's budget:
-the paper's reading gets 10, today's reading shares C1's cartpole-200 arms, and the report states
-the power that gives."""
-
-
 def claim_seeds(claim_id: str, task: str) -> int:
     """The planned seeds per arm of `claim_id` on its setting of `task` (plans.PLANNED_SEEDS)."""
     setting = next(s for c in CLAIMS if c.id == claim_id for s in c.settings if s.task == task)
@@ -120,9 +114,10 @@ fire, so no early stop, and a budget of at least 300 episodes (300 × 200 steps)
 
 def _paper() -> list[Arm]:
     """C1–C4 (ALGORITHM.md §7): ce vs bayes in the paper's settings, each with its planned seeds,
-    and C2 also under the paper's own reading."""
+    and C2 also under the paper's own reading (its seeds planned on the archive's collapse rate,
+    PREREGISTRATION §11)."""
     arms = [arm(t, m, loss, claim_seeds(claim, t)) for claim, t, m in PAPER_SETTINGS for loss in ("ce", "bayes")]
-    return arms + [arm("cartpole-200", "naive", loss, C2_PAPER_READING_SEEDS, **C2_PAPER_READING)
+    return arms + [arm("cartpole-200", "naive", loss, planned_seeds("C2", PAPER_READING), **C2_PAPER_READING)
                    for loss in ("ce", "bayes")]
 
 

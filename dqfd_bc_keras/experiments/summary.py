@@ -1,0 +1,139 @@
+"""The opening of RESULTS.md: what holds, what does not, what is unknown and what has not run,
+each with its number, computed from the same runs and files as the tables below it, so it
+regenerates with them and can say nothing they do not show.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Config
+from .arms import ArmRuns, find_arm
+from .claims import CLAIMS, GOALS_MARGIN, RETURN_MARGIN, SHARE_MARGIN, dynamic_default, judge
+from .efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
+from .estimators import CALIBRATION_FILE, meets_goal
+from .grid import BC_ALONE, DQN, collect, effect
+from .replicate import replicated
+from .suites import ALL, EFFICIENCY_TASKS, PROTOCOL, SUITES
+
+UNKNOWN = ("inconclusive", "not reproduced")
+
+
+def _claims(arms: list[ArmRuns]) -> dict[str, list[str]]:
+    """Each claim setting's reference verdict in one line, filed under holds / does not hold / unknown."""
+    filed: dict[str, list[str]] = {"holds": [], "does not hold": [], "unknown": [], "not run": []}
+    for claim in CLAIMS:
+        for setting in claim.settings:
+            where = f"{claim.id} on {setting.name}" + (f" ({setting.reading.split(':')[0]})" if setting.reading else "")
+            pairs = setting.pairs(arms)
+            if not pairs or pairs[0][1] is None:
+                filed["not run"].append(where)
+                continue
+            bayes, ce = pairs[0]
+            result = judge(claim, bayes, ce)
+            c = result.comparisons[0]
+            margin = (f"±{RETURN_MARGIN * bayes.runs[0].config.limit:g}" if claim.id in ("C1", "C3") else
+                      f"±{SHARE_MARGIN:g}" if claim.id == "C2" else f"+{GOALS_MARGIN:g}")
+            interval = "—" if c.tost is None else f"{c.tost[0]:.2f} … {c.tost[1]:.2f}"
+            power = "" if result.power is None else f", power {result.power:.2f}"
+            line = (f"{where}: **{result.verdict}**: `{c.metric}` bayes {c.bayes.mean:.4g} · ce {c.ce.mean:.4g}, "
+                    f"90% CI of bayes − ce {interval} against {margin} ({len(bayes.runs)} and {len(ce.runs)} seeds"
+                    f"{power}).")
+            filed["unknown" if result.verdict.startswith(UNKNOWN) else result.verdict].append(line)
+    return filed
+
+
+def _efficiency(arms: list[ArmRuns], directory: Path) -> list[str]:
+    """SB3's median ÷ bayes's per task (the efficiency table) and, where the archive holds more
+    seeds of the same bayes arm, the same ratio over all of them."""
+    loaded = load(directory / EFFICIENCY_FILE)
+    if loaded is None:
+        return []
+    _, steps = loaded
+    sb3 = {a.task: a.steps for a in steps if a.method == SB3_METHOD}
+    lines = []
+    for a in steps:
+        if a.method != "bayes" or a.task not in sb3:
+            continue
+        point, low, high = ratio_ci(sb3[a.task], a.steps)
+        text = (f"{a.task}: SB3 ÷ bayes {point:.1f}× [{low:.1f}×, {high:.1f}×] over {a.steps.size} seeds, the "
+                f"{a.target:g}× goal {'met' if point >= a.target else 'not met'}")
+        same = Config.for_task(a.task, expert_loss="bayes", demo_episodes=EFFICIENCY_TASKS[a.task], **PROTOCOL)
+        run = find_arm(arms, same)
+        if run is not None and len(run.runs) > a.steps.size:
+            more = ratio_ci(sb3[a.task], run.values("interactions_to_threshold"))
+            text += (f"; over all {len(run.runs)} archived seeds of the same arm {more[0]:.1f}× [{more[1]:.1f}×, "
+                     f"{more[2]:.1f}×], goal {'met' if more[0] >= a.target else 'not met'}")
+        lines.append(text + ".")
+    return lines
+
+
+def _estimators(directory: Path) -> list[str]:
+    path = directory / CALIBRATION_FILE
+    if not path.is_file():
+        return []
+    summary = json.loads(path.read_text())
+    estimators = sorted({u for entries in summary["tasks"].values() for u in entries})
+    met = [u for u in estimators if all(meets_goal(entries[u]) for entries in summary["tasks"].values())]
+    return [f"σ² estimators that meet the calibration goal (≥ {summary['goal_ratio']:g}× the on-demo σ² − σ0² off "
+            f"the demonstrations, on every task): {len(met)} of {len(estimators)}, {', '.join(met) or 'none'}."]
+
+
+def _grid(arms: list[ArmRuns], directory: Path) -> list[str]:
+    cells, table = collect(arms, directory)
+    dqn = table.get(DQN, {})
+    verdicts = [effect(entries[c], dqn[c]) for method, entries in table.items() if method not in (DQN, BC_ALONE)
+                for c in cells if c in entries and c in dqn]
+    if not verdicts:
+        return []
+    return [f"Demonstration quality × quantity (CartPole): a method with demonstrations is faster than DQN in "
+            f"{verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
+            f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}."]
+
+
+def _replications(arms: list[ArmRuns], directory: Path) -> list[str]:
+    found = replicated(arms, directory)
+    if not found:
+        return []
+    tests = [c for *_, comparisons in found for c in comparisons]
+    differ = [f"{archived.label}: {c.metric} (p = {c.p:.2g})" for archived, _, comparisons in found
+              for c in comparisons if c.p < 0.05]
+    return [f"Replications at fresh seeds: {len(found)} arms, {len(tests)} rank tests, "
+            f"{len(differ)} with p < 0.05{': ' + '; '.join(differ) if differ else ''}."]
+
+
+def _not_run(arms: list[ArmRuns]) -> list[str]:
+    """Per suite of `run all`: how many of its arms have no run here, and how many seeds are missing."""
+    lines = []
+    for name in ALL:
+        missing, seeds = 0, 0
+        for a in SUITES[name]:
+            found = find_arm(arms, a.config(0))
+            have = 0 if found is None else sum(r.config.seed < a.seeds for r in found.runs)
+            missing += have == 0
+            seeds += a.seeds - have
+        if seeds:
+            lines.append(f"`{name}`: {missing} of {len(SUITES[name])} arms not run, {seeds} planned runs missing.")
+    return lines
+
+
+def summary(arms: list[ArmRuns], directory: Path) -> list[str]:
+    """The summary's lines (markdown), computed from `arms` and the suite `directory`'s files."""
+    claims = _claims(arms)
+    choice, _ = dynamic_default(arms)
+    found = [*_efficiency(arms, directory), *_estimators(directory), *_grid(arms, directory),
+             *_replications(arms, directory),
+             *([f"Dynamic demonstrations: the pre-registered rule picks `{choice}` as the default."] if choice else [])]
+    lines = ["## Summary", "", "Computed from the tables below (it regenerates with them); the numbers are the "
+             "judged metric's means, the TOST interval (90% CI) and the margin of each claim's rule.", ""]
+    for title, key in (("Holds", "holds"), ("Does not hold", "does not hold"), ("Unknown", "unknown")):
+        lines += [f"**{title}**", "", *(f"- {line}" for line in claims[key] or ["none"]), ""]
+    lines += ["**Measured beside the claims**", "", *(f"- {line}" for line in found or ["nothing"]),
+              "- Studies with their own archives and reports: the Bayesian loss with σ0² below the variance cap "
+              "([SIGMA0.md](SIGMA0.md)) and MinAtar Breakout on frames ([PIXELS.md](PIXELS.md)).", ""]
+    gaps = [*(f"claim {where}" for where in claims["not run"]), *_not_run(arms)]
+    lines += ["**Not run yet**", "", *(f"- {line}" for line in gaps or ["nothing: every planned run is here"]), ""]
+    return lines
