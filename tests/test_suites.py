@@ -93,6 +93,25 @@ def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
     assert (logged["suite"], logged["runs"], logged["interrupted"]) == ("quick", 1, True)
 
 
+def test_a_sweep_in_an_unpacked_archive_runs_only_what_it_lacks(tmp_path):
+    """An exported run has eval.json and no checkpoints/: complete, never retrained or replaced. One
+    with checkpoints/ started here and was cut off in its final phase: it is resumed."""
+    from dqfd_bc_keras.experiments.sweep import run_jobs
+
+    bayes, ce = SUITES["quick"]
+    archived = Job(bayes, 0, tmp_path)
+    archived.directory.mkdir(parents=True)
+    (archived.directory / "eval.json").write_text("{}")
+    cut_off = Job(ce, 0, tmp_path)
+    (cut_off.directory / "checkpoints").mkdir(parents=True)
+    (cut_off.directory / "eval.json").write_text("{}")
+    assert archived.complete and not cut_off.complete
+    lines = []
+    assert run_jobs([archived], tmp_path, "unpacked", 1, workers=1, progress=lines.append) == []
+    assert lines == ["unpacked: 1 runs, 1 already complete, 0 to run on 1 local worker(s)"]
+    assert [p.name for p in archived.directory.iterdir()] == ["eval.json"]
+
+
 def test_unknown_suite_or_backend_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="unknown suite 'everything'"):
         suite_arms("everything")

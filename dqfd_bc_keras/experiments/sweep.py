@@ -47,7 +47,12 @@ class Job:
 
     @property
     def complete(self) -> bool:
-        return (self.directory / COMPLETE).is_file()
+        """Finished here (complete.json), or a finished run unpacked from an archive: its eval.json
+        without checkpoints/ (`export` keeps none, and a run started here has one until it is
+        done). Neither is run again, so resuming a sweep in an unpacked archive trains only what
+        it lacks and never replaces an archived run."""
+        d = self.directory
+        return (d / COMPLETE).is_file() or ((d / "eval.json").is_file() and not (d / "checkpoints").exists())
 
 
 @dataclass
