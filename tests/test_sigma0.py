@@ -83,3 +83,28 @@ def test_runs_from_before_the_weights_were_logged_show_none_and_nothing_ran_says
     assert sigma0.weights(result.bayes) is None
     assert sigma0.sigma0_section(group_arms(ce))[0].startswith("Not run:")
     assert np.isnan(old[0].column("imitation_weight_demo")).all()
+
+
+def test_the_study_report_command_writes_its_markdown_and_refuses_a_bad_source(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from test_claims import write_run
+
+    suite = tmp_path / "suite"
+    for run in (c3_runs(suite, "ce", [[100 + s] * 5 for s in range(3)]) +
+                c3_runs(suite, "bayes", [[300 + s] * 5 for s in range(3)], weights=(25.0, 5.0),
+                        uncertainty="distance", sigma0_sq=0.02)):
+        write_run(run)
+    repo = Path(__file__).resolve().parents[1]
+    command = [sys.executable, "-m", "dqfd_bc_keras.experiments.sigma0"]
+    done = subprocess.run([*command, suite, "--report", tmp_path / "SIGMA0.md"], capture_output=True, text=True,
+                          cwd=repo, timeout=300)
+    assert done.returncode == 0, done.stderr
+    text = (tmp_path / "SIGMA0.md").read_text()
+    assert text.startswith("# The Bayesian loss where it can act") and "Provenance" in text
+    assert "| C3 | distance | 0.02 | 3 | 301.0 · 101.0 |" in text and "25.00 · 5.00 · ×5.00 (acts)" in text
+    assert text in done.stdout
+    done = subprocess.run([*command, tmp_path / "nothing"], capture_output=True, text=True, cwd=repo, timeout=300)
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
