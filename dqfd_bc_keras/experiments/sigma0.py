@@ -76,7 +76,14 @@ class Result:
                        else "inconclusive")
             return f"Δ {comparison.interval(1)}: {verdict}"
         point, low, high = ratio_ci(self.ce.values(self.metric), self.bayes.values(self.metric))
-        return f"ce ÷ bayes {point:.2f} [{low:.2f}, {high:.2f}]"
+        if np.isnan(point):
+            return "ce ÷ bayes undefined (both medians 0 or ∞)"
+        interval = "CI undefined" if np.isnan(low) else f"{_times(low)}, {_times(high)}"
+        return f"ce ÷ bayes {_times(point)} [{interval}]"
+
+
+def _times(value: float) -> str:
+    return "∞" if np.isinf(value) else f"{value:.2f}"
 
 
 def _seeds(arm: ArmRuns, n: int) -> ArmRuns:
