@@ -74,6 +74,7 @@ def test_a_clear_win_survives_holm_over_the_family_and_a_tie_does_not(tmp_path):
     text = "\n".join(sigma0.sigma0_section(group_arms(ce + win + tie)))
     assert "25.00 · 5.00 · ×5.00 (acts)" in text and "5.00 · 4.00 · ×1.25 |" in text
     assert "measurably better than ce in any setting? yes**: 1 of 4" in text and "28 of 32 not run" in text
+    assert "reaches 1.5 (*acts*) in: distance 2 of 4; mc_dropout 0 of 0 arms." in text
 
 
 def test_runs_from_before_the_weights_were_logged_show_none_and_nothing_ran_says_so(tmp_path):

@@ -142,6 +142,9 @@ def sigma0_section(arms: list[ArmRuns]) -> list[str]:
         rows.append(f"| {r.setting} | {r.uncertainty} | {r.sigma0_sq:g} | {len(r.bayes.runs)} | "
                     f"{_median(r.bayes, r.metric)} · {_median(r.ce, r.metric)} | {r.margin_rule()} | "
                     f"{r.p:.3g} · {r.p_holm:.3g} | **{r.verdict}** | {mechanism} |")
+    acts = {u: [r for r in found if r.uncertainty == u and (w := weights(r.bayes)) and w[0] / w[1] >= ACTS]
+            for u in SIGMA0_ESTIMATORS}
+    mechanism = "; ".join(f"{u} {len(acts[u])} of {sum(r.uncertainty == u for r in found)}" for u in SIGMA0_ESTIMATORS)
     better = [r for r in found if r.verdict == "better"]
     worse = [r for r in found if r.verdict == "worse"]
     answer = ("yes" if better and not worse else "no")
@@ -156,7 +159,8 @@ def sigma0_section(arms: list[ArmRuns]) -> list[str]:
         "| setting | estimator | σ0² | seeds | bayes · ce | margin rule | p · Holm | verdict | weight on · off · ratio |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |", *rows, "",
         f"**Is the Bayesian loss measurably better than ce in any setting? {answer}**: {len(better)} of {len(found)} "
-        f"comparisons run are *better*, {len(worse)} *worse* ({FAMILY - len(found)} of {FAMILY} not run yet)."]
+        f"comparisons run are *better*, {len(worse)} *worse* ({FAMILY - len(found)} of {FAMILY} not run yet). "
+        f"The weight's ratio on ÷ off the demonstrations reaches {ACTS:g} (*acts*) in: {mechanism} arms."]
 
 
 ARCHIVE = "docs/data/sigma0.tar.xz"
