@@ -171,7 +171,8 @@ def test_the_torso_is_chosen_by_the_observation_and_refused_where_it_cannot_read
 
 def test_a_minatar_run_trains_and_evaluates_end_to_end(tmp_path):
     out = tmp_path / "run"
-    done = run("train.py", "--task", "minatar-breakout", "--quick", "--out", out)
+    done = run("train.py", "--task", "minatar-breakout", "--quick", "--set", "total_steps=300", "--set", "eval_every=150",
+               "--out", out)
     assert done.returncode == 0, done.stderr
     config = json.loads((out / "config.json").read_text())
     assert config["observation"]["frames"] == {"shape": [10, 10, 4], "scale": 1.0, "stack": 1}

@@ -189,25 +189,24 @@ def test_a_run_checkpoint_restores_the_estimator_for_a_resume(demos, held_out, t
         np.testing.assert_allclose(restored, original, rtol=1e-6)
 
 
-def test_a_run_logs_the_imitation_weight_on_and_off_the_demonstrations(tmp_path):
+def test_a_run_logs_the_imitation_weight_on_and_off_the_demonstrations(tmp_path, demos, bc_models):
     """train.py with the distance estimator at σ0² = 0.1: on D_demo's states (its references, d = 0)
     σ² = σ0², so the weight 1/(2σ²) is 1/(2·0.1) = 5; on the agent's own states it lies between
     1/(2(σ0² + v)) with v = 1/4 (CartPole's largest policy variance), 1.43, and 5, and below 5 once
-    the agent leaves the demonstrations. ce reads no σ²: its columns are empty."""
+    the agent leaves the demonstrations. ce reads no σ²: no weight (its columns are empty)."""
     import csv
     import subprocess
     import sys
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    for loss in ("bayes", "ce"):
-        done = subprocess.run([sys.executable, "train.py", "--task", "cartpole", "--quick", "--expert-loss", loss,
-                               "--set", "uncertainty=distance", "--set", "sigma0_sq=0.1", "--set", "dynamic_demos=off",
-                               "--out", tmp_path / loss], capture_output=True, text=True, timeout=600, cwd=repo)
-        assert done.returncode == 0, done.stderr
-    bayes = list(csv.DictReader((tmp_path / "bayes" / "metrics.csv").open()))
-    on, off = ([float(r[f"imitation_weight_{kind}"]) for r in bayes] for kind in ("demo", "agent"))
-    assert on == pytest.approx([5.0] * len(bayes), rel=1e-4)
+    done = subprocess.run([sys.executable, "train.py", "--task", "cartpole", "--quick", "--expert-loss", "bayes",
+                           "--set", "uncertainty=distance", "--set", "sigma0_sq=0.1", "--set", "dynamic_demos=off",
+                           "--out", tmp_path / "bayes"], capture_output=True, text=True, timeout=600, cwd=repo)
+    assert done.returncode == 0, done.stderr
+    rows = list(csv.DictReader((tmp_path / "bayes" / "metrics.csv").open()))
+    on, off = ([float(r[f"imitation_weight_{kind}"]) for r in rows] for kind in ("demo", "agent"))
+    assert on == pytest.approx([5.0] * len(rows), rel=1e-4)
     assert all(1 / (2 * 0.35) - 1e-4 <= w <= 5.0 + 1e-4 for w in off) and min(off) < 4.9
-    ce = list(csv.DictReader((tmp_path / "ce" / "metrics.csv").open()))
-    assert {r["imitation_weight_demo"] for r in ce} == {""} == {r["imitation_weight_agent"] for r in ce}
+    ce = make_agent(Config.for_task("cartpole", expert_loss="ce"), demos, bc_models["ce"])
+    assert ce.imitation_weights() == (None, None)
