@@ -8,8 +8,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
-
 from ..config import Config
 from .arms import ArmRuns, find_arm
 from .claims import CLAIMS, GOALS_MARGIN, RETURN_MARGIN, SHARE_MARGIN, dynamic_default, judge
