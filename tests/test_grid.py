@@ -12,10 +12,10 @@ import pytest
 
 from dqfd_bc_keras.experiments.estimators import (CALIBRATION_FILE, OFF_DEMO, STATE_SETS, best_other,
                                                   estimators_section, meets_goal)
-from dqfd_bc_keras.experiments.grid import (BC_ALONE, DQN, GRID_FILE, TEACHER_RETURNS, Cell, Entry, effect,
-                                            escapes)
+from dqfd_bc_keras.envs import get_task
+from dqfd_bc_keras.experiments.grid import BC_ALONE, DQN, GRID_FILE, Cell, Entry, effect, escapes
 from dqfd_bc_keras.experiments.imitation import IMITATION_DIR
-from dqfd_bc_keras.experiments.suites import GRID_METHODS, SUITES, grid_arms, grid_cells
+from dqfd_bc_keras.experiments.suites import GRID_METHODS, GRID_TASKS, SUITES, grid_arms, grid_cells
 from dqfd_bc_keras.experts import expert_returns
 
 REPO = Path(__file__).resolve().parents[1]
@@ -27,25 +27,37 @@ def lab(*args, timeout=600):
                           text=True, timeout=timeout, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
 
 
-@pytest.mark.parametrize("teacher", sorted(TEACHER_RETURNS))
-def test_teacher_means_are_the_measured_ones(teacher):
+TEACHERS = [(task, teacher) for task in GRID_TASKS for teacher in sorted(get_task(task).lab.grid_teachers)]
+
+
+@pytest.mark.parametrize("task, teacher", TEACHERS)
+def test_teacher_means_are_the_measured_ones(task, teacher):
     expert, epsilon = teacher
-    measured = expert_returns("cartpole", expert, episodes=100, seed=0, epsilon=epsilon).mean()
-    assert round(measured, 2) == TEACHER_RETURNS[teacher]
+    measured = expert_returns(task, expert, episodes=100, seed=0, epsilon=epsilon).mean()
+    assert round(measured, 2) == get_task(task).lab.grid_teachers[teacher]
 
 
-def test_the_grid_is_every_method_on_every_cell_with_plain_dqn_once():
+def test_the_grid_is_every_method_on_every_cell_of_each_task_with_plain_dqn_once():
     cells = grid_cells()
     assert len(cells) == 12 and {c["demo_episodes"] for c in cells} == {1, 5, 20}
-    assert {(c["expert"], c["expert_epsilon"]) for c in cells} == set(TEACHER_RETURNS)
     arms = SUITES["demos"]
-    assert len(arms) == 1 + 12 * len(GRID_METHODS) and sum(a.expert_loss == "none" for a in arms) == 1
+    assert GRID_TASKS == ("cartpole", "mountaincar") and len(arms) == 2 * (1 + 12 * len(GRID_METHODS))
+    for task in GRID_TASKS:
+        assert {(c["expert"], c["expert_epsilon"]) for c in cells} == set(get_task(task).lab.grid_teachers)
+        on_task = [a for a in arms if a.task == task]
+        assert len(on_task) == 1 + 12 * len(GRID_METHODS) and sum(a.expert_loss == "none" for a in on_task) == 1
     assert all(a.seeds == 5 for a in arms) and len({a.name for a in arms}) == len(arms)
-    # The preset's own cell (imperfect × 5) is the efficiency suite's arms: its runs are shared.
-    assert {a.name for a in arms} >= {"cartpole-bootstrap-ce", "cartpole-bootstrap-bayes", "cartpole-bootstrap-none"}
+    # CartPole's own cell (imperfect × 5) is the efficiency suite's arms, and plain DQN on both tasks: runs shared
+    # (MountainCar's efficiency arms demonstrate 10 episodes, none of the grid's cells).
+    efficiency = {a.name for a in SUITES["efficiency"]}
+    assert {a.name for a in arms} & efficiency == {"cartpole-bootstrap-ce", "cartpole-bootstrap-bayes",
+                                                   "cartpole-bootstrap-margin", "cartpole-bootstrap-none",
+                                                   "mountaincar-bootstrap-none-eval1000"}
     config = next(a for a in arms if a.name == "cartpole-bootstrap-sqil-strong-eps0.5-demos20").config(3)
     assert (config.expert, config.expert_epsilon, config.demo_episodes, config.seed) == ("strong", 0.5, 20, 3)
-    assert all(a.config(0).total_steps == 600 and a.seeds == 1 for a in grid_arms(quick_budget=True))
+    config = next(a for a in arms if a.name == "mountaincar-bootstrap-bayes-strong-eps0.2-demos1-distance-eval1000").config(0)
+    assert (config.task, config.total_steps, config.early_stop_window, config.eval_every) == ("mountaincar", 100_000, 0, 1_000)
+    assert all(a.config(0).total_steps == 600 and a.seeds == 1 for a in grid_arms("cartpole", quick_budget=True))
 
 
 @pytest.mark.parametrize("method, dqn, expected", [
@@ -62,12 +74,13 @@ def test_help_and_hurt_read_the_ratio_interval_against_1(method, dqn, expected):
 
 
 def test_escaping_a_teacher_needs_the_whole_interval_above_its_mean():
-    cell = Cell("imperfect", 0.0, 5)
-    assert cell.teacher_return == 198.06 and cell.name == "imperfect × 5"
+    cell = Cell("cartpole", "imperfect", 0.0, 5)
+    assert cell.teacher_return == 198.06 and cell.name == "imperfect × 5" and cell.threshold == 475
     above = Entry(np.full(5, 1000.0), np.array([300.0, 320, 500, 450, 210]))
     straddling = Entry(np.full(5, 1000.0), np.array([150.0, 300, 190, 250, 180]))
     assert escapes(above, cell) and not escapes(straddling, cell)
-    assert Cell("strong", 0.5, 1).teacher == "strong ε=0.5"
+    assert Cell("cartpole", "strong", 0.5, 1).teacher == "strong ε=0.5"
+    assert Cell("mountaincar", "strong", 0.5, 1).teacher_return == -189.23 < Cell("mountaincar", "strong", 0, 1).threshold
 
 
 def test_grid_quick_runs_every_method_writes_the_tables_and_heatmaps_and_skips_finished_runs(tmp_path):
@@ -76,8 +89,8 @@ def test_grid_quick_runs_every_method_writes_the_tables_and_heatmaps_and_skips_f
     text = (tmp_path / GRID_FILE).read_text()
     rows = {line.split(" | ")[0].lstrip("| ") for line in text.splitlines() if line.startswith("| ")}
     assert {DQN, "margin", "ce", "bayes (mc_dropout)", "bayes (distance)", "SQIL", BC_ALONE} <= rows
-    assert "| method | strong ε=0.5 × 1 |\n" in text
-    for name in ("grid-interactions.png", "grid-final.png"):
+    assert "| method | strong ε=0.5 × 1 |\n" in text and "### cartpole" in text and "mountaincar" not in text
+    for name in ("grid-cartpole-interactions.png", "grid-cartpole-final.png"):
         assert (tmp_path / "figures" / name).stat().st_size > 10_000
     bc = json.loads((tmp_path / IMITATION_DIR / "cartpole-bootstrap-bc-alone-strong-eps0.5-demos1-quick" / "seed0.json")
                     .read_text())

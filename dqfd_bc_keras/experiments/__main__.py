@@ -14,7 +14,7 @@ from importlib.util import find_spec
 from pathlib import Path
 
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
-from .suites import ALL, EFFICIENCY_TASKS, SUITES, on_task
+from .suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, SUITES, on_task
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
@@ -87,9 +87,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     grid = commands.add_parser(
         "grid", help="the demonstration quality × quantity grid: runs, BC alone, GRID.md and heatmaps",
         description="Runs every missing run of the grid (suite `demos`) and of BC alone into OUT, then writes "
-                    "OUT/GRID.md and OUT/figures/grid-*.png (docs/PREREGISTRATION.md §8).")
+                    "OUT/GRID.md and OUT/figures/grid-TASK-*.png (docs/PREREGISTRATION.md §8, §12).")
     grid.add_argument("--out", required=True, help="suite directory")
-    grid.add_argument("--quick", action="store_true", help="2 cells, 1 seed, the QUICK budget (about a minute)")
+    grid.add_argument("--task", choices=GRID_TASKS, action="append",
+                      help="run this task's grid only (repeatable; default: every task's); GRID.md shows all that ran")
+    grid.add_argument("--quick", action="store_true", help="1 cell of CartPole, 1 seed, the QUICK budget (about a minute)")
     grid.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: 5)")
     grid.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     rep2 = commands.add_parser(
@@ -138,7 +140,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.command == "grid":
         from .grid import run_grid
 
-        run_grid(args.out, args.quick, args.seeds, args.workers, progress=lambda line: print(line, flush=True))
+        run_grid(args.out, args.quick, args.seeds, args.workers, progress=lambda line: print(line, flush=True),
+                 tasks=tuple(args.task) if args.task else None)
     elif args.command == "calibrate":
         from .estimators import main as calibrate
 

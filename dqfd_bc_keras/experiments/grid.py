@@ -1,10 +1,11 @@
 """When do demonstrations help or hurt? The quality × quantity grid (PREREGISTRATION §8).
 
     python -m dqfd_bc_keras.experiments grid --out results          # runs, BC alone, GRID.md, heatmaps
+    python -m dqfd_bc_keras.experiments grid --task mountaincar --out results   # one task's grid
     python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 1 cell, 1 seed, QUICK budget
 
-Per cell (teacher × demonstrated episodes) and method: the median over seeds of counted
-interactions until a greedy evaluation reaches the solved threshold (∞: never), and of the final
+On each task of `GRID_TASKS` (CartPole, MountainCar), per cell (teacher × demonstrated episodes)
+and method: the median over seeds of counted interactions until a greedy evaluation reaches the solved threshold (∞: never), and of the final
 evaluation minus the teacher's 100-episode mean. Against plain DQN (no demonstrations) a method
 *helps* in a cell if the 95% bootstrap CI of DQN's median ÷ its median lies wholly above 1,
 *hurts* if wholly below; it *escapes* a teacher below the threshold if its median final return
@@ -29,17 +30,16 @@ from .metrics import interactions_to_threshold
 from .data import load_runs
 from .efficiency import ratio_ci, teacher_verdict
 from .imitation import imitation_arms, load_imitation, run_imitation
-from .suites import GRID_TASK, SUITES, Arm, grid_arms, grid_cells
+from .suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
 from .sweep import run_suite
 
-TEACHER_RETURNS = get_task(GRID_TASK).lab.grid_teachers
-"""Each teacher's mean plain return on the grid's task (its preset's `lab.grid_teachers`, tasks/)."""
 BC_ALONE, DQN = "BC alone", "DQN (no demos)"
 GRID_FILE = "GRID.md"
 
 
 @dataclass(frozen=True)
 class Cell:
+    task: str
     expert: str
     epsilon: float
     episodes: int
@@ -54,7 +54,12 @@ class Cell:
 
     @property
     def teacher_return(self) -> float:
-        return TEACHER_RETURNS[self.expert, self.epsilon]
+        """The teacher's mean plain return over 100 episodes (its preset's `lab.grid_teachers`, tasks/)."""
+        return get_task(self.task).lab.grid_teachers[self.expert, self.epsilon]
+
+    @property
+    def threshold(self) -> float:
+        return float(get_task(self.task).solved_return)
 
 
 @dataclass
@@ -74,15 +79,16 @@ def method_name(a: Arm) -> str:
 
 def _cell(a: Arm) -> Cell:
     config = dataclasses.replace(a, expert_loss="ce").config(0)
-    return Cell(config.expert, config.expert_epsilon, config.demo_episodes)
+    return Cell(config.task, config.expert, config.expert_epsilon, config.demo_episodes)
 
 
-def collect(arms: list[ArmRuns], suite_dir: Path, quick: bool = False) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
-    """The grid's cells and {method: {cell: Entry}} from the suite's arms and BC alone's files."""
-    cells = [Cell(c["expert"], float(c["expert_epsilon"]), int(c["demo_episodes"])) for c in grid_cells(quick)]
+def collect(arms: list[ArmRuns], suite_dir: Path, task: str,
+            quick: bool = False) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
+    """`task`'s cells and {method: {cell: Entry}} from the suite's arms and BC alone's files."""
+    cells = [Cell(task, c["expert"], float(c["expert_epsilon"]), int(c["demo_episodes"])) for c in grid_cells(quick)]
     by_config = {_key(a.config): a for a in arms}
     table: dict[str, dict[Cell, Entry]] = {}
-    for a in grid_arms(quick):
+    for a in grid_arms(task, quick):
         found = by_config.get(_key(a.config(0).to_dict()))
         runs = [r for r in found.runs if r.config.seed < a.seeds] if found else []  # the grid's seeds only
         if not runs:
@@ -94,7 +100,7 @@ def collect(arms: list[ArmRuns], suite_dir: Path, quick: bool = False) -> tuple[
             table.setdefault(method_name(a), {})[cell] = entry
     imitation = load_imitation(suite_dir)
     for a in imitation_arms(quick):
-        if imitation.get(a.name):
+        if a.task == task and imitation.get(a.name):
             finals = np.array([r["mean_return"] for r in imitation[a.name]], float)
             table.setdefault(BC_ALONE, {})[_cell(a)] = Entry(np.full(finals.size, np.nan), finals)
     return cells, table
@@ -109,7 +115,7 @@ def grid_only(config: dict) -> bool:
 @functools.cache
 def _grid_only_keys() -> frozenset[str]:
     others = {_key(a.config(0).to_dict()) for name, arms in SUITES.items() if name != "demos" for a in arms}
-    return frozenset({_key(a.config(0).to_dict()) for a in grid_arms()} - others)
+    return frozenset({_key(a.config(0).to_dict()) for a in all_grid_arms()} - others)
 
 
 def _key(config: dict) -> str:
@@ -148,7 +154,7 @@ def tables(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]:
                 mark = {"helps": " ↑", "hurts": " ↓", "unclear": ""}[effect(entry, dqn[cell])]
             reached = int(np.isfinite(entry.steps).sum())
             row_steps.append("—" if method == BC_ALONE else f"{_steps(np.median(entry.steps))}{mark} ({reached}/{entry.steps.size})")
-            escape = " ✓" if cell.teacher_return < _threshold() and escapes(entry, cell) else ""
+            escape = " ✓" if cell.teacher_return < cell.threshold and escapes(entry, cell) else ""
             row_final.append(f"{np.median(entry.final) - cell.teacher_return:+.0f}{escape}")
         steps.append(f"| {method} | " + " | ".join(row_steps) + " |")
         final.append(f"| {method} | " + " | ".join(row_final) + " |")
@@ -164,14 +170,10 @@ def _teachers(cells: list[Cell]) -> list[Cell]:
     return list({c.teacher: c for c in cells}.values())
 
 
-def _threshold() -> float:
-    return float(get_task(GRID_TASK).solved_return)
-
-
 def answers(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]:
     """Per method: cells where it helps, hurts, and where it escapes a bad teacher (by §8's rules)."""
-    dqn, lines = table.get(DQN, {}), []
-    bad = [c for c in cells if c.teacher_return < _threshold()]
+    dqn, lines, threshold = table.get(DQN, {}), [], cells[0].threshold
+    bad = [c for c in cells if c.teacher_return < threshold]
     for method, entries in table.items():
         if method == DQN:
             continue
@@ -182,7 +184,7 @@ def answers(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]
         escaped = [c.name for c in bad if c in entries and escapes(entries[c], c)]
         speed = (f"helps in {len(helps)} of {len(judged)} cells{_list(helps)}, hurts in {len(hurts)}{_list(hurts)}; "
                  if method != BC_ALONE else "")
-        lines.append(f"- **{method}**: {speed}escapes a teacher below {_threshold():g} in "
+        lines.append(f"- **{method}**: {speed}escapes a teacher below {threshold:g} in "
                      f"{len(escaped)} of {sum(c in entries for c in bad)} cells{_list(escaped)}.")
     return lines
 
@@ -202,7 +204,7 @@ def heatmaps(cells: list[Cell], table: dict[str, dict[Cell, Entry]], path_steps:
     bound = float(np.nanmax(np.abs(final))) if np.isfinite(final).any() else 1.0
     _heatmap(path_steps, cells, methods, steps, np.log10(np.maximum(np.where(np.isfinite(steps), steps, np.nan), 1.0)),
              dict(cmap="viridis_r"), "log10 interactions", _steps,
-             f"median counted interactions to {_threshold():g} ({seeds} seeds per cell)")
+             f"median counted interactions to {cells[0].threshold:g} ({seeds} seeds per cell)")
     _heatmap(path_final, cells, methods, final, final, dict(cmap="RdBu", vmin=-bound, vmax=bound), "return − teacher",
              lambda v: f"{v:+.0f}", f"median final return − the teacher's mean ({seeds} seeds per cell)")
 
@@ -220,35 +222,49 @@ def _heatmap(path: Path, cells: list[Cell], methods: list[str], values: np.ndarr
                     fontsize=7)
         ax.set_xticks(range(len(cells)), [c.name.replace(" × ", "\n× ") for c in cells], fontsize=7)
         ax.set_yticks(range(len(methods)), methods, fontsize=8)
-        ax.set_title(f"CartPole, teacher × demonstrated episodes: {title}")
+        ax.set_title(f"{cells[0].task}, teacher × demonstrated episodes: {title}")
 
 
 def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdown_dir: Path,
-                 quick: bool = False) -> list[str]:
-    """The section of RESULTS.md (and GRID.md): tables, heatmaps and the per-method answers."""
-    cells, table = collect(arms, suite_dir, quick)
+                 quick: bool = False, tasks: tuple[str, ...] | None = None) -> list[str]:
+    """The section of RESULTS.md (and GRID.md): per task (default: every task of the grid), tables,
+    heatmaps and the per-method answers."""
+    lines = []
+    for task in tasks or grid_tasks(quick):
+        lines += [f"### {task}", "", *_task_section(arms, suite_dir, task, figures_dir, markdown_dir, quick), ""]
+    return lines[:-1]
+
+
+def _task_section(arms: list[ArmRuns], suite_dir: Path, task: str, figures_dir: Path, markdown_dir: Path,
+                  quick: bool) -> list[str]:
+    cells, table = collect(arms, suite_dir, task, quick)
     if len(table) < 2:
-        return ["Not run: `python -m dqfd_bc_keras.experiments grid --out results` runs it."]
+        return [f"Not run: `python -m dqfd_bc_keras.experiments grid --task {task} --out results` runs it."]
     seeds = max(e.final.size for entries in table.values() for e in entries.values())
-    names = ("grid-interactions.png", "grid-final.png")
+    names = (f"grid-{task}-interactions.png", f"grid-{task}-final.png")
     heatmaps(cells, table, *(figures_dir / n for n in names), seeds)
     links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
-    budget = "the QUICK budget (a test, not a result)" if quick else "preset defaults (50k steps, early stop, the sample-efficiency protocol)"
-    return [f"{GRID_TASK}, {budget}; every method with demonstrations "
+    config = grid_arms(task)[0].config(0)
+    stop = "early stop" if config.early_stop_window else "no early stop"
+    budget = ("the QUICK budget (a test, not a result)" if quick else
+              f"preset defaults ({config.total_steps // 1000}k steps, {stop}, the sample-efficiency protocol)")
+    return [f"{task}, {budget}; every method with demonstrations "
             f"has up to {seeds} seeds per cell, plain DQN one set for all cells; BC alone is the MLE BC model on the "
             "cell's demonstrations, played greedily without RL (no interaction beyond the demonstrations). "
-            "Rules: docs/PREREGISTRATION.md §8.", "", *tables(cells, table), "", *links, "",
+            "Rules: docs/PREREGISTRATION.md §8 (§12 on MountainCar).", "", *tables(cells, table), "", *links, "",
             "Per method, by those rules:", "", *answers(cells, table)]
 
 
 def run_grid(out: str | Path, quick: bool = False, seeds: int | None = None, workers: int = 2,
-             progress: Callable[[str], None] = print) -> Path:
-    """Every missing run of the grid and of BC alone into `out`, then OUT/GRID.md and its heatmaps."""
+             progress: Callable[[str], None] = print, tasks: tuple[str, ...] | None = None) -> Path:
+    """Every missing run of the grid on `tasks` (default: all) and of BC alone into `out`, then
+    OUT/GRID.md and its heatmaps (every task's, whatever ran)."""
     out = Path(out)
-    run_suite(grid_arms(quick), seeds, out, workers, progress=progress, name="demos (quick)" if quick else "demos")
-    run_imitation(out, quick, progress)
-    arms = group_arms(load_runs(out))
-    section = grid_section(arms, out, out / "figures", out, quick)
+    tasks = tasks or grid_tasks(quick)
+    arms = [a for task in tasks for a in grid_arms(task, quick)]
+    run_suite(arms, seeds, out, workers, progress=progress, name="demos (quick)" if quick else f"demos ({', '.join(tasks)})")
+    run_imitation(out, quick, progress, tasks)
+    section = grid_section(group_arms(load_runs(out)), out, out / "figures", out, quick, tasks if quick else None)
     write_text(out / GRID_FILE, "\n".join(["# Demonstration quality × quantity", "", *section, ""]))
     progress(f"wrote {out / GRID_FILE}")
     return out / GRID_FILE

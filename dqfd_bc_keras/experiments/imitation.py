@@ -26,16 +26,17 @@ from ..evaluation import GreedyPolicy, evaluate
 from ..files import write_text
 from ..seeds import final_eval_seed
 from ..training import demonstrations, fit_bc
-from .suites import Arm, grid_arms
+from .suites import Arm, grid_arms, grid_tasks
 from ..provenance import provenance
 
 IMITATION_DIR = "bc-alone"
 """The folder of the suite directory that holds BC alone's results (exported with the runs)."""
 
 
-def imitation_arms(quick_budget: bool = False) -> list[Arm]:
-    """One arm per grid cell, named as its `ce` arm with `bc-alone` for the loss."""
-    return [dataclasses.replace(a, expert_loss="bc-alone") for a in grid_arms(quick_budget) if a.expert_loss == "ce"]
+def imitation_arms(quick_budget: bool = False, tasks: tuple[str, ...] | None = None) -> list[Arm]:
+    """One arm per grid cell of each task, named as its `ce` arm with `bc-alone` for the loss."""
+    return [dataclasses.replace(a, expert_loss="bc-alone") for task in tasks or grid_tasks(quick_budget)
+            for a in grid_arms(task, quick_budget) if a.expert_loss == "ce"]
 
 
 def imitate(a: Arm, seed: int) -> dict:
@@ -54,10 +55,11 @@ def imitate(a: Arm, seed: int) -> dict:
             "train_accuracy": accuracy, **result.to_dict(), "provenance": provenance()}
 
 
-def run_imitation(out: str | Path, quick_budget: bool = False, progress: Callable[[str], None] = print) -> int:
-    """Every missing (cell, seed) of BC alone into `out`; returns how many ran."""
+def run_imitation(out: str | Path, quick_budget: bool = False, progress: Callable[[str], None] = print,
+                  tasks: tuple[str, ...] | None = None) -> int:
+    """Every missing (cell, seed) of BC alone on `tasks` (default: all the grid's) into `out`; returns how many ran."""
     ran = 0
-    for a in imitation_arms(quick_budget):
+    for a in imitation_arms(quick_budget, tasks):
         for seed in range(a.seeds):
             path = Path(out) / IMITATION_DIR / a.name / f"seed{seed}.json"
             if path.is_file():

@@ -159,7 +159,8 @@ def _sensitivity() -> list[Arm]:
 BEST_OTHER_ESTIMATOR = "distance"
 """`calibration.best_other` of docs/data/calibration.json (PREREGISTRATION §8), picked before any run with it."""
 OTHER_ESTIMATORS = (BEST_OTHER_ESTIMATOR, "ensemble")
-GRID_TASK = "cartpole"
+GRID_TASKS = ("cartpole", "mountaincar")
+"""The grid's tasks (PREREGISTRATION §8, §12); each preset's `lab.grid_teachers` holds its teachers' means."""
 GRID_TEACHERS = (("strong", 0.0), ("imperfect", 0.0), ("strong", 0.2), ("strong", 0.5))
 """(expert, ε): the strong and imperfect scripted experts, and the strong one acting at random w.p. ε."""
 GRID_EPISODES = (1, 5, 20)
@@ -170,7 +171,7 @@ GRID_METHODS = (("margin", ()), ("ce", ()), ("bayes", ()), ("bayes", (("uncertai
 
 
 QUICK_GRID = ((("strong", 0.5),), (1,))
-"""`--quick`: one cell (a bad teacher, one episode), one seed, the QUICK budget (the tests' grid)."""
+"""`--quick`: one cell (a bad teacher, one episode) of the first task, one seed, the QUICK budget (the tests' grid)."""
 
 
 def grid_cells(quick: bool = False) -> list[dict[str, object]]:
@@ -187,13 +188,22 @@ def quick(a: Arm) -> Arm:
                                label="-".join(filter(None, (a.label, "quick"))), seeds=1)
 
 
-def grid_arms(quick_budget: bool = False) -> list[Arm]:
-    """When demonstrations help or hurt (PREREGISTRATION §8): every method on every cell, and plain
-    DQN once; BC alone is `imitation.py`'s, without RL."""
-    arms = [arm(GRID_TASK, "bootstrap", "none", GRID_SEEDS, **PROTOCOL)]
-    arms += [arm(GRID_TASK, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
+def grid_tasks(quick: bool = False) -> tuple[str, ...]:
+    return GRID_TASKS[:1] if quick else GRID_TASKS
+
+
+def grid_arms(task: str, quick_budget: bool = False) -> list[Arm]:
+    """When demonstrations help or hurt on `task` (PREREGISTRATION §8, §12): every method on every
+    cell, and plain DQN once; BC alone is `imitation.py`'s, without RL."""
+    arms = [arm(task, "bootstrap", "none", GRID_SEEDS, **PROTOCOL)]
+    arms += [arm(task, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
              for cell in grid_cells(quick_budget) for loss, extra in GRID_METHODS]
     return [quick(a) for a in arms] if quick_budget else arms
+
+
+def all_grid_arms(quick_budget: bool = False) -> list[Arm]:
+    """Suite `demos`: the grid's arms on each of its tasks (`--quick`: the first task's quick cell)."""
+    return [a for task in grid_tasks(quick_budget) for a in grid_arms(task, quick_budget)]
 
 
 def _estimators() -> list[Arm]:
@@ -215,10 +225,10 @@ BAD_TEACHERS = (("imperfect", 0.0), ("strong", 0.5))
 
 def sigma0_settings() -> list[tuple[str, str, int, dict[str, object]]]:
     """(setting, task, seeds, Config fields) of the σ0² study (PREREGISTRATION §10), in its order:
-    C3's, the grid's bad-teacher cells, MountainCar's efficiency setting."""
+    C3's, the CartPole grid's bad-teacher cells, MountainCar's efficiency setting."""
     cells = [cell for cell in grid_cells() if (cell["expert"], cell["expert_epsilon"]) in BAD_TEACHERS]
     return [("C3", "cartpole", claim_seeds("C3", "cartpole"), {}),
-            *((f"grid {c['expert']} ε={c['expert_epsilon']:g} × {c['demo_episodes']}", GRID_TASK, GRID_SEEDS,
+            *((f"grid {c['expert']} ε={c['expert_epsilon']:g} × {c['demo_episodes']}", "cartpole", GRID_SEEDS,
                {**c, **PROTOCOL}) for c in cells),
             ("MountainCar efficiency", "mountaincar", 10,
              {"demo_episodes": EFFICIENCY_TASKS["mountaincar"], **PROTOCOL})]
@@ -251,7 +261,7 @@ SUITES: dict[str, list[Arm]] = {
     "ablations": _ablations(),
     "baselines": [arm(t, m, loss) for _, t, m in PAPER_SETTINGS for loss in ("none", "margin", "bc_margin")],
     "sensitivity": _sensitivity(),
-    "demos": grid_arms(),
+    "demos": all_grid_arms(),
     "estimators": _estimators(),
     "sigma0": _sigma0(),
     "quick": [Arm("cartpole", "bootstrap", loss, tuple(QUICK.items()), "quick", 2) for loss in ("bayes", "ce")],

@@ -15,7 +15,7 @@ from .efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
 from .estimators import CALIBRATION_FILE, meets_goal
 from .grid import BC_ALONE, DQN, collect, effect
 from .replicate import replicated
-from .suites import ALL, EFFICIENCY_TASKS, PROTOCOL, SUITES
+from .suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, PROTOCOL, SUITES
 
 UNKNOWN = ("inconclusive", "not reproduced")
 
@@ -81,15 +81,17 @@ def _estimators(directory: Path) -> list[str]:
 
 
 def _grid(arms: list[ArmRuns], directory: Path) -> list[str]:
-    cells, table = collect(arms, directory)
-    dqn = table.get(DQN, {})
-    verdicts = [effect(entries[c], dqn[c]) for method, entries in table.items() if method not in (DQN, BC_ALONE)
-                for c in cells if c in entries and c in dqn]
-    if not verdicts:
-        return []
-    return [f"Demonstration quality × quantity (CartPole): a method with demonstrations is faster than DQN in "
-            f"{verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
-            f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}."]
+    lines = []
+    for task in GRID_TASKS:
+        cells, table = collect(arms, directory, task)
+        dqn = table.get(DQN, {})
+        verdicts = [effect(entries[c], dqn[c]) for method, entries in table.items() if method not in (DQN, BC_ALONE)
+                    for c in cells if c in entries and c in dqn]
+        if verdicts:
+            lines.append(f"Demonstration quality × quantity ({task}): a method with demonstrations is faster than DQN "
+                         f"in {verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
+                         f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}.")
+    return lines
 
 
 def _replications(arms: list[ArmRuns], directory: Path) -> list[str]:
