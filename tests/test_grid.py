@@ -141,3 +141,9 @@ def test_calibrate_quick_measures_every_estimator_on_every_kind_of_state(tmp_pat
         assert set(entry["mean"]) == set(STATE_SETS) and all(v >= 0 for v in entry["mean"].values())
         assert all(0 <= v <= 1 for v in entry["share_of_max"].values())
     assert (tmp_path / "c.png").stat().st_size > 10_000 and "best other estimator" in done.stdout
+
+
+def test_grid_task_is_one_of_the_grids_tasks(tmp_path):
+    done = lab("grid", "--task", "acrobot", "--out", tmp_path, timeout=60)
+    assert done.returncode == 2 and "invalid choice: 'acrobot'" in done.stderr and "mountaincar" in done.stderr
+    assert not any(tmp_path.iterdir())
