@@ -479,3 +479,21 @@ def test_fields_a_loss_does_not_read_do_not_name_its_arm(tmp_path):
             for name, loss, mode in (("a", "bayes", "episodes"), ("b", "bayes", "rollouts"), ("c", "margin", "episodes"))]
     names = sorted(a.name for a in grouping.group_arms(runs))
     assert names == ["bayes dynamic_demos=episodes", "bayes dynamic_demos=rollouts", "margin"]
+
+
+def test_a_replication_compares_the_metrics_its_claim_is_judged_by(tmp_path):
+    from dqfd_bc_keras.experiments.replicate import METRICS, claim_metrics, compare
+
+    goals = [goals_arm(tmp_path / "g" / loss, loss, 1.0 + 0.1 * SPREAD) for loss in ("bayes", "ce")]
+    paper = [c2_arm(tmp_path / "p", loss, [UNFINISHED] * 2, **PAPER_FIELDS) for loss in ("bayes", "ce")]
+    today = [c2_arm(tmp_path / "t", loss, [SOLVER] * 2) for loss in ("bayes", "ce")]
+    alone = return_arm(tmp_path / "a", "bayes", [1.0, 2.0], task="acrobot", timeout="bootstrap")
+    arms = [*goals, *paper, *today, alone]
+    assert list(claim_metrics(arms, goals[0])) == list(claim_metrics(arms, goals[1])) == ["goals_first30", "goals_all"]
+    assert list(claim_metrics(arms, paper[1])) == ["collapsed", "collapses"]  # C2, the paper's reading
+    # C1 and C2 (today's reading) read the same pair
+    assert list(claim_metrics(arms, today[0])) == ["episodes_to_solve", "unfinished", "collapses"]
+    assert claim_metrics(arms, alone) == {}  # in no claim's setting: METRICS only
+    rows = compare(paper[0], paper[1].runs, arms)
+    assert [c.metric for c in rows] == [*METRICS, "collapsed", "collapses"]
+    assert rows[-1].archived == rows[-1].fresh == [2.0, 2.0] and rows[-1].p == 1.0

@@ -29,8 +29,9 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..files import write_text
-from .metrics import interactions_to_threshold
+from .metrics import PER_RUN, interactions_to_threshold
 from .arms import ArmRuns, find_arm, group_arms
+from .claims import CLAIMS, judge
 from .data import REPLICATIONS, FinishedRun, load_runs
 from .stats import mann_whitney
 from .suites import arm
@@ -42,7 +43,29 @@ METRICS: dict[str, Callable[[FinishedRun], float]] = {
     "final return": lambda run: float(run.final["mean_return"]),
     "mean training return": lambda run: float(np.mean(run.column("plain_return"))),
 }
-"""What is compared; a run that never reached the threshold counts as ∞ (ranked last)."""
+"""What is compared for every arm; a run that never reached the threshold counts as ∞ (ranked last)."""
+SAME_AS_METRICS = {"mean_train_return"}
+"""Claim metrics that METRICS already compares under another name."""
+
+
+def claim_metrics(arms: list[ArmRuns], archived: ArmRuns) -> dict[str, Callable[[FinishedRun], float]]:
+    """Beside METRICS, what the claims judge `archived` by: the metrics each claim's judge compares
+    where `archived` is one side of the pair the claim's verdict reads (C1's episodes to solve, C2's
+    unfinished runs or collapses, C4's flags)."""
+    found = {}
+    for claim in CLAIMS:
+        for setting in claim.settings:
+            pairs = setting.pairs(arms)
+            if pairs and pairs[0][1] is not None and any(archived is side for side in pairs[0]):
+                found |= {c.metric: PER_RUN[c.metric] for c in judge(claim, *pairs[0]).comparisons
+                          if c.metric not in SAME_AS_METRICS}
+    return found
+
+
+def compare(archived: ArmRuns, fresh: list[FinishedRun], arms: list[ArmRuns]) -> list[Comparison]:
+    """Each metric of METRICS and of `archived`'s claim, archived runs against fresh ones."""
+    metrics = {**METRICS, **claim_metrics(arms, archived)}
+    return [Comparison(metric, [f(r) for r in archived.runs], [f(r) for r in fresh]) for metric, f in metrics.items()]
 
 
 @dataclass(frozen=True)
@@ -76,8 +99,9 @@ def parse_seeds(text: str) -> range:
     return seeds
 
 
-def archived_runs(archive: str | Path, name: str) -> list[FinishedRun]:
-    """The runs of the arm called `name` (its directory) in `archive`; one config but for the seed."""
+def archived_runs(archive: str | Path, name: str) -> tuple[list[FinishedRun], list[FinishedRun]]:
+    """The runs of the arm called `name` (its directory) in `archive`, one config but for the seed,
+    and all the archive's runs."""
     runs = load_runs(archive)
     found = [run for run in runs if run.path.parent.name == name]
     if not found:
@@ -89,13 +113,13 @@ def archived_runs(archive: str | Path, name: str) -> list[FinishedRun]:
                for run in found}
     if len(configs) > 1:
         raise ConfigError(f"{archive}: the runs of {name!r} do not share one config")
-    return found
+    return found, runs
 
 
 def replicate(name: str, seeds: range, out: str | Path, archive: str | Path = DEFAULT_ARCHIVE, workers: int = 2,
               progress: Callable[[str], None] = print) -> list[Comparison]:
     """Rerun arm `name` of `archive` at `seeds` (none of them archived) into `out`; compare."""
-    runs = archived_runs(archive, name)
+    runs, everything = archived_runs(archive, name)
     taken = sorted(set(seeds) & {run.config.seed for run in runs})
     if taken:
         raise ConfigError(f"--seeds: the archive already has seed(s) {taken} of {name!r}; fresh seeds are ones it has not")
@@ -109,7 +133,8 @@ def replicate(name: str, seeds: range, out: str | Path, archive: str | Path = DE
     jobs = [Job(rerun, seed, out) for seed in seeds]
     run_jobs(jobs, out, f"replicate {name}", f"{seeds.start}-{seeds.stop - 1}", workers, progress=progress)
     fresh = [run for run in load_runs(out / rerun.name) if run.config.seed in seeds]
-    comparisons = [Comparison(metric, [f(r) for r in runs], [f(r) for r in fresh]) for metric, f in METRICS.items()]
+    arms = group_arms(everything)
+    comparisons = compare(next(a for a in arms if a.runs[0].path.parent.name == name), fresh, arms)
     table = "\n".join([
         f"# Replication of {name}", "",
         f"Archive: {archive} ({len(runs)} runs, seeds {min(r.config.seed for r in runs)}–"
@@ -129,8 +154,7 @@ def replicated(arms: list[ArmRuns], directory: Path) -> list[tuple[ArmRuns, ArmR
     for rerun in fresh:
         archived = find_arm(arms, rerun.runs[0].config)
         if archived is not None:
-            found.append((archived, rerun, [Comparison(metric, [f(r) for r in archived.runs], [f(r) for r in rerun.runs])
-                                            for metric, f in METRICS.items()]))
+            found.append((archived, rerun, compare(archived, rerun.runs, arms)))
     return found
 
 

@@ -102,7 +102,8 @@ def _replications(arms: list[ArmRuns], directory: Path) -> list[str]:
     differ = [f"{archived.label}: {c.metric} (p = {c.p:.2g})" for archived, _, comparisons in found
               for c in comparisons if c.p < 0.05]
     return [f"Replications at fresh seeds: {len(found)} arms, {len(tests)} rank tests, "
-            f"{len(differ)} with p < 0.05{': ' + '; '.join(differ) if differ else ''}."]
+            f"{len(differ)} with p < 0.05 (uncorrected; {0.05 * len(tests):.1f} expected by chance if none differ)"
+            f"{': ' + '; '.join(differ) if differ else ''}."]
 
 
 def _not_run(arms: list[ArmRuns]) -> list[str]:
