@@ -55,8 +55,10 @@ def test_the_grid_is_every_method_on_every_cell_of_each_task_with_plain_dqn_once
                                                    "mountaincar-bootstrap-none-eval1000"}
     config = next(a for a in arms if a.name == "cartpole-bootstrap-sqil-strong-eps0.5-demos20").config(3)
     assert (config.expert, config.expert_epsilon, config.demo_episodes, config.seed) == ("strong", 0.5, 20, 3)
-    config = next(a for a in arms if a.name == "mountaincar-bootstrap-bayes-strong-eps0.2-demos1-distance-eval1000").config(0)
-    assert (config.task, config.total_steps, config.early_stop_window, config.eval_every) == ("mountaincar", 100_000, 0, 1_000)
+    name = "mountaincar-bootstrap-bayes-strong-eps0.2-demos1-distance-eval1000"
+    config = next(a for a in arms if a.name == name).config(0)
+    assert (config.task, config.total_steps, config.early_stop_window, config.eval_every) == ("mountaincar", 100_000, 0,
+                                                                                             1_000)
     assert all(a.config(0).total_steps == 600 and a.seeds == 1 for a in grid_arms("cartpole", quick_budget=True))
 
 
@@ -81,6 +83,7 @@ def test_escaping_a_teacher_needs_the_whole_interval_above_its_mean():
     assert escapes(above, cell) and not escapes(straddling, cell)
     assert Cell("cartpole", "strong", 0.5, 1).teacher == "strong ε=0.5"
     assert Cell("mountaincar", "strong", 0.5, 1).teacher_return == -189.23 < Cell("mountaincar", "strong", 0, 1).threshold
+    assert Cell("mountaincar", "strong", 0, 1).teacher_return == -106.39  # above −110: the escape rule skips it
 
 
 def test_grid_quick_runs_every_method_writes_the_tables_and_heatmaps_and_skips_finished_runs(tmp_path):
