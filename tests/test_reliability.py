@@ -30,6 +30,13 @@ REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
 
 
+def ctrl_c_reaches() -> None:
+    """A child's SIGINT back to the default: launched from a background job without job control
+    (`nohup pytest … &`), the tests inherit SIGINT ignored, and Ctrl-C would then never reach the
+    child: the behaviour Unix means for background jobs, not the one these tests check."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def script_main(name):
     spec = importlib.util.spec_from_file_location(name.removesuffix(".py"), REPO / name)
     module = importlib.util.module_from_spec(spec)
@@ -469,7 +476,8 @@ def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
     out = tmp_path / "sweep"
     args = [sys.executable, "-m", "dqfd_bc_keras.experiments", "run", "quick", "--seeds", "2", "--workers", "2",
             "--set", "total_steps=5000", "--set", "checkpoint_every=300", "--out", str(out)]
-    process = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=ctrl_c_reaches)
     deadline = time.time() + 240
     while time.time() < deadline and process.poll() is None:
         latest = [json.loads(p.read_text())["dir"] for p in out.glob("*/seed0/checkpoints/latest.json")
@@ -541,7 +549,8 @@ def test_a_long_evaluation_shows_progress_and_an_interrupt_says_so(tmp_path, mon
     assert capsys.readouterr().err.splitlines() == ["evaluated 2 of 100 episodes (11 s)",
                                                     "evaluated 4 of 100 episodes (25 s)"]
     process = subprocess.Popen([sys.executable, "evaluate.py", "models/cartpole", "--episodes", "100000000"],
-                               cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=ctrl_c_reaches)
     time.sleep(15)  # TensorFlow's import, then episodes
     process.send_signal(signal.SIGINT)
     _, err = process.communicate(timeout=60)
