@@ -5,8 +5,8 @@
     python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 1 cell, 1 seed, QUICK budget
 
 On each task of `GRID_TASKS` (CartPole, MountainCar), per cell (teacher × demonstrated episodes)
-and method: the median over seeds of counted interactions until a greedy evaluation reaches the solved threshold (∞: never), and of the final
-evaluation minus the teacher's 100-episode mean. Against plain DQN (no demonstrations) a method
+and method: the median over seeds of counted interactions until a greedy evaluation reaches the
+solved threshold (∞: never), and of the final evaluation minus the teacher's 100-episode mean. Against plain DQN (no demonstrations) a method
 *helps* in a cell if the 95% bootstrap CI of DQN's median ÷ its median lies wholly above 1,
 *hurts* if wholly below; it *escapes* a teacher below the threshold if its median final return
 lies above the teacher's mean with the CI of that median wholly above (§7's teacher rule).
@@ -99,8 +99,8 @@ def collect(arms: list[ArmRuns], suite_dir: Path, task: str,
         for cell in targets:
             table.setdefault(method_name(a), {})[cell] = entry
     imitation = load_imitation(suite_dir)
-    for a in imitation_arms(quick):
-        if a.task == task and imitation.get(a.name):
+    for a in imitation_arms(quick, (task,)):
+        if imitation.get(a.name):
             finals = np.array([r["mean_return"] for r in imitation[a.name]], float)
             table.setdefault(BC_ALONE, {})[_cell(a)] = Entry(np.full(finals.size, np.nan), finals)
     return cells, table
