@@ -7,8 +7,8 @@
 On each task of `GRID_TASKS` (CartPole, MountainCar), per cell (teacher × demonstrated episodes)
 and method: the median over seeds of counted interactions until a greedy evaluation reaches the
 solved threshold (∞: never), and of the final evaluation minus the teacher's 100-episode mean.
-Against plain DQN (no demonstrations) a method *helps* in a cell if the 95% bootstrap CI of DQN's median ÷ its median lies wholly above 1,
-*hurts* if wholly below; it *escapes* a teacher below the threshold if its median final return
+Against plain DQN (no demonstrations) a method *helps* in a cell if the 95% bootstrap CI of DQN's
+median ÷ its median lies wholly above 1, *hurts* if wholly below; it *escapes* a teacher below the threshold if its median final return
 lies above the teacher's mean with the CI of that median wholly above (§7's teacher rule).
 """
 
