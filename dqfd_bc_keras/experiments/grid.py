@@ -4,12 +4,13 @@
     python -m dqfd_bc_keras.experiments grid --task mountaincar --out results   # one task's grid
     python -m dqfd_bc_keras.experiments grid --quick --out /tmp/g   # 1 cell, 1 seed, QUICK budget
 
-On each task of `GRID_TASKS` (CartPole, MountainCar), per cell (teacher × demonstrated episodes)
-and method: the median over seeds of counted interactions until a greedy evaluation reaches the
-solved threshold (∞: never), and of the final evaluation minus the teacher's 100-episode mean.
-Against plain DQN (no demonstrations) a method *helps* in a cell if the 95% bootstrap CI of DQN's
-median ÷ its median lies wholly above 1, *hurts* if wholly below; it *escapes* a teacher below the threshold if its median final return
-lies above the teacher's mean with the CI of that median wholly above (§7's teacher rule).
+On each task of `GRID_TASKS` (CartPole, MountainCar), per cell (teacher × demonstrated episodes) and
+method: the median over seeds of counted interactions until a greedy evaluation reaches the solved
+threshold (∞: never), and of the final evaluation minus the teacher's 100-episode mean. Against
+plain DQN (no demonstrations) a method *helps* in a cell if the 95% bootstrap CI of DQN's median ÷
+its median lies wholly above 1, *hurts* if wholly below; it *escapes* a teacher below the threshold
+if its median final return lies above the teacher's mean with the CI of that median wholly above
+(§7's teacher rule).
 """
 
 from __future__ import annotations
