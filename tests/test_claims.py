@@ -11,6 +11,7 @@ from dqfd_bc_keras.experiments import arms as grouping, claims as analysis, metr
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
 from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
+from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.runs import EVAL_FIELDS
@@ -445,6 +446,24 @@ def test_ablations_pair_with_the_full_arm_and_are_judged_against_the_margin(tmp_
         ("bayes_prior", "prior", "full"), ("dynamic_demos", "dyn", "full"), ("mc_dropout", "mc", "full")]
     verdicts = {a.name: analysis.judge_ablation(a, f).verdict for _, a, f in pairs}
     assert verdicts == {"prior": "no measurable contribution", "dyn": "contributes", "mc": "hurts"}
+    line = "- Ablations (one part of the Bayesian machinery off, against the full arm): contributes in 1, hurts in 1, "
+    assert line + "no measurable contribution in 1, of 3." in summary([full, prior, dynamic, dropout], tmp_path)
+
+
+def test_the_summary_counts_how_sensitivity_arms_move_the_verdict(tmp_path):
+    """C3 at cartpole/bootstrap, 10 seeds: the reference pair equal and narrow (holds); σ0² = 0.05 two
+    margins above ce (does not hold: a flip), σ0² = 2 as ce on average but spread by a margin per seed (inconclusive),
+    σ0² = 0.1 equal to ce (holds: the same verdict)."""
+    c3 = {"task": "cartpole", "timeout": "bootstrap"}
+    ce = 100.0 + 0.005 * 25.0 * SPREAD
+    arms = [return_arm(tmp_path / "c", "ce", ce, **c3), return_arm(tmp_path / "b", "bayes", ce, **c3),
+            return_arm(tmp_path / "s1", "bayes", ce + 50.0, sigma0_sq=0.05, **c3),
+            return_arm(tmp_path / "s2", "bayes", ce + 25.0 * (SPREAD - SPREAD.mean()), sigma0_sq=2.0, **c3),
+            return_arm(tmp_path / "s3", "bayes", ce, sigma0_sq=0.1, **c3)]
+    assert [analysis.flips(v, "holds") for v in ("does not hold", "inconclusive", "holds")] == ["yes", "unclear", "no"]
+    line = ("- Sensitivity (each further bayes arm of a claim's setting against its ce arm): the verdict flips between "
+            "holds and does not hold in 1 of 3, moves to or from inconclusive in 1, stays in 1.")
+    assert line in summary(arms, tmp_path)
 
 
 def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_path):

@@ -209,6 +209,14 @@ def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> Verdict:
     return claim.judge(bayes, ce)
 
 
+def flips(verdict: str, reference: str) -> str:
+    """A sensitivity arm's verdict against its setting's reference verdict: "yes" if it turns holds
+    into does not hold (or back), "unclear" if it moves to or from inconclusive, "no" if the same."""
+    if verdict == reference:
+        return "no"
+    return "yes" if {verdict, reference} == {"holds", "does not hold"} else "unclear"
+
+
 # --- ablations and the dynamic-demonstration default (docs/PREREGISTRATION.md §2, §6) -------
 ABLATED = {"dynamic_demos": "off", "bayes_prior": False, "mc_dropout": False}
 """The part each ablation switches off, and its value when off."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from . import figures
 from .arms import ArmRuns, bayes_ce_pairs, group_arms, preset_distance
-from .claims import ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, judge, judge_ablation, rule_text
+from .claims import ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, flips, judge, judge_ablation, rule_text
 from .metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
 from ..envs import get_task
 from ..files import write_text
@@ -61,12 +61,6 @@ def _cell(comparisons: list[Comparison], part: Callable[[Comparison], str]) -> s
     return "<br>".join(part(c) for c in comparisons) or "—"
 
 
-def _flips(verdict: str, reference: str) -> str:
-    if verdict == reference:
-        return "no"
-    return "yes" if {verdict, reference} == {"holds", "does not hold"} else "unclear"
-
-
 def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
     """The claims table's rows (the reference pair of each claim's setting) and the sensitivity
     table's rows (every other bayes arm of that setting, against its ce arm)."""
@@ -91,7 +85,7 @@ def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
                                   f"{len(bayes.runs)}, {len(ce.runs)} · {power} | **{result.verdict}** |")
                 else:
                     sensitivity.append(f"| {claim.id} | {bayes.label} | {ce.name if ce else '—'} | {per_arm} | "
-                                       f"{result.verdict} | {_flips(result.verdict, reference)} |")
+                                       f"{result.verdict} | {flips(result.verdict, reference)} |")
     return claims, sensitivity
 
 

@@ -6,11 +6,13 @@ regenerates with them and can say nothing they do not show.
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
 from ..config import Config
 from .arms import ArmRuns, find_arm
-from .claims import CLAIMS, GOALS_MARGIN, RETURN_MARGIN, SHARE_MARGIN, dynamic_default, judge
+from .claims import (CLAIMS, GOALS_MARGIN, RETURN_MARGIN, SHARE_MARGIN, ablation_pairs, dynamic_default, flips, judge,
+                     judge_ablation)
 from .efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
 from .estimators import CALIBRATION_FILE, meets_goal
 from .grid import BC_ALONE, DQN, collect, effect
@@ -42,6 +44,33 @@ def _claims(arms: list[ArmRuns]) -> dict[str, list[str]]:
                     f"{power}).")
             filed["unknown" if result.verdict.startswith(UNKNOWN) else result.verdict].append(line)
     return filed
+
+
+def _sensitivity(arms: list[ArmRuns]) -> list[str]:
+    """How often a further bayes arm of a claim's setting (σ0², demonstrator, estimator, …) judged
+    against its ce arm changes the setting's reference verdict (the sensitivity table's *flips*)."""
+    moves = []
+    for claim in CLAIMS:
+        for setting in claim.settings:
+            pairs = setting.pairs(arms)
+            if not pairs or pairs[0][1] is None:
+                continue
+            reference = judge(claim, *pairs[0]).verdict
+            moves += [flips(judge(claim, bayes, ce).verdict, reference) for bayes, ce in pairs[1:] if ce is not None]
+    if not moves:
+        return []
+    return [f"Sensitivity (each further bayes arm of a claim's setting against its ce arm): the verdict flips "
+            f"between holds and does not hold in {moves.count('yes')} of {len(moves)}, moves to or from "
+            f"inconclusive in {moves.count('unclear')}, stays in {moves.count('no')}."]
+
+
+def _ablations(arms: list[ArmRuns]) -> list[str]:
+    verdicts = Counter(judge_ablation(ablated, full).verdict for _, ablated, full in ablation_pairs(arms))
+    if not verdicts:
+        return []
+    counts = ", ".join(f"{verdict} in {n}" for verdict, n in sorted(verdicts.items()))
+    return [f"Ablations (one part of the Bayesian machinery off, against the full arm): {counts}, "
+            f"of {sum(verdicts.values())}."]
 
 
 def _efficiency(arms: list[ArmRuns], directory: Path) -> list[str]:
@@ -125,8 +154,8 @@ def summary(arms: list[ArmRuns], directory: Path) -> list[str]:
     """The summary's lines (markdown), computed from `arms` and the suite `directory`'s files."""
     claims = _claims(arms)
     choice, _ = dynamic_default(arms)
-    found = [*_efficiency(arms, directory), *_estimators(directory), *_grid(arms, directory),
-             *_replications(arms, directory),
+    found = [*_sensitivity(arms), *_ablations(arms), *_efficiency(arms, directory), *_estimators(directory),
+             *_grid(arms, directory), *_replications(arms, directory),
              *([f"Dynamic demonstrations: the pre-registered rule picks `{choice}` as the default."] if choice else [])]
     lines = ["## Summary", "", "Computed from the tables below (it regenerates with them); the numbers are the "
              "judged metric's means, the TOST interval (90% CI) and the margin of each claim's rule.", ""]
