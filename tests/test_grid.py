@@ -86,6 +86,29 @@ def test_escaping_a_teacher_needs_the_whole_interval_above_its_mean():
     assert Cell("mountaincar", "strong", 0, 1).teacher_return == -106.39  # above −110: the escape rule skips it
 
 
+def test_the_summary_line_counts_pairs_and_calls_a_grid_short_of_its_seeds_provisional(tmp_path, monkeypatch):
+    """Two cells: DQN never reaches the threshold on one (ce helps there) and matches ce on the other (unclear)."""
+    from dqfd_bc_keras.experiments import summary as summarising
+    never, matched = Cell("mountaincar", "strong", 0, 1), Cell("mountaincar", "strong", 0, 5)
+
+    def table(ce_seeds: int) -> dict:
+        dqn = {never: Entry(np.full(5, INF), np.zeros(5)), matched: Entry(np.full(5, 7000.0), np.zeros(5))}
+        ce = {never: Entry(np.full(ce_seeds, 1000.0), np.zeros(ce_seeds)), matched: Entry(np.full(1, 7000.0), np.zeros(1))}
+        return {DQN: dqn, "ce": ce}
+
+    for ce_seeds, tail in ((2, " So far from 1–2 of the 5 planned seeds per pair: read these as provisional."),
+                           (5, " So far from 1–5 of the 5 planned seeds per pair: read these as provisional.")):
+        monkeypatch.setattr(summarising, "collect", lambda arms, directory, task: ([never, matched], table(ce_seeds))
+                            if task == "mountaincar" else ([], {}))
+        line = ("Demonstration quality × quantity (mountaincar): a method with demonstrations is faster than DQN in 1 of 2 "
+                "(cell, method) pairs, slower in 0, unclear in 1." + tail)
+        assert summarising._grid([], tmp_path) == [line]
+    full = {DQN: table(5)[DQN], "ce": {c: Entry(np.full(5, 1000.0), np.zeros(5)) for c in (never, matched)}}
+    monkeypatch.setattr(summarising, "collect", lambda arms, directory, task: ([never, matched], full)
+                        if task == "mountaincar" else ([], {}))
+    assert summarising._grid([], tmp_path)[0].endswith("slower in 0, unclear in 0.")
+
+
 def test_grid_quick_runs_every_method_writes_the_tables_and_heatmaps_and_skips_finished_runs(tmp_path):
     done = lab("grid", "--quick", "--out", tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]

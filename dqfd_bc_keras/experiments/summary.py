@@ -17,7 +17,7 @@ from .efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
 from .estimators import CALIBRATION_FILE, meets_goal
 from .grid import BC_ALONE, DQN, collect, effect
 from .replicate import replicated
-from .suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, PROTOCOL, SUITES
+from .suites import ALL, EFFICIENCY_TASKS, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES
 
 UNKNOWN = ("inconclusive", "not reproduced")
 
@@ -114,12 +114,18 @@ def _grid(arms: list[ArmRuns], directory: Path) -> list[str]:
     for task in GRID_TASKS:
         cells, table = collect(arms, directory, task)
         dqn = table.get(DQN, {})
-        verdicts = [effect(entries[c], dqn[c]) for method, entries in table.items() if method not in (DQN, BC_ALONE)
-                    for c in cells if c in entries and c in dqn]
-        if verdicts:
-            lines.append(f"Demonstration quality × quantity ({task}): a method with demonstrations is faster than DQN "
-                         f"in {verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
-                         f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}.")
+        pairs = [(entries[c], dqn[c]) for method, entries in table.items() if method not in (DQN, BC_ALONE)
+                 for c in cells if c in entries and c in dqn]
+        if not pairs:
+            continue
+        verdicts = [effect(entry, baseline) for entry, baseline in pairs]
+        seeds = sorted({len(entry.steps) for entry, _ in pairs})
+        partial = "" if seeds[0] >= GRID_SEEDS else (
+            f" So far from {seeds[0]}{'' if len(seeds) == 1 else f'–{seeds[-1]}'} of the {GRID_SEEDS} planned "
+            f"seeds per pair: read these as provisional.")
+        lines.append(f"Demonstration quality × quantity ({task}): a method with demonstrations is faster than DQN "
+                     f"in {verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
+                     f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}.{partial}")
     return lines
 
 
