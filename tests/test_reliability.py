@@ -472,6 +472,36 @@ def test_the_report_names_every_run_it_leaves_out(finished, tmp_path):
 
 # --- round 2: Ctrl-C on a sweep ----------------------------------------------------------------------
 
+def _deaf_to_sigterm(ready) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    ready.set()
+    time.sleep(120)
+
+
+def test_runs_that_do_not_stop_are_killed_together_after_one_grace_and_named(tmp_path, monkeypatch, capsys):
+    import multiprocessing
+
+    from dqfd_bc_keras.experiments import sweep
+
+    monkeypatch.setattr(sweep, "STOP_GRACE", 2.0)
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 2)
+    context, workers = multiprocessing.get_context("fork"), []
+    for seed in (0, 1):
+        ready = context.Event()
+        process = context.Process(target=_deaf_to_sigterm, args=(ready,), daemon=True)
+        process.start()
+        assert ready.wait(30)
+        workers.append(sweep._Worker(process, None, None, job=sweep.Job(arm, seed, tmp_path)))
+    started = time.monotonic()
+    sweep._stop_all(workers)
+    seconds = time.monotonic() - started
+    assert [w.process.exitcode for w in workers] == [-signal.SIGKILL] * 2
+    assert 2.0 <= seconds < 4.0, seconds  # one grace for both: one each would be 4 s
+    assert capsys.readouterr().err.splitlines() == [
+        f"warning: {tmp_path / arm.name}/seed{seed}: the run had not stopped 2 s after SIGTERM; killed (its last "
+        "checkpoint is kept, and the next sweep resumes from it)" for seed in (0, 1)]
+
+
 def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
     out = tmp_path / "sweep"
     args = [sys.executable, "-m", "dqfd_bc_keras.experiments", "run", "quick", "--seeds", "2", "--workers", "2",
@@ -491,7 +521,7 @@ def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
     seconds = time.time() - signal_sent
     print(f"the sweep exited {seconds:.1f} s after Ctrl-C")
     assert process.returncode == 130, err
-    assert seconds < 30, seconds  # a liveness bound: the runs stop at their next step, not at their end
+    assert seconds < 30, (seconds, err)  # a liveness bound: the runs stop at their next step, not at their end
     assert "interrupted after 0 of 4 runs; no run was started after it" in stdout
     assert err.strip().splitlines()[-1] == ("interrupted (Ctrl-C); every finished run is kept; run the same command "
                                             "again to go on")

@@ -6,7 +6,8 @@ the arm's), so a sweep killed halfway picks up where it stopped. Every sweep get
 `OUT/sweeps.jsonl`.
 
 Ctrl-C or SIGTERM stops a local sweep within seconds: no run is started after it, and each
-running one gets SIGTERM, which stops it where `train.py` would stop (its last checkpoint kept).
+running one gets SIGTERM, which stops it where `train.py` would stop (its last checkpoint kept);
+one still running `STOP_GRACE` seconds later is killed, which keeps the same checkpoint.
 A run whose directory another live runner holds is left to that runner, not counted as failed.
 """
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -105,9 +107,11 @@ def run_job(job: Job) -> Outcome:
                    time.perf_counter() - started, pid=pid)
 
 
-STOP_GRACE = 60.0
-"""Seconds a stopped run gets to reach its safe point before it is killed (its last checkpoint is
-kept either way; every file of a run is written atomically)."""
+STOP_GRACE = 20.0
+"""Seconds the stopped runs get, together, to reach their safe point (the end of the graph call
+under way: one episode at most) before those still running are killed. A kill costs nothing a
+stop keeps: a stop writes no checkpoint either, every file of a run is written atomically, and
+the next runner takes over the dead one's lock."""
 RUNS_PER_WORKER = 25
 """Runs a worker process takes in turn before it retires and a fresh one takes its place (as
 `multiprocessing.Pool(maxtasksperchild=…)`): TensorFlow's import (~5 s) is paid once per worker,
@@ -184,21 +188,33 @@ def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WO
                     idle.append(worker)
                 yield outcome
     except BaseException:
-        for worker in busy.values():
-            worker.process.terminate()  # SIGTERM: the run stops at its next safe point
-        for worker in busy.values():
-            worker.process.join(STOP_GRACE)
-            if worker.process.is_alive():
-                worker.process.kill()
+        _stop_all(list(busy.values()))
         raise
     finally:
         for worker in idle:
             worker.retire()
 
 
+def _stop_all(workers: list[_Worker]) -> None:
+    """SIGTERM each running worker (its run stops at its next safe point), wait for them all
+    against one deadline, `STOP_GRACE` from now, and kill those still running then."""
+    for worker in workers:
+        worker.process.terminate()
+    deadline = time.monotonic() + STOP_GRACE
+    for worker in workers:
+        worker.process.join(max(0.0, deadline - time.monotonic()))
+        if worker.process.is_alive():
+            worker.process.kill()
+            worker.process.join()
+            print(f"warning: {worker.job.directory}: the run had not stopped {STOP_GRACE:g} s after SIGTERM; "
+                  "killed (its last checkpoint is kept, and the next sweep resumes from it)", file=sys.stderr)
+
+
 def _serve(jobs, outcomes) -> None:
     """A worker: run the jobs it is given until it is given None. Ctrl-C is the sweep's to relay
-    (as SIGTERM), not the run's."""
+    (as SIGTERM), not the run's. It leaves through `os._exit`: what a run keeps is on disk
+    already, and skipping the interpreter's teardown spares a stopping worker the seconds (and
+    the hangs TensorFlow's teardown is known for) that it would add to the sweep's stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _stop)
     try:
@@ -206,6 +222,9 @@ def _serve(jobs, outcomes) -> None:
             outcomes.send(run_job(job))
     except (Terminated, EOFError, BrokenPipeError):
         pass  # stopped (nothing to report, the run resumes next time), or the sweep is gone
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def _stop(signum: int, frame: object) -> None:
