@@ -172,7 +172,8 @@ class RunDirectory:
     # --- checkpoints ------------------------------------------------------------------------
     def save_checkpoint(self) -> None:
         """Write a complete new checkpoint, fsync it, switch `latest.json` to it, then delete
-        the old one: at every moment `latest.json` names a complete checkpoint."""
+        the old one: at every moment `latest.json` names a complete checkpoint, whether the
+        save is killed or interrupted (Ctrl-C, SIGTERM) at any point of it."""
         root = self.out / "checkpoints"
         target = free_name(root / f"ckpt-{int(self.learner.interaction.env_steps.numpy())}")
         try:
@@ -186,12 +187,15 @@ class RunDirectory:
             write_text(target / "state.json", json.dumps(self.state.to_dict()))
             write_text(target / "config.json", json.dumps(self.config.to_dict(), indent=1))  # the run's own
             sync_tree(target)
-            write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
         except BaseException as error:
             shutil.rmtree(target, ignore_errors=True)  # the debris of a save that did not finish
             if isinstance(error, tf.errors.OpError):  # e.g. the disk is full
                 raise RunDirectoryError(f"{target}: cannot write the checkpoint ({one_line(error)})") from None
             raise
+        # The switch, outside the clean-up above: once `latest.json` may name `target`, nothing
+        # deletes it (an interrupt here leaves one complete checkpoint or the other, and the
+        # next save deletes whichever is not current).
+        write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
         for old in root.iterdir():
             if old.is_dir() and old != target:
                 shutil.rmtree(old, ignore_errors=True)

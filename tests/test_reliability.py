@@ -112,6 +112,49 @@ def test_a_kill_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(tmp_pat
     assert episodes == {0, 7}  # some snapshots hold the old checkpoint, the later ones the new
 
 
+def test_an_interrupt_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(tmp_path, monkeypatch):
+    """Ctrl-C or SIGTERM (a KeyboardInterrupt, which runs the save's clean-up, unlike a kill) after
+    each file operation of a save: the run restores a complete checkpoint every time. (An
+    interrupt just after the switch to the new checkpoint once deleted it, and the run could not
+    be resumed.)"""
+    config = Config.for_task("cartpole", **QUICK)
+    out = tmp_path / "run"
+    out.mkdir()
+    run = runs._start(config, out, None, resume=False, quiet=True)
+    operations = [(runs, "write_text"), (runs, "sync_tree"), (shutil, "rmtree"), (tf.train.Checkpoint, "write")]
+    calls, interrupt_after = [0], [None]
+
+    def watched(function):
+        def operation(*args, **kwargs):
+            result = function(*args, **kwargs)
+            calls[0] += 1
+            if calls[0] == interrupt_after[0]:
+                raise cli.Terminated
+            return result
+        return operation
+
+    for module, name in operations:
+        monkeypatch.setattr(module, name, watched(getattr(module, name)))
+    run.save_checkpoint()  # counts the operations of one save
+    per_save, interrupted, current, switched = calls[0], 0, 0, set()
+    assert per_save >= 6
+    for k in range(1, per_save + 1):
+        calls[0], interrupt_after[0] = 0, k
+        run.state.episode = k
+        run.learner.interaction.env_steps.assign(1000 * k)
+        try:
+            run.save_checkpoint()
+        except cli.Terminated:
+            interrupted += 1
+        reader = runs.RunDirectory(config, out, run.learner, TrainingState(), quiet=True)
+        reader.restore_checkpoint()
+        assert reader.state.episode in (current, k), k  # the checkpoint current before, or this one
+        current = reader.state.episode
+        switched |= {k} if current == k else set()
+    assert interrupted == per_save
+    assert switched and min(switched) < per_save  # some interrupts came after the switch, before the save's end
+
+
 def test_the_final_save_at_the_checkpoints_step_never_removes_the_current_one(finished, tmp_path):
     """Resuming a finished run saves again at the same step: a new directory, then the switch."""
     run = tmp_path / "run"
