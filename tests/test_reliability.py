@@ -150,7 +150,8 @@ def test_an_interrupt_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(t
         reader.restore_checkpoint()
         assert reader.state.episode in (current, k), k  # the checkpoint current before, or this one
         current = reader.state.episode
-        switched |= {k} if current == k else set()
+        if current == k:
+            switched.add(k)
     assert interrupted == per_save
     assert switched and min(switched) < per_save  # some interrupts came after the switch, before the save's end
 

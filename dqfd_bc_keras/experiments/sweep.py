@@ -148,9 +148,17 @@ class _Worker:
             self.jobs.send(None)
         except OSError:
             pass  # it is gone already
-        self.process.join(STOP_GRACE)
-        if self.process.is_alive():
-            self.process.kill()
+        self.end_by(time.monotonic() + STOP_GRACE)
+
+    def end_by(self, deadline: float) -> bool:
+        """Wait for the process until `deadline` (`time.monotonic()`), then kill it; True if it
+        had to be killed."""
+        self.process.join(max(0.0, deadline - time.monotonic()))
+        if not self.process.is_alive():
+            return False
+        self.process.kill()
+        self.process.join()
+        return True
 
 
 def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WORKER) -> Iterator[Outcome]:
@@ -202,10 +210,7 @@ def _stop_all(workers: list[_Worker]) -> None:
         worker.process.terminate()
     deadline = time.monotonic() + STOP_GRACE
     for worker in workers:
-        worker.process.join(max(0.0, deadline - time.monotonic()))
-        if worker.process.is_alive():
-            worker.process.kill()
-            worker.process.join()
+        if worker.end_by(deadline):
             print(f"warning: {worker.job.directory}: the run had not stopped {STOP_GRACE:g} s after SIGTERM; "
                   "killed (its last checkpoint is kept, and the next sweep resumes from it)", file=sys.stderr)
 
