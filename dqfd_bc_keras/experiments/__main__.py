@@ -14,7 +14,7 @@ from importlib.util import find_spec
 from pathlib import Path
 
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
-from .suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, SUITES, on_task
+from .suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, SUITES, on_task, suite_arms
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
@@ -37,11 +37,22 @@ def comma_list(allowed: Sequence[str], what: str):
     return parse
 
 
+def suite_name(text: str) -> str:
+    """argparse type of `run`'s suite: a suite of the package, `all`, or a user's `module:NAME`
+    (imported after parsing, by `suites.suite_arms`)."""
+    if text in SUITES or text == "all" or ":" in text:
+        return text
+    choices = ", ".join(repr(name) for name in [*sorted(SUITES), "all"])
+    raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from {choices}, or module:NAME)")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     go = commands.add_parser("run", help="run a suite's incomplete runs")
-    go.add_argument("suite", choices=[*sorted(SUITES), "all"], help=f"a suite, or all: {', '.join(ALL)}")
+    go.add_argument("suite", type=suite_name,
+                    help=f"one of {', '.join(sorted(SUITES))}; all: {', '.join(ALL)}; or your own list of arms as "
+                         "module:NAME (docs/EXTENDING.md)")
     go.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: each arm's planned seeds)")
     go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     go.add_argument("--out", required=True, help="suite directory")
@@ -147,13 +158,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         calibrate(args.out, args.figure, args.quick)
     elif args.command == "run":
-        from .sweep import run_suite
-
         assignments = [*(f"{key}={json.dumps(value) if isinstance(value, dict) else value}"
                          for key, value in env_settings(args).items()), *args.set]
         task, moved = chosen_task(args), chosen_task(args) is not None or assignments
-        for suite in ALL if args.suite == "all" else (args.suite,):
-            arms = on_task(SUITES[suite], task, assignments) if moved else SUITES[suite]
+        suites = {suite: suite_arms(suite) for suite in (ALL if args.suite == "all" else (args.suite,))}
+        from .sweep import run_suite  # after the suites are found: a wrong module:NAME is refused before TF loads
+
+        for suite, arms in suites.items():
+            arms = on_task(arms, task, assignments) if moved else arms
             run_suite(arms, args.seeds, args.out, args.workers, args.backend, args.address,
                       progress=lambda line: print(line, flush=True), name=f"{suite} on {task}" if task else suite,
                       restart_broken=args.restart_broken, runs_per_worker=args.runs_per_worker)

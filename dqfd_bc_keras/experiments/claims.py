@@ -209,6 +209,11 @@ def judge(claim: Claim, bayes: ArmRuns, ce: ArmRuns | None) -> Verdict:
     return claim.judge(bayes, ce)
 
 
+def too_few(*arms: ArmRuns) -> str:
+    """What a table or summary line says in place of a comparison one of `arms` has too few seeds for."""
+    return f"n = {min(len(arm.runs) for arm in arms)}: too few seeds for a comparison"
+
+
 def flips(verdict: str, reference: str) -> str:
     """A sensitivity arm's verdict against its setting's reference verdict: "yes" if it turns holds
     into does not hold (or back), "unclear" if it moves to or from inconclusive, "no" if the same."""
@@ -245,6 +250,8 @@ def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
     the first 30 episodes within ±GOALS_MARGIN), the TOST_LEVEL CI of full − ablated: no measurable
     contribution if it lies within ±margin; contributes if it lies wholly above +margin; hurts if
     wholly below −margin; else inconclusive."""
+    if min(len(full.runs), len(ablated.runs)) < 2:
+        return Verdict("inconclusive (n < 2)")
     metric = get_task(full.config["task"]).lab.ablation_metric
     fraction = ABLATION_MARGINS[metric]
     margin = GOALS_MARGIN if fraction is None else fraction * full.runs[0].config.limit

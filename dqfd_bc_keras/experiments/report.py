@@ -20,7 +20,8 @@ import numpy as np
 
 from . import figures
 from .arms import ArmRuns, bayes_ce_pairs, group_arms, preset_distance
-from .claims import ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, flips, judge, judge_ablation, rule_text
+from .claims import (ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, flips, judge, judge_ablation,
+                     rule_text, too_few)
 from .metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
 from ..envs import get_task
 from ..files import write_text
@@ -75,8 +76,8 @@ def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
             reference = judge(claim, *pairs[0]).verdict
             for i, (bayes, ce) in enumerate(pairs):
                 result = judge(claim, bayes, ce)
-                per_arm = _cell(result.comparisons,
-                                lambda c: f"{c.metric}: bayes {c.bayes.format(2)} · ce {c.ce.format(2)}")
+                per_arm = (too_few(bayes, ce) if ce is not None and not result.comparisons else _cell(
+                    result.comparisons, lambda c: f"{c.metric}: bayes {c.bayes.format(2)} · ce {c.ce.format(2)}"))
                 if i == 0:
                     diff = _cell(result.comparisons, lambda c: c.interval())
                     test = _cell(result.comparisons, lambda c: f"{c.test} p = {c.p:.3g}")
@@ -235,6 +236,11 @@ def _ablations(arms: list[ArmRuns]) -> list[str]:
     rows = []
     for key, ablated, full in pairs:
         result = judge_ablation(ablated, full)
+        if not result.comparisons:
+            rows.append(f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
+                        f"{len(full.runs)}, {len(ablated.runs)} | {too_few(full, ablated)} | — | — | — | "
+                        f"**{result.verdict}** |")
+            continue
         [c] = result.comparisons
         rows.append(f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
                     f"{len(full.runs)}, {len(ablated.runs)} | {c.metric}: full {c.bayes.format(2)} · ablated "

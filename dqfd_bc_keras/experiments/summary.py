@@ -12,7 +12,7 @@ from pathlib import Path
 from ..config import Config
 from .arms import ArmRuns, find_arm
 from .claims import (CLAIMS, GOALS_MARGIN, RETURN_MARGIN, SHARE_MARGIN, ablation_pairs, dynamic_default, flips, judge,
-                     judge_ablation)
+                     judge_ablation, too_few)
 from .efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
 from .estimators import CALIBRATION_FILE, meets_goal
 from .grid import BC_ALONE, DQN, collect, effect
@@ -34,6 +34,9 @@ def _claims(arms: list[ArmRuns]) -> dict[str, list[str]]:
                 continue
             bayes, ce = pairs[0]
             result = judge(claim, bayes, ce)
+            if not result.comparisons:  # a sweep under way or cut off, or `run quick --seeds 1`
+                filed["unknown"].append(f"{where}: **inconclusive**: {too_few(bayes, ce)}.")
+                continue
             c = result.comparisons[0]
             margin = (f"±{RETURN_MARGIN * bayes.runs[0].config.limit:g}" if claim.id in ("C1", "C3") else
                       f"±{SHARE_MARGIN:g}" if claim.id == "C2" else f"+{GOALS_MARGIN:g}")

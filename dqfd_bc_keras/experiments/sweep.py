@@ -8,13 +8,17 @@ the arm's), so a sweep killed halfway picks up where it stopped. Every sweep get
 Ctrl-C or SIGTERM stops a local sweep within seconds: no run is started after it, and each
 running one gets SIGTERM, which stops it where `train.py` would stop (its last checkpoint kept);
 one still running `STOP_GRACE` seconds later is killed, which keeps the same checkpoint.
-A run whose directory another live runner holds is left to that runner, not counted as failed.
+A run whose directory another live runner holds is left to that runner, not counted as failed;
+one that another runner completed after this sweep listed it is skipped (`claim`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import os
+import shutil
 import signal
 import sys
 import time
@@ -25,8 +29,8 @@ from multiprocessing.connection import wait as wait_for
 from pathlib import Path
 
 from ..cli import Terminated
-from ..errors import BrokenRunError, ConfigError, DirectoryInUseError
-from ..files import write_text
+from ..errors import BrokenRunError, ConfigError, DirectoryInUseError, RunDirectoryError
+from ..files import DirectoryLock, write_text
 from ..provenance import provenance
 from ..runs import COMPLETE
 from .data import SWEEP_LOG
@@ -69,6 +73,8 @@ class Outcome:
     error: str = ""
     busy: str = ""
     """Why the run was left alone: another live runner holds its directory."""
+    done_elsewhere: bool = False
+    """Another runner completed the run after this sweep listed it: it was not run here."""
     pid: int = 0
     """The worker process that ran it."""
 
@@ -85,19 +91,23 @@ def run_job(job: Job) -> Outcome:
     keras.backend.clear_session()
 
     started, pid = time.perf_counter(), os.getpid()
-    resume = (job.directory / "checkpoints" / "latest.json").is_file()
     config = job.arm.config(job.seed)
     try:
-        try:
-            if resume:  # the run on disk must be this arm's run
-                changed = differences(config.to_dict(), saved_config(job.directory).to_dict())
-                if changed:
-                    raise BrokenRunError(f"{job.directory / 'config.json'}: not the arm's config ({'; '.join(changed)})")
-            result = train(config, job.directory, resume=resume, force=not resume, quiet=True)
-        except BrokenRunError as error:
-            if not job.restart_broken:
-                raise BrokenRunError(f"{error} (or rerun the sweep with --restart-broken)") from None
-            result = train(config, job.directory, force=True, quiet=True)
+        with claim(job.directory):
+            if job.complete:
+                return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, pid=pid, done_elsewhere=True)
+            resume = (job.directory / "checkpoints" / "latest.json").is_file()
+            try:
+                if resume:  # the run on disk must be this arm's run
+                    changed = differences(config.to_dict(), saved_config(job.directory).to_dict())
+                    if changed:
+                        raise BrokenRunError(f"{job.directory / 'config.json'}: not the arm's config "
+                                             f"({'; '.join(changed)})")
+                result = train(config, job.directory, resume=resume, force=not resume, quiet=True)
+            except BrokenRunError as error:
+                if not job.restart_broken:
+                    raise BrokenRunError(f"{error} (or rerun the sweep with --restart-broken)") from None
+                result = train(config, job.directory, force=True, quiet=True)
     except DirectoryInUseError as error:  # another runner's: it will finish it
         return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, busy=str(error), pid=pid)
     except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
@@ -105,6 +115,49 @@ def run_job(job: Job) -> Outcome:
                        pid=pid)
     return Outcome(job, result.episodes, result.env_steps, result.evaluation.mean_return,
                    time.perf_counter() - started, pid=pid)
+
+
+@contextlib.contextmanager
+def claim(directory: Path) -> Iterator[None]:
+    """Hold run `directory` for a runner from before it decides whether the run is to be done until
+    the run ends: an exclusive `flock` on the directory itself (`train` takes the `.lock` inside it
+    on its own). A sweep lists the runs to do before it starts them, so another runner on the same
+    `--out` may finish one in between: holding the claim, `Job.complete` tells, and the run is
+    skipped instead of resumed and finished a second time. DirectoryInUseError if another runner
+    holds it. A directory made here for a run that left nothing in it (a new run that failed before
+    its first checkpoint) is removed, as `train` removes one it made."""
+    if directory.exists() and not directory.is_dir():
+        raise RunDirectoryError(f"{directory} is a file, not a run directory")
+    made = not directory.exists()
+    directory.mkdir(parents=True, exist_ok=True)
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock = directory / DirectoryLock.NAME
+            holder = (lock.read_text().strip() if lock.is_file() else "") or "(unknown)"
+            raise DirectoryInUseError(f"{directory} is in use by process {holder}; wait for it to finish or stop "
+                                      "it") from None
+        try:
+            yield
+        finally:
+            if made and all(path.name == DirectoryLock.NAME for path in directory.iterdir()):
+                shutil.rmtree(directory)
+    finally:
+        os.close(fd)  # closing releases the flock
+
+
+@contextlib.contextmanager
+def locked(directory: Path) -> Iterator[None]:
+    """Wait for, and hold, an exclusive `flock` on `directory` itself (a sweep's `--out`: no file
+    of its own is needed, and the kernel drops it if the holder dies)."""
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
 
 
 STOP_GRACE = 20.0
@@ -301,6 +354,7 @@ def run_jobs(
             job = outcome.job
             status = (f"failed: {outcome.error}" if outcome.error else
                       f"left to the runner that holds it ({outcome.busy})" if outcome.busy else
+                      "skipped: another runner completed it" if outcome.done_elsewhere else
                       f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
             progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
                      f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
@@ -317,7 +371,9 @@ def run_jobs(
                      "workers": workers, "backend": backend, "runs_per_worker": runs_per_worker, "seconds": round(time.perf_counter() - started, 1),
                      "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **({"interrupted": True} if interrupted else {}),
                      **provenance()}
-            write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
+            out.mkdir(parents=True, exist_ok=True)
+            with locked(out):  # two runners ending together: each line kept, the file rewritten atomically
+                write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
     busy = [o for o in outcomes if o.busy]
     if busy:
         progress(f"{name}: {len(busy)} run(s) left to another runner that holds them; run the command again once "
