@@ -14,14 +14,16 @@ all read these declarations, so a new method is one `Method(...)` and its term:
 
 and `train.py --expert-loss my_module:SOFT_MARGIN` trains with it (the module is imported, and
 the `Method` it names is registered under its own name; config.json records `my_module:SOFT_MARGIN`
-so evaluation and `--resume` find it again). This module imports no TensorFlow: reading a
-config.json does not load it.
+so `--resume` finds it again; evaluating the run does not need it). This module imports no
+TensorFlow: reading a config.json does not load it.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
@@ -110,6 +112,22 @@ for _method in (
     register(_method)
 
 
+_SAVED = ContextVar("reading_saved_config", default=False)
+
+
+@contextmanager
+def reading_saved_config() -> Iterator[None]:
+    """While a saved run's config.json is read, a method of the user's own whose module cannot be
+    imported here stands in as a plain `Method` (demonstrations, no BC model, no term): evaluating
+    a run needs its settings, not its loss. Asking the config for its method afterwards (training,
+    `--resume`) imports the module again and reports it missing."""
+    token = _SAVED.set(True)
+    try:
+        yield
+    finally:
+        _SAVED.reset(token)
+
+
 def get_method(name: str) -> Method:
     """The method called `name`, or a user's `module:NAME` (a `Method` object in an importable module)."""
     if name in METHODS:
@@ -121,7 +139,10 @@ def get_method(name: str) -> Method:
     try:
         method = getattr(importlib.import_module(module), attribute)
     except (ImportError, AttributeError) as error:
-        raise ConfigError(f"expert_loss={name!r}: cannot import it ({type(error).__name__}: {error})") from None
+        if _SAVED.get():
+            return Method(name, f"a method of your own that cannot be imported here ({type(error).__name__})")
+        raise ConfigError(f"expert_loss={name!r}: cannot import it ({type(error).__name__}: {error}); keep your "
+                          "module importable (on PYTHONPATH or installed)") from None
     if not isinstance(method, Method):
         raise ConfigError(f"expert_loss={name!r}: {attribute} is a {type(method).__name__}, not a "
                           "dqfd_bc_keras.methods.Method")

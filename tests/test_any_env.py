@@ -85,10 +85,13 @@ def test_rule_demonstrator_records_on_any_env():
 
 @pytest.mark.parametrize("spec, message", [
     ("imperfect", "has no scripted imperfect expert"),
-    ("toy_envs:nothing", "cannot import it (AttributeError"),
-    ("no_such_module:rule", "cannot import it (ModuleNotFoundError"),
-    ("toy_envs:NOT_CALLABLE", "NOT_CALLABLE is not callable"),
-    ("toy_envs:out_of_range", "returned 7, not an action in [0, 2)"),
+    ("toy_envs:nothing", "demonstrator toy_envs:nothing: toy_envs (tests/toy_envs.py) has no function 'nothing'; "
+                         "it has Chain, Unsupported, breakout_rule, dies, go_left, go_right, out_of_range"),
+    ("no_such_module:rule", "demonstrator no_such_module:rule: no module named 'no_such_module' (is its directory "
+                            "on PYTHONPATH?)"),
+    ("toy_envs:NOT_CALLABLE", "demonstrator toy_envs:NOT_CALLABLE: NOT_CALLABLE is not a function (it is of type int)"),
+    ("toy_envs:out_of_range", "toy_envs:out_of_range returned 7 (int); a demonstrator returns an int action in "
+                              "[0, 2) (tests/toy_envs.py:78)"),
     ("best", "expert='best' is none of strong, imperfect, module:function or a .keras model file"),
 ])
 def test_bad_demonstrators_are_named(spec, message):

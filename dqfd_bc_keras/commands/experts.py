@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ..cli import ArgumentParser, positive_int, run
-from ..experts import expert_returns
+from ..recording import expert_returns
 from ..tasks import families, family_preset
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import re
 from collections.abc import Callable, Mapping
@@ -16,6 +17,8 @@ Rule = Callable[[np.ndarray], int]
 
 EXPERT_NAMES = ("strong", "imperfect")
 """The scripted experts every package preset has: a strong one and an imperfect one."""
+DEFAULT_EXPERT = "imperfect"
+"""Config's default `expert`; a preset without an expert of that name demonstrates with its first one."""
 ENV_DEFAULTS: Mapping[str, object] = {"demo_episodes": 10, "total_steps": 100_000, "eval_every": 5_000,
                                       "early_stop_window": 0}
 """The Config defaults of any Gymnasium env that is not a preset (`--env ID`): no early stop,
@@ -82,9 +85,13 @@ TASKS: dict[str, TaskSpec] = {}
 
 
 def register_task(spec: TaskSpec) -> TaskSpec:
-    """Add a preset (a user's own, from their module); returns it."""
+    """Add a preset (a user's own, from their module); returns it as registered: a preset with
+    scripted experts but none called `DEFAULT_EXPERT`, whose defaults name no `expert`, gets its
+    first expert as its default demonstrator (a preset with one expert just uses it)."""
     if not isinstance(spec, TaskSpec):
         raise ConfigError(f"register_task() takes a TaskSpec, got {type(spec).__name__}")
+    if spec.experts and DEFAULT_EXPERT not in spec.experts and "expert" not in spec.defaults:
+        spec = dataclasses.replace(spec, defaults={**spec.defaults, "expert": next(iter(spec.experts))})
     TASKS[spec.name] = spec
     return spec
 
