@@ -5,6 +5,7 @@ before it imports anything heavy."""
 from __future__ import annotations
 
 import argparse
+import ast
 import difflib
 import json
 import re
@@ -41,8 +42,11 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
     parser.add_argument("--max-steps", type=positive_int, metavar="N",
                         help="episode step limit (required for an env registered without one)")
     parser.add_argument("--env-kwargs", nargs="+", action="extend", type=env_kwarg, metavar="KEY=VALUE",
-                        help="keyword arguments of the env's constructor, values as JSON (use_lidar=false, "
-                             'obs_type=\'"ram"\', config=\'{"lanes_count": 3}\'), else a plain string')
+                        help="keyword arguments of the env's constructor; each value is JSON (use_lidar=false, "
+                             "config='{\"lanes_count\": 3}'), else a Python literal (is_slippery=False, "
+                             "shape='(3, 4)', tuples stored as lists), else a plain string if it is a word: "
+                             "letters, digits and _ . - : / with a letter, not starting with - (obs_type=ram, "
+                             "map_name=8x8); anything else, e.g. a value that does not parse, is an error")
     parser.set_defaults(default_task=default)
 
 
@@ -92,15 +96,51 @@ def env_settings(args: argparse.Namespace) -> dict[str, object]:
     return settings
 
 
+WORD = re.compile(r"(?=[^-]*[A-Za-z])[A-Za-z0-9_][A-Za-z0-9_.:/-]*")
+"""A value `--env-kwargs` keeps as a plain string: letters, digits and `_ . : / -`, with at least one
+letter, not starting with `-` (`rgb_array`, `8x8`, `human-ish`)."""
+MISSPELLED_CONSTANTS = {"true": ("true", "True"), "false": ("false", "False"), "none": ("null", "None"),
+                        "null": ("null", "None")}
+"""Words that mean a constant but are none in JSON or Python (`FALSE`, `none`): their JSON and Python
+spellings, suggested instead of keeping them as a string (a truthy one)."""
+
+
 def env_kwarg(text: str) -> tuple[str, object]:
-    """argparse type of `--env-kwargs`: KEY=VALUE, the value parsed as JSON, else kept as a string."""
+    """argparse type of `--env-kwargs`: KEY=VALUE, the value as JSON, else as a Python literal
+    (`ast.literal_eval`: `False`, `None`, `'ram'`, tuples), else as a string when it is a `WORD`.
+    A value kept as a string by mistake is passed on silently ("False" is truthy), so anything
+    else is refused, naming the key and why. Values are JSON values (tuples become lists), as
+    config.json stores them for every later env of the run."""
     key, sep, value = text.partition("=")
-    if not sep or not key.strip().isidentifier():
+    key = key.strip()
+    if not sep or not key.isidentifier():
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a Python identifier, got {text!r}")
     try:
-        return key.strip(), json.loads(value)
-    except json.JSONDecodeError:
-        return key.strip(), value
+        return key, json.loads(value)
+    except ValueError as error:  # JSONDecodeError, or an integer of more digits than Python converts
+        json_error = str(error)
+    try:
+        parsed = ast.literal_eval(value.strip())
+    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError) as error:
+        literal_error = f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else 'malformed'}"
+    else:
+        try:
+            return key, json.loads(json.dumps(parsed))
+        except TypeError as error:
+            raise argparse.ArgumentTypeError(f"{key}={value}: a Python {type(parsed).__name__}, which JSON cannot "
+                                             f"hold ({error})") from None
+    if value.lower() in MISSPELLED_CONSTANTS:
+        as_json, as_python = MISSPELLED_CONSTANTS[value.lower()]
+        raise argparse.ArgumentTypeError(f"{key}={value} is neither JSON nor Python: write {key}={as_json} or "
+                                         f"{key}={as_python}, or {key}='\"{value}\"' for the string")
+    if WORD.fullmatch(value):
+        return key, value
+    start = value.lstrip()[:1]
+    why = (f"is not valid JSON ({json_error})" if start in ("{", "[", '"') else
+           f"is not a valid Python literal ({literal_error})" if start in ("(", "'") else
+           "is neither JSON, a Python literal nor a word (letters, digits, _ . : / -, with a letter)")
+    raise argparse.ArgumentTypeError(f"{key}={value} {why}; a string that is not a word is written as JSON: "
+                                     f"{key}='\"...\"'")
 
 
 def positive_int(text: str) -> int:
@@ -160,5 +200,5 @@ def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None 
         return EXIT_USAGE
     except KeyboardInterrupt as error:
         name, code = ("SIGTERM", 143) if isinstance(error, Terminated) else ("Ctrl-C", 130)
-        print(f"interrupted ({name}); {interrupted}", file=sys.stderr)
+        print(f"interrupted ({name}); {error.args[0] if error.args else interrupted}", file=sys.stderr)  # what it left
         return code

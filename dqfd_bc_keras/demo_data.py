@@ -146,29 +146,38 @@ def concatenate(parts: Sequence[DemoDataset], source: str) -> DemoDataset:
     return DemoDataset(**arrays, meta=meta)
 
 
+def check_layout(path: Path, meta: DemoMeta, layout: dict[str, tuple[np.dtype, tuple[int, ...]]]) -> None:
+    """The dtype and shape of every array (`layout`: name → (dtype, shape)), against each other
+    and `meta`: read from a file's .npy headers before any array is loaded, so a header claiming
+    more rows than the data holds is named, not allocated. Raises DemoFileError."""
+    for name, (dtype, ndim) in ARRAYS.items():
+        got, shape = layout[name]
+        if name in ("obs", "next_obs"):
+            dtype, ndim = meta.obs_dtype, meta.obs_ndim
+        if got != dtype or len(shape) != ndim:
+            raise DemoFileError(path, f"{name} must be {np.dtype(dtype).name} with {ndim} dimension(s), "
+                                      f"got {got} with shape {shape}")
+    n = layout["actions"][1][0]
+    if n == 0 or meta.episode_returns == []:
+        raise DemoFileError(path, "the dataset is empty")
+    for name, (_, shape) in layout.items():
+        if shape[0] != n:
+            raise DemoFileError(path, f"{name} has {shape[0]} rows, actions has {n}")
+    for name in ("obs", "next_obs"):
+        shape = layout[name][1]
+        if meta.obs_shape is not None and list(shape[1:]) != list(meta.obs_shape):
+            raise DemoFileError(path, f"{name} has frames of shape {list(shape[1:])}, meta says "
+                                      f"obs_shape={list(meta.obs_shape)}")
+        if meta.obs_shape is None and shape[1] != meta.obs_dim:
+            raise DemoFileError(path, f"{name} has {shape[1]} features, meta says obs_dim={meta.obs_dim}")
+
+
 def validate(path: Path, ds: DemoDataset) -> None:
     """Every invariant a learner relies on that does not need the environment (dtypes, shapes,
     finite values, actions in range, complete episodes in time order); raises DemoFileError
     naming `path` (a file, or a `minari:` id) and the first failure."""
-    for name, (dtype, ndim) in ARRAYS.items():
-        array = getattr(ds, name)
-        if name in ("obs", "next_obs"):
-            dtype, ndim = ds.meta.obs_dtype, ds.meta.obs_ndim
-        if array.dtype != dtype or array.ndim != ndim:
-            raise DemoFileError(path, f"{name} must be {np.dtype(dtype).name} with {ndim} dimension(s), "
-                                      f"got {array.dtype} with shape {array.shape}")
+    check_layout(path, ds.meta, {name: (getattr(ds, name).dtype, getattr(ds, name).shape) for name in ARRAYS})
     n, m = len(ds.actions), ds.meta
-    if n == 0 or m.episode_returns == []:
-        raise DemoFileError(path, "the dataset is empty")
-    for name in ARRAYS:
-        if len(getattr(ds, name)) != n:
-            raise DemoFileError(path, f"{name} has {len(getattr(ds, name))} rows, actions has {n}")
-    for name in ("obs", "next_obs"):
-        if m.obs_shape is not None and list(getattr(ds, name).shape[1:]) != list(m.obs_shape):
-            raise DemoFileError(path, f"{name} has frames of shape {list(getattr(ds, name).shape[1:])}, meta says "
-                                      f"obs_shape={list(m.obs_shape)}")
-        if m.obs_shape is None and getattr(ds, name).shape[1] != m.obs_dim:
-            raise DemoFileError(path, f"{name} has {getattr(ds, name).shape[1]} features, meta says obs_dim={m.obs_dim}")
     for name in ("obs", "rewards", "next_obs"):
         if not np.isfinite(getattr(ds, name)).all():
             raise DemoFileError(path, f"{name} holds non-finite values (NaN or inf)")

@@ -15,13 +15,15 @@ from __future__ import annotations
 import dataclasses
 import errno
 import json
+import math
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .demo_data import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, validate
+from .demo_data import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, check_layout, validate
 from .envs import get_task, task_spaces
 from .errors import ConfigError, DemoFileError
 from .files import atomic_path
@@ -51,8 +53,8 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
          env_kwargs: dict[str, Any] | None = None, max_transitions: int | None = None) -> DemoDataset:
     """Read and validate a dataset; with `task`/`timeout`, also check it was recorded for them
     (with `task`, on an env made with `env_kwargs`: none when not given, and with the task's
-    observation features and actions); with `max_transitions`, check its size from the file's
-    header before any array is read.
+    observation features and actions); with `max_transitions`, check its size. Every array's
+    header is checked (against the others', the meta and its size in the zip) before any is read.
 
     Raises `DemoFileError` naming the file and the problem for anything a learner could trip
     on later: not an npz, pickled objects, missing keys, wrong shapes or dtypes, non-finite
@@ -63,23 +65,17 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
         raise DemoFileError(path, _not_a_file(path))
     if not zipfile.is_zipfile(path):
         raise DemoFileError(path, "is not an .npz file")
-    if max_transitions is not None:
-        rows = _rows(path)
-        if rows is not None and rows > max_transitions:
-            raise DemoFileError(path, f"holds {rows} transitions, more than demo_capacity={max_transitions} "
-                                      "(raise it with --set demo_capacity=N, or give fewer demonstrations)")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            contents = {key: data[key] for key in data.files}
-    except ValueError as error:  # numpy refuses object arrays without allow_pickle
-        raise DemoFileError(path, f"holds pickled objects, which are not accepted ({error})") from None
-    except (OSError, zipfile.BadZipFile, EOFError) as error:
-        raise DemoFileError(path, f"is not a readable .npz file ({error})") from None
-    missing = [key for key in (*ARRAYS, "meta") if key not in contents]
+    headers = _headers(path)
+    missing = [key for key in (*ARRAYS, "meta") if key not in headers]
     if missing:
         raise DemoFileError(path, f"missing key(s) {missing}")
-    meta = _parse_meta(path, contents["meta"])
-    dataset = DemoDataset(**{name: contents[name] for name in ARRAYS}, meta=meta)
+    rows = headers["actions"][1][0] if headers["actions"][1] else 0
+    if max_transitions is not None and rows > max_transitions:
+        raise DemoFileError(path, f"holds {rows} transitions, more than demo_capacity={max_transitions} "
+                                  "(raise it with --set demo_capacity=N, or give fewer demonstrations)")
+    meta = _parse_meta(path, _read(path, "meta"))
+    check_layout(path, meta, {name: headers[name] for name in ARRAYS})
+    dataset = DemoDataset(**{name: _read(path, name) for name in ARRAYS}, meta=meta)
     validate(path, dataset)
     if task is not None and meta.task != task:
         raise DemoFileError(path, f"was recorded on task {meta.task!r}, not on the requested {task!r}")
@@ -103,16 +99,57 @@ def load(path: str | Path, task: str | None = None, timeout: str | None = None,
     return dataset
 
 
-def _rows(path: Path) -> int | None:
-    """How many transitions the file holds, from the header of its `actions` array (its data unread)."""
+HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+"""The .npy header versions numpy writes for arrays of plain dtypes."""
+MAX_DEFLATE_RATIO = 1032
+"""The most data deflate gives per compressed byte: a member claiming more is damaged or forged."""
+
+
+def _headers(path: Path) -> dict[str, tuple[np.dtype, tuple[int, ...]]]:
+    """{key: (dtype, shape)} of the file's `.npy` members, from their headers alone, each checked
+    against the member's size in the zip: the data a header claims must be exactly what the member
+    holds, and no more than its compressed bytes can inflate to. numpy allocates what a header
+    claims before reading, so a lying header is a MemoryError (10^12 rows) or a short read."""
+    headers = {}
     try:
-        with zipfile.ZipFile(path) as archive, archive.open("actions.npy") as file:
-            version = np.lib.format.read_magic(file)
-            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            shape = read(file)[0]
-    except (KeyError, ValueError, OSError, zipfile.BadZipFile):
-        return None  # the full load names what is wrong
-    return int(shape[0]) if shape else None
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                member = f"member {info.filename}"
+                with archive.open(info) as file:
+                    try:
+                        version = np.lib.format.read_magic(file)
+                        read = HEADER_READERS.get(version)
+                        if read is None:
+                            raise ValueError(f".npy format version {version} is not read here")
+                        shape, _, dtype = read(file)
+                    except ValueError as error:
+                        raise DemoFileError(path, f"{member} has no valid .npy header ({error})") from None
+                    offset = file.tell()
+                if dtype.hasobject:
+                    raise DemoFileError(path, f"{member} holds pickled objects, which are not accepted")
+                claimed = math.prod(shape) * dtype.itemsize
+                if claimed != info.file_size - offset:
+                    raise DemoFileError(path, f"{member} claims shape {shape} of {dtype} ({claimed} bytes), but holds "
+                                              f"{info.file_size - offset} bytes of data")
+                inflatable = {zipfile.ZIP_STORED: 1, zipfile.ZIP_DEFLATED: MAX_DEFLATE_RATIO}.get(info.compress_type)
+                if inflatable is None or info.file_size > inflatable * info.compress_size + 1024:
+                    raise DemoFileError(path, f"{member} claims {info.file_size} bytes from {info.compress_size} "
+                                              "compressed, which its compression cannot give (a damaged file)")
+                headers[info.filename.removesuffix(".npy")] = dtype, tuple(shape)
+    except (OSError, zipfile.BadZipFile, EOFError) as error:
+        raise DemoFileError(path, f"is not a readable .npz file ({error})") from None
+    return headers
+
+
+def _read(path: Path, key: str) -> np.ndarray:
+    """One array of the file, its header already checked by `_headers`."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return data[key]
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error) as error:
+        raise DemoFileError(path, f"member {key}.npy is not readable ({error})") from None
 
 
 META_TYPES: dict[str, tuple[type, ...]] = {

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int
+from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, seed
 from ..demo_files import load, save
 from ..errors import ConfigError
 from ..experts import EXPERT_NAMES
@@ -32,7 +32,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help=f"a preset's {' | '.join(EXPERT_NAMES)}, a rule module:function (obs → action) "
                           "or a saved model.keras (its greedy policy)")
     rec.add_argument("--episodes", type=positive_int, default=5)
-    rec.add_argument("--seed", type=int, default=0, help="episode i resets with seed + i")
+    rec.add_argument("--seed", type=seed, default=0, help="episode i resets with seed + i")
     rec.add_argument("--epsilon", type=float, default=0.0, help="probability of a random action")
     rec.add_argument("--timeout", choices=TIMEOUT_MODES, default="bootstrap")
     rec.add_argument("--out", required=True, help="the .npz file to write")
