@@ -41,9 +41,11 @@ episode next_obs[..., :-1] == obs[..., 1:], and every reset's stack is frame_sta
 the reset frame (also after a lost life).
 
 The options (`AtariOptions`) come from the run's env kwargs: `split_kwargs` takes the keys
-`noop_max`, `frame_skip`, `screen_size`, `frame_stack`, `clip_rewards` and
-`terminal_on_life_loss` out; the rest go to `gym.make` (`repeat_action_probability`,
-`full_action_space`, `mode`, `difficulty`, `max_num_frames_per_episode`, ...).
+`noop_max`, `frame_skip`, `screen_size`, `frame_stack`, `clip_rewards`,
+`terminal_on_life_loss` and `obs_type` out; the rest go to `gym.make` (`repeat_action_probability`,
+`full_action_space`, `mode`, `difficulty`, `max_num_frames_per_episode`, ...). With
+`obs_type="ram"` the agent observes the console's 128 bytes of RAM, a vector: no-op starts and
+frame skip (the last frame's RAM, no pooling), lives and clipping as above, no screen or stack.
 
 >>> env = make_atari("ale_py:ALE/Breakout-v5", {"frame_stack": 2})
 >>> obs, info = env.reset(seed=0)
@@ -71,9 +73,13 @@ NOOP = 0
 
 RESERVED_ALE_KWARGS = {
     "frameskip": "the preprocessing skips frames: use frame_skip",
-    "obs_type": "the preprocessing reads the grey screen",
-    "sound_obs": "the observation is the screen only",
+    "sound_obs": "the observation is the screen or the RAM only",
 }
+
+OBS_TYPES = ("grayscale", "ram")
+"""What an Atari agent can observe: the grey screen as frames, or the console's 128 bytes of RAM."""
+FRAME_OPTIONS = ("screen_size", "frame_stack")
+"""The options that shape frames, which a RAM observation does not have."""
 
 
 def is_atari(env_id: str) -> bool:
@@ -97,6 +103,10 @@ class AtariOptions:
     """Learning: the reward is sign(r) (info["plain_reward"] keeps r)."""
     terminal_on_life_loss: bool = True
     """Learning: a lost life ends the episode, and the next reset continues the game."""
+    obs_type: str = "grayscale"
+    """"grayscale": the screen, shrunk and stacked as above; "ram": the console's 128 bytes as one
+    vector, with no-op starts and frame skip (the last step's RAM: pooling is for flickering
+    sprites) and neither screen_size nor frame_stack."""
 
 
 ATARI_OPTIONS = AtariOptions()
@@ -119,11 +129,12 @@ _MINIMUM = {"noop_max": 0, "frame_skip": 1, "screen_size": 1, "frame_stack": 1}
 
 def split_kwargs(env_kwargs: Mapping[str, Any] | None) -> tuple[AtariOptions, dict[str, Any]]:
     """The preprocessing options in `env_kwargs` and the kwargs for `gym.make` (the rest, with
-    the ALE's own frame skip off and its grey screen on). A one-line `ConfigError` for a bad
-    option value, for an ALE kwarg the preprocessing sets, and for a key that is neither."""
+    the ALE's own frame skip off and the observation `obs_type`). A one-line `ConfigError` for a bad
+    option value, for an ALE kwarg the preprocessing sets, for a frame option with the RAM, and
+    for a key that is neither."""
     fields = {field.name: field for field in dataclasses.fields(AtariOptions)}
     ale_keywords = [name for name in inspect.signature(_ale_env().__init__).parameters
-                    if name not in ("self", *RESERVED_ALE_KWARGS)]
+                    if name not in ("self", *RESERVED_ALE_KWARGS, *fields)]
     options, make_kwargs = {}, {}
     for key, value in (env_kwargs or {}).items():
         if key in fields:
@@ -137,11 +148,22 @@ def split_kwargs(env_kwargs: Mapping[str, Any] | None) -> tuple[AtariOptions, di
             hint = f"did you mean {near[0]!r}? " if near else ""
             raise ConfigError(f"--env-kwargs {key}: neither an Atari option nor an ALE keyword ({hint}options: "
                               f"{', '.join(fields)}; ALE: {', '.join(ale_keywords)})")
-    return AtariOptions(**options), {**make_kwargs, "frameskip": 1, "obs_type": "grayscale"}
+    atari = AtariOptions(**options)
+    if atari.obs_type == "ram":
+        for key in FRAME_OPTIONS:
+            if key in options:
+                raise ConfigError(f"--env-kwargs {key}: not with obs_type='ram', which observes the console's "
+                                  "128 bytes, not frames")
+    return atari, {**make_kwargs, "frameskip": 1, "obs_type": atari.obs_type}
 
 
-def _checked(key: str, value: Any, kind: str) -> int | bool:
+def _checked(key: str, value: Any, kind: str) -> int | bool | str:
     """`value` of option `key` if it has the option's type (`kind`, the annotation) and range."""
+    if kind == "str":
+        if value not in OBS_TYPES:
+            raise ConfigError(f"--env-kwargs {key}: expected 'grayscale' (the screen as frames) or 'ram' (the "
+                              f"console's 128 bytes), got {value!r}")
+        return value
     if kind == "bool":
         if not isinstance(value, bool):
             raise ConfigError(f"--env-kwargs {key}: expected true or false, got {value!r}")
@@ -158,13 +180,13 @@ def _ale_env() -> type:
 
 def wrap_atari(env: gym.Env, options: AtariOptions = ATARI_OPTIONS, learning: bool = True) -> gym.Env:
     """`env` (an ALE env made with `split_kwargs`'s kwargs) preprocessed: the learner's env when
-    `learning`, else the plain env (raw rewards, one episode per game)."""
+    `learning`, else the plain env (raw rewards, one episode per game); RAM is not stacked."""
     env = AtariFrames(env, options.noop_max, options.frame_skip, options.screen_size)
     if learning and options.terminal_on_life_loss:
         env = EpisodicLife(env)
     if learning and options.clip_rewards:
         env = ClipReward(env)
-    return StackFrames(env, options.frame_stack)
+    return env if options.obs_type == "ram" else StackFrames(env, options.frame_stack)
 
 
 def make_atari(
@@ -199,7 +221,8 @@ class AtariFrames(gym.Wrapper, gym.utils.RecordConstructorArgs):
     `reset(seed=s)` fixes it); a step repeats the action `frame_skip` frames (fewer if the
     game ends), sums their rewards and max-pools the last two frames (Atari sprites flicker
     between frames), then area-averages the (210, 160) grey screen to `screen_size`².
-    `info["noops"]` at a reset is the count taken.
+    `info["noops"]` at a reset is the count taken. An env observing the RAM (a 1-D uint8 Box)
+    gets the no-op starts and the skip, and each step observes its last frame's RAM as it is.
     """
 
     def __init__(self, env: gym.Env, noop_max: int = 30, frame_skip: int = 4, screen_size: int = 84) -> None:
@@ -207,17 +230,20 @@ class AtariFrames(gym.Wrapper, gym.utils.RecordConstructorArgs):
                                                  screen_size=screen_size)
         gym.Wrapper.__init__(self, env)
         space = env.observation_space
-        if not (isinstance(space, gym.spaces.Box) and len(space.shape) == 2 and space.dtype == np.uint8):
-            raise ConfigError(f"Atari preprocessing needs a grey uint8 screen (obs_type='grayscale'), got {space}")
+        if not (isinstance(space, gym.spaces.Box) and len(space.shape) in (1, 2) and space.dtype == np.uint8):
+            raise ConfigError(f"Atari preprocessing needs a grey uint8 screen (obs_type='grayscale') or the RAM "
+                              f"(obs_type='ram'), got {space}")
         if getattr(env.unwrapped, "_frameskip", 1) != 1:
             raise ConfigError("Atari preprocessing needs the ALE env made with frameskip=1: it skips frames itself")
         meanings = getattr(env.unwrapped, "get_action_meanings", None)
         if noop_max and meanings is not None and meanings()[NOOP] != "NOOP":
             raise ConfigError(f"no-op starts need action {NOOP} to be NOOP, it is {meanings()[NOOP]}")
         self.noop_max, self.frame_skip = int(noop_max), int(frame_skip)
-        self._rows = area_weights(space.shape[0], screen_size).astype(np.float32)
-        self._cols = area_weights(space.shape[1], screen_size).T.astype(np.float32)
-        self.observation_space = gym.spaces.Box(0, 255, (screen_size, screen_size), np.uint8)
+        self.ram = len(space.shape) == 1
+        if not self.ram:
+            self._rows = area_weights(space.shape[0], screen_size).astype(np.float32)
+            self._cols = area_weights(space.shape[1], screen_size).T.astype(np.float32)
+            self.observation_space = gym.spaces.Box(0, 255, (screen_size, screen_size), np.uint8)
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         frame, info = self.env.reset(**kwargs)
@@ -237,10 +263,14 @@ class AtariFrames(gym.Wrapper, gym.utils.RecordConstructorArgs):
             last_two = [*last_two[-1:], frame]
             if terminated or truncated:
                 break
-        return self._shrink(np.max(last_two, axis=0)), total, terminated, truncated, info
+        frame = last_two[-1] if self.ram else np.max(last_two, axis=0)
+        return self._shrink(frame), total, terminated, truncated, info
 
     def _shrink(self, frame: np.ndarray) -> np.ndarray:
-        """The area average in float32 (as cv2 computes it; the two differ by at most one grey level)."""
+        """The area average in float32 (as cv2 computes it; the two differ by at most one grey level);
+        the RAM as it is."""
+        if self.ram:
+            return frame
         return np.clip(np.rint(self._rows @ frame.astype(np.float32) @ self._cols), 0, 255).astype(np.uint8)
 
 

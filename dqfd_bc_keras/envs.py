@@ -32,6 +32,7 @@ import functools
 import importlib
 import inspect
 import json
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -74,6 +75,8 @@ def env_task(env_id: str) -> TaskSpec:
             importlib.import_module(module)
         spec = gym.spec(bare)
     except (gym.error.Error, ImportError) as error:
+        if module and module in sys.modules and inspect.isclass(getattr(sys.modules[module], bare, None)):
+            raise ConfigError(_class_not_id(module, bare)) from None
         raise ConfigError(f"unknown task {env_id!r}: neither a preset ({', '.join(sorted(TASKS))}) nor a "
                           f"Gymnasium env id ({type(error).__name__}: {error})") from None
     threshold = None if spec.reward_threshold is None else float(spec.reward_threshold)
@@ -81,6 +84,19 @@ def env_task(env_id: str) -> TaskSpec:
         return TaskSpec(env_id, env_id, max_steps=spec.max_episode_steps or ATARI_STEP_LIMIT,
                         solved_return=threshold, defaults=ATARI_DEFAULTS)
     return TaskSpec(env_id, env_id, max_steps=spec.max_episode_steps, solved_return=threshold, defaults=ENV_DEFAULTS)
+
+
+def _class_not_id(module: str, name: str) -> str:
+    """What to pass instead of `--env module:name` when `name` is a class of `module`: the ids
+    registered with an entry point in `module`, or how to register the class."""
+    ids = [env_id for env_id, spec in gym.registry.items()
+           if isinstance(spec.entry_point, str) and spec.entry_point.startswith(f"{module}:")]
+    if ids:
+        how = f"{module} registers {', '.join(ids)}: pass --env {module}:{ids[0]}"
+    else:
+        how = (f"register the class in {module} with gymnasium.register(id=\"{name}-v0\", "
+               f"entry_point=\"{module}:{name}\") and pass --env {module}:{name}-v0")
+    return f"{module}:{name} is a class, not an env id: --env takes a registered Gymnasium id; {how}"
 
 
 @dataclass(frozen=True)
@@ -211,6 +227,15 @@ def _observe(env: gym.Env, name: str, env_kwargs: Mapping[str, Any] | None) -> g
     return FlattenObservation(env, layout)
 
 
+def _unlimited(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True,
+               render_mode: str | None = None) -> gym.Env:
+    """Task `name`'s env as the networks observe it, without a step limit: what the learner's env
+    and the plain env both start from, so that each puts its limit outside, on the agent's steps
+    (a limit inside an Atari env's frame skip would count the emulator's frames)."""
+    return _observe(_make(name, env_kwargs, learning, max_episode_steps=-1, **_rendering(render_mode)), name,
+                    env_kwargs)
+
+
 def task_slug(name: str) -> str:
     """`name` as one path component: an env id's namespace slash and module colon become dashes."""
     return name.replace("/", "-").replace(":", "-")
@@ -241,7 +266,7 @@ def make_task(
     spec, limit = get_task(name), step_limit(name, max_steps)
     if timeout == "time-aware":
         task_spaces(name, env_kwargs).network_input("auto", timeout)  # frames take no time feature: one line
-    env = _observe(_make(name, env_kwargs, max_episode_steps=-1, **_rendering(render_mode)), name, env_kwargs)
+    env = _unlimited(name, env_kwargs, render_mode=render_mode)
     if spec.fall_penalty is not None:
         env = FallPenalty(env, spec.fall_penalty)
     if spec.goal_reward is not None:
@@ -257,16 +282,14 @@ def make_plain_env(
     """The unmodified Gymnasium env of task `name` (made with `env_kwargs`), with its own time
     limit (an env without one, as MinAtar's and the ALE's, gets the training limit); observations
     as the networks take them, and an Atari env's preprocessing without the learner's reward
-    clipping and lives.
+    clipping and lives. The limit counts the agent's steps, as training's does.
 
     With `timeout="time-aware"` the observation also carries the time feature the agent was
     trained with (fraction of the training limit `max_steps` left); rewards and ends are untouched.
     """
-    spec = get_task(name)
-    registered = gym.spec(spec.env_id.rpartition(":")[2]).max_episode_steps
-    own_limit = None if registered is not None else step_limit(name, max_steps)
-    env = _observe(_make(name, env_kwargs, learning=False, max_episode_steps=own_limit, **_rendering(render_mode)),
-                   name, env_kwargs)
+    registered = gym.spec(get_task(name).env_id.rpartition(":")[2]).max_episode_steps
+    limit = registered if registered is not None else step_limit(name, max_steps)
+    env = gym.wrappers.TimeLimit(_unlimited(name, env_kwargs, learning=False, render_mode=render_mode), limit)
     if timeout == "time-aware":
         env = TimeFeature(env, step_limit(name, max_steps))
     return env
