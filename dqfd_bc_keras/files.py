@@ -54,25 +54,45 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
     if not overwrite and path.exists():
         raise OutputExistsError(f"{path} exists; pass --force to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    with _naming(path, None):
+        fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
     os.close(fd)
     umask = os.umask(0)
     os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a result should be as readable as any file
-    tmp = Path(tmp)
+    os.chmod(name, 0o666 & ~umask)  # mkstemp makes 0600; a result should be as readable as any file
+    tmp = Path(name)
     try:
-        yield tmp
-        if durable:
-            _sync(tmp)
-        os.replace(tmp, path)
-        if durable:
-            _sync(path.parent)
+        with _naming(path, tmp):
+            yield tmp
+            if durable:
+                _sync(tmp)
+            os.replace(tmp, path)
+            if durable:
+                _sync(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
 
 
-TEMPORARY = re.compile(r"\..+\.[a-z0-9_]{8}(\.[^.]+)?")
+@contextlib.contextmanager
+def _naming(path: Path, tmp: Path | None) -> Iterator[None]:
+    """An OSError writing `path` names `path`: the user's file, not the temporary one beside it (a
+    read-only directory) nor none at all (a full disk in `write`, which names no file)."""
+    try:
+        yield
+    except OSError as error:
+        if not error.errno or tmp is not None and error.filename is not None and Path(error.filename) != tmp:
+            raise  # not about this file
+        raise OSError(error.errno, error.strerror, str(path)) from None
+
+
+TEMPORARY = re.compile(r"\.(.+)\.[a-z0-9_]{8}(\.[^.]+)?")
 """The name `atomic_path` gives its temporary file: `.{stem}.{8 random characters}{suffix}`."""
+
+
+def temporary_of(name: str) -> str | None:
+    """The file whose temporary `name` is (`TEMPORARY`), else None."""
+    match = TEMPORARY.fullmatch(name)
+    return None if match is None else f"{match[1]}{match[2] or ''}"
 
 
 def remove_temporaries(directory: Path) -> list[Path]:

@@ -7,7 +7,9 @@ lab's test fixture (tests/data/make_suite.py), so the lab reads what runs write.
     demonstrations.json  the `DemoSummary` of the D_demo the run started from
     dynamic_demos.json   one `DemoUpdate` per dynamic-demonstration update
 
-Every file is written atomically; metrics.csv may also grow by one appended row.
+Every file is written atomically; metrics.csv may also grow by one appended row. Which
+directories hold a run, and what replacing one deletes (`check_dir`, `clear`), is decided here
+too, without TensorFlow, so that `train.py` refuses a wrong `--out` in a second.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import IO
@@ -23,11 +26,67 @@ import numpy as np
 
 from .config import Config
 from .envs import get_task
-from .files import atomic_path, write_text
+from .errors import ConfigError, OutputExistsError
+from .files import DirectoryLock, atomic_path, temporary_of, write_text
 from .records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Record
 
 METRICS, EVALS = "metrics.csv", "evals.csv"
 DEMONSTRATIONS, DYNAMIC_DEMOS = "demonstrations.json", "dynamic_demos.json"
+COMPLETE = "complete.json"
+"""Written last, atomically, by a finished run: a run without it is resumed, never taken as done."""
+RUN_FILES = frozenset({"config.json", METRICS, EVALS, DEMONSTRATIONS, DYNAMIC_DEMOS, "tb", "checkpoints",
+                       "q_network.keras", "bc_model.keras", "demos.npz", "eval.json", "learning_curve.png",
+                       "provenance.json", COMPLETE})
+"""The names a run writes in its directory (runs.py's docstring): all that replacing a run deletes."""
+NEW, RESUME, RESTART = "new", "resume", "restart"
+"""What training into a directory does (`check_dir`): start a run, resume the one there, or start
+over the one there that was stopped before its first checkpoint."""
+
+
+def is_run(out: Path) -> bool:
+    """Whether `out` holds a run (the rule of runs.py's docstring): what `--force` may replace."""
+    if (out / "checkpoints" / "latest.json").is_file() or (out / COMPLETE).is_file():
+        return True
+    try:
+        config = json.loads((out / "config.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(config, dict) and {"task", "expert_loss"} <= config.keys()
+
+
+def check_dir(out: Path, resume: bool, force: bool) -> str:
+    """NEW, RESUME or RESTART for training into `out`; refuses what would overwrite a run (unless
+    `force`), or anything that is not a run, or resuming what has no checkpoint. Checked before
+    TensorFlow loads and before the lock is taken (so a refusal writes nothing), and again holding it."""
+    contents = sorted(p.name for p in out.iterdir() if p.name != DirectoryLock.NAME) if out.is_dir() else []
+    if resume and not (contents and is_run(out)):
+        raise ConfigError(f"{out} has no checkpoint to resume from")
+    if not contents:
+        return NEW
+    if not is_run(out):
+        shown = ", ".join(contents[:3]) + (f" and {len(contents) - 3} more" if len(contents) > 3 else "")
+        raise OutputExistsError(f"{out} is not a run directory (it holds {shown}), and only a run is ever replaced; "
+                                "choose a new or empty --out")
+    if (out / "checkpoints" / "latest.json").is_file():
+        if resume:
+            return RESUME
+        if force:
+            return NEW
+        raise OutputExistsError(f"{out} already holds a run; pass --resume to continue it or --force to replace it")
+    if force:
+        return NEW
+    if not ((out / METRICS).exists() or (out / COMPLETE).exists()):
+        return RESTART  # killed between its config.json and its first checkpoint: nothing to lose
+    raise OutputExistsError(f"{out} holds a run without a checkpoint, which cannot be resumed; pass --force to "
+                            "replace it")
+
+
+def clear(out: Path) -> None:
+    """Delete what a run wrote in `out`: RUN_FILES and their temporaries. Its lock and every other
+    file are kept: nothing a user put there is deleted."""
+    for path in out.iterdir():
+        if path.name in RUN_FILES or temporary_of(path.name) in RUN_FILES:
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
 def _writer(file: IO[str], record: type[Record]) -> csv.DictWriter:

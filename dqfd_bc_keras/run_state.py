@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,15 +54,37 @@ class TrainingState:
 
     @classmethod
     def from_dict(cls, fields: dict[str, Any]) -> TrainingState:
-        """The state a state.json holds; keys it does not know are ignored."""
+        """The state a state.json holds; keys it does not know are ignored. A value of the wrong
+        type raises TypeError naming its key (a resume reports it rather than fail mid-run)."""
+        if not isinstance(fields, dict):
+            raise TypeError(f"state.json must hold an object, got {type(fields).__name__}")
         known = {f.name: fields[f.name] for f in dataclasses.fields(cls) if f.name in fields}
+        hints = typing.get_type_hints(cls)
+        for name, value in known.items():
+            if name not in RECORDS and not _is(value, hints[name]):
+                kind = hints[name]
+                shown = kind.__name__ if isinstance(kind, type) else kind
+                raise TypeError(f"{name} must be {shown}, got {value!r:.60}")
         for name, record in RECORDS.items():
-            known[name] = [record.from_row(row) for row in known.get(name, [])]
+            rows = known.get(name, [])
+            if not isinstance(rows, list) or not all(isinstance(row, dict) for row in rows):
+                raise TypeError(f"{name} must be a list of objects, got {rows!r:.60}")
+            known[name] = [record.from_row(row) for row in rows]
         return cls(**known)
 
 
 RECORDS = {"metrics": EpisodeRow, "evals": EvalRow, "demo_updates": DemoUpdate}
 """TrainingState's lists of records and the record of each."""
+
+
+def _is(value: Any, kind: Any) -> bool:
+    """Whether a JSON value is of type `kind` (int, float, bool or list[float]; an int counts as a
+    float, a bool as nothing but a bool)."""
+    if typing.get_origin(kind) is list:
+        return isinstance(value, list) and all(_is(v, typing.get_args(kind)[0]) for v in value)
+    if kind is bool or isinstance(value, bool):
+        return kind is bool and isinstance(value, bool)
+    return isinstance(value, int) if kind is int else isinstance(value, (int, float))
 
 
 def early_stop(config: Config, returns: list[float]) -> bool:

@@ -19,14 +19,24 @@ Every file is written atomically; a checkpoint is a new directory, fsynced, then
 by rewriting `checkpoints/latest.json`, then the old one is deleted, so a run killed at any
 moment resumes from a complete one. One process writes a run directory (`.lock` holds its PID).
 The files of records are written by `run_files.py`.
+
+A directory is a run directory when it holds `checkpoints/latest.json` or `complete.json`, or a
+`config.json` that train.py wrote (a JSON object with a `task` and an `expert_loss`: a run's first
+file). Only such a directory is replaced (`--force`), and replacing it deletes only the names above
+(and the temporaries of their writes): a file a user put beside them is kept. Any other directory
+that is not empty (its lock aside) is refused. A run killed before its first checkpoint holds its
+config.json but no checkpoint: a rerun, or `--resume`, starts it over, with a warning.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import shutil
 import sys
+import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,20 +46,17 @@ import tensorflow as tf
 from . import demos as demo_io
 from .config import Config
 from .envs import task_spaces
-from .errors import (BrokenRunError, ConfigError, DemoFileError, DivergedError, OutputExistsError, RunDirectoryError,
-                     one_line)
+from .errors import (BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line)
 from .evaluation import EvalResult
 from .files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from .provenance import provenance
 from .records import DemoSummary, EpisodeRow, EvalRow
-from .run_files import (METRICS, append_row, plot_learning_curve, write_demonstrations, write_dynamic_demos,
-                        write_evals, write_metrics)
+from .run_files import (COMPLETE, METRICS, RESTART, RESUME, append_row, check_dir, clear, plot_learning_curve,
+                        write_demonstrations, write_dynamic_demos, write_evals, write_metrics)
 from .run_state import TrainingState
 from .seeds import eval_seed, final_eval_seed
 from .training import Learner, build, run_evaluation, train_episodes
 
-COMPLETE = "complete.json"
-"""Written last, atomically, by a finished run: a run without it is resumed, never taken as done."""
 GIVEN_DEMOS = "demos_given.npz"
 """D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
 demonstrations whatever their source (a file, a Minari dataset, a recording)."""
@@ -68,23 +75,6 @@ class RunResult:
     stopped_early: bool
     wall_time: float
     evaluation: EvalResult
-
-
-def check_dir(out: Path, resume: bool, force: bool) -> None:
-    """Refuse to overwrite an existing run unless resuming it or forced. Checked before the lock
-    is taken (so a refusal writes nothing) and again holding it."""
-    if resume:
-        if not (out / "checkpoints" / "latest.json").is_file():
-            raise ConfigError(f"{out} has no checkpoint to resume from")
-    elif not force and out.is_dir() and any(path.name != DirectoryLock.NAME for path in out.iterdir()):
-        raise OutputExistsError(f"{out} already holds a run; pass --resume to continue it or --force to replace it")
-
-
-def clear(out: Path) -> None:
-    """Delete everything in `out` but its lock."""
-    for path in out.iterdir():
-        if path.name != DirectoryLock.NAME:
-            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
 TB_SKIPS = ("episode", "interactions", "wall_time")
@@ -110,6 +100,16 @@ class RunDirectory:
         """Opened at the first summary: a resume that fails to restore leaves no event file."""
         return tf.summary.create_file_writer(str(self.out / "tb"))
 
+    @contextlib.contextmanager
+    def tb_errors(self) -> Iterator[None]:
+        """TensorFlow's error writing the event files (a full disk) as one line naming tb/: the run
+        stops there, resumable from its last checkpoint."""
+        try:
+            yield
+        except tf.errors.OpError as error:
+            raise RunDirectoryError(f"{self.out / 'tb'}: cannot write the TensorBoard events "
+                                    f"({one_line(error)})") from None
+
     def write_demonstrations(self, data: demo_io.DemoDataset | None, given: bool) -> None:
         """What the run started from before any interaction (not interactions themselves): a
         dataset it was `given` (a file, a Minari dataset) or one it recorded from its expert."""
@@ -125,7 +125,7 @@ class RunDirectory:
     # --- called after every episode -------------------------------------------------------
     def on_episode(self, learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
         step = row.env_step
-        with self.tb.as_default(step=row.interactions):  # TensorBoard's x axis: interactions
+        with self.tb_errors(), self.tb.as_default(step=row.interactions):  # TensorBoard's x axis: interactions
             for key, value in row.to_row().items():
                 if key not in TB_SKIPS and value is not None:
                     tf.summary.scalar(f"train/{key}", value)
@@ -161,13 +161,14 @@ class RunDirectory:
                 env_step=env_step, interactions=point, episode=self.state.episode, mean_return=result.mean_return,
                 std_return=result.std_return,
                 mean_goals=float(np.mean(result.goals)) if result.goals is not None else None))
-            with self.tb.as_default(step=point):
+            with self.tb_errors(), self.tb.as_default(step=point):
                 tf.summary.scalar("eval/plain_return", result.mean_return)
                 tf.summary.scalar("eval/env_step", env_step)
                 if result.goals is not None:
                     tf.summary.scalar("eval/goals", float(np.mean(result.goals)))
         write_evals(self.out, self.state.evals)
-        self.tb.flush()
+        with self.tb_errors():
+            self.tb.flush()
 
     # --- checkpoints ------------------------------------------------------------------------
     def save_checkpoint(self) -> None:
@@ -234,7 +235,8 @@ class RunDirectory:
         write_text(out / "eval.json", json.dumps(evaluation.to_dict(), indent=1))
         plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
         self.save_checkpoint()
-        self.tb.close()
+        with self.tb_errors():
+            self.tb.close()
         write_text(out / "provenance.json", json.dumps(provenance(), indent=1))
         write_text(out / COMPLETE, json.dumps({"episodes": self.state.episode, "env_steps": int(
             learner.interaction.env_steps.numpy()), "interactions": learner.interactions}) + "\n", durable=True)
@@ -253,10 +255,19 @@ def train(
     """Train `config` into run directory `out` (or continue the run there with `resume`), as
     its only writer. A new run that fails before its first checkpoint leaves nothing behind."""
     out = Path(out)
+    if not resume:
+        config.check_memory()  # before anything is written: a run that cannot fit is refused, not killed halfway
     created = not out.exists()
-    check_dir(out, resume, force)
-    with DirectoryLock(out):
+    if not (out / DirectoryLock.NAME).exists():  # else a live writer is named first, holding the lock
         check_dir(out, resume, force)
+    with DirectoryLock(out):
+        mode = check_dir(out, resume, force)
+        if mode == RESTART:
+            warnings.warn(f"{out}: no checkpoint yet (the run was stopped before its first); starting it over",
+                          DqfdWarning, stacklevel=2)
+            if resume and (out / "checkpoints" / GIVEN_DEMOS).is_file():  # the run's own D_demo, as a resume would
+                dataset = _given_demos(out / "checkpoints" / GIVEN_DEMOS, config)
+        resume = mode == RESUME
         if not resume:
             clear(out)
         try:
@@ -266,6 +277,8 @@ def train(
                 shutil.rmtree(out) if created else clear(out)
             if isinstance(error, DivergedError):
                 raise DivergedError(f"{out}: {error}; nothing was kept") from None
+            if isinstance(error, KeyboardInterrupt):  # what the command line says the interrupt left
+                error.args = (f"{out}: nothing was kept (the run had not reached its first checkpoint)",)
             raise
         if resume:  # restored: what a kill cut short goes
             remove_temporaries(out)
@@ -321,10 +334,7 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
         tf.config.experimental.enable_op_determinism()
     given = out / "checkpoints" / GIVEN_DEMOS
     if resume and given.is_file():  # the run's own D_demo, not a new recording (nor the --demos of this call)
-        try:
-            dataset = demo_io.load(given, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
-        except DemoFileError as error:
-            raise BrokenRunError(f"{error}; the run cannot be resumed: start the run over with --force") from None
+        dataset = _given_demos(given, config)
     learner, _ = build(config, dataset, fresh=not resume)
     run = RunDirectory(config, out, learner, TrainingState(), quiet)
     if resume:
@@ -336,6 +346,14 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
     return run
+
+
+def _given_demos(given: Path, config: Config) -> demo_io.DemoDataset:
+    """The D_demo a run was given (checkpoints/demos_given.npz), checked against its config."""
+    try:
+        return demo_io.load(given, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
+    except DemoFileError as error:
+        raise BrokenRunError(f"{error}; the run cannot be resumed: start the run over with --force") from None
 
 
 def free_name(path: Path) -> Path:

@@ -522,7 +522,7 @@ def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path)
     (out / "notes.txt").write_text("keep me")
     with pytest.raises(OutputExistsError) as error:
         runs.train(tiny("none"), out, quiet=True)
-    assert "--resume" in str(error.value) and "--force" in str(error.value)
+    assert "is not a run directory" in str(error.value) and "--force" not in str(error.value)
     assert [p.name for p in out.iterdir()] == ["notes.txt"] and (out / "notes.txt").read_text() == "keep me"
     with pytest.raises(ConfigError, match="checkpoint"):
         runs.train(tiny("none"), out, resume=True, quiet=True)
@@ -530,9 +530,13 @@ def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path)
         runs.train(tiny("none"), tmp_path / "missing", resume=True, quiet=True)
     assert [p.name for p in out.iterdir()] == ["notes.txt"] and not (tmp_path / "missing").exists()
 
-    # force: a plain-DQN run replaces it (and writes nothing of demonstrations or BC)
+    # force replaces only a run (here one stopped before its first checkpoint), keeping the user's file; a
+    # plain-DQN run replaces it (and writes nothing of demonstrations or BC)
+    with pytest.raises(OutputExistsError, match="is not a run directory"):
+        runs.train(tiny("none"), out, force=True, quiet=True)
+    (out / "config.json").write_text(json.dumps(tiny().to_dict()))
     result = runs.train(tiny("none"), out, force=True, quiet=True)
-    assert not (out / "notes.txt").exists()
+    assert (out / "notes.txt").read_text() == "keep me"
     assert result.env_steps == 300
     assert (out / "q_network.keras").is_file() and (out / "eval.json").is_file()
     assert not (out / "bc_model.keras").exists() and not (out / "demos.npz").exists()

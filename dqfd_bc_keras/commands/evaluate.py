@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
+from ..errors import ConfigError
 from ..files import write_text
 
 POLICIES = ("bc", "q")
@@ -55,6 +56,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--video", metavar="DIR", help="also record the episodes as MP4 files in DIR "
                         "(needs moviepy: requirements-extras.txt)")
     args = parser.parse_args(argv)
+    if args.out == "":  # else it would be skipped without a word
+        raise ConfigError("--out must not be empty")
     from ..evaluation import evaluate, load_policy, record_video  # TensorFlow from here on
 
     env = env_settings(args)

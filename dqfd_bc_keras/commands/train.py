@@ -17,15 +17,19 @@ and a bad argument answer in about a second.
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Sequence
+from pathlib import Path
 
 from .. import demos
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
 from ..config import QUICK, TARGETS, Config, parse_assignments
 from ..envs import task_slug
 from ..errors import ConfigError
-from ..experts import EXPERT_NAMES
+from ..experts import EXPERT_NAMES, try_demonstrator
+from ..files import DirectoryLock
 from ..methods import METHODS
+from ..run_files import check_dir
 from ..wrappers import TIMEOUT_MODES
 
 
@@ -42,7 +46,8 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--demos", help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari "
                         "cache); else recorded from --expert")
     parser.add_argument("--expert", "--policy", dest="expert",
-                        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect), "
+                        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect; a preset "
+                             "of yours without one: its first expert), "
                              "a rule module:function (obs → action) or a saved model.keras")
     parser.add_argument("--demo-episodes", type=positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
     parser.add_argument("--steps", type=positive_int, help="environment-step budget")
@@ -67,6 +72,19 @@ def refuse_changes(config: Config, given: dict, demos_source: str | None) -> Non
                           "drop those flags, or start the run over with --force")
 
 
+def check_out(out: str | None) -> None:
+    """`--out` given empty would train into the default directory unasked; a name that is not UTF-8
+    (a valid POSIX path) fails in TensorFlow, which writes only to UTF-8 paths: both refused here."""
+    if out == "":
+        raise ConfigError("--out must not be empty")
+    if out is not None:
+        try:
+            out.encode()
+        except UnicodeEncodeError:
+            raise ConfigError(f"--out {os.fsencode(out)!r} is not a UTF-8 path, and TensorFlow writes only to "
+                              "those; choose another name") from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse(argv)
     flags = {"expert_loss": args.expert_loss, "target": args.target, "timeout": args.timeout,
@@ -77,10 +95,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     # without a time limit usable.
     overrides = {**(QUICK if args.quick else {}), **chosen, **env_settings(args), **parse_assignments(args.set)}
     task = chosen_task(args)
+    check_out(args.out)
     defaults = Config.__dataclass_fields__
     out = args.out or (f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
                        f"-seed{overrides.get('seed', defaults['seed'].default)}")
-    config = None if args.resume else Config.for_task(task, **overrides)
+    dataset = None
+    if not args.resume:  # what a new run needs, checked before TensorFlow loads
+        config = Config.for_task(task, **overrides).check_memory()
+        if not (Path(out) / DirectoryLock.NAME).exists():  # else the lock's holder is named first, in `train`
+            check_dir(Path(out), resume=False, force=args.force)
+        if args.demos:
+            dataset = demos.load_source(args.demos, task=config.task, timeout=config.timeout,
+                                        env_kwargs=config.env_kwargs, max_transitions=config.demo_capacity)
+        elif config.uses_demos:
+            try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
     from ..runs import saved_config, train  # TensorFlow from here on: every argument has been checked
 
     # A resumed run is the run in `out`, as its config.json says; a flag that would change it is refused.
@@ -88,9 +116,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = saved_config(out)
         refuse_changes(config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})},
                        args.demos)
-    dataset = (demos.load_source(args.demos, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs,
-                                 max_transitions=config.demo_capacity)
-               if args.demos and not args.resume else None)
     if not args.quiet:
         print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
               f"config: {out}/config.json", flush=True)
