@@ -19,7 +19,10 @@ caches them when a row is written), the targets, every loss term, the gradient, 
 out, where the graph runs TensorFlow's fused kernel), the target refreshes and θ_prior.
 
 Tolerances (float32, 250 steps, seed 0): loss terms per graph call rtol 1e-4 (measured ≤ 1e-6);
-each weight variable within 1e-4 of its norm (measured ~3e-7); priorities rtol/atol 1e-4. A norm,
+each weight variable within 1e-4 of its norm (measured ~3e-7); priorities rtol 1e-4, atol 3e-4
+(TensorFlow's op determinism, which any earlier training in the same pytest worker turns on for the
+whole process, changes the graph's reductions: then one priority of 2650 differed by 2.1e-4, |δ| by
+2.4e-4 at |δ| = 0.27; without it all were within 1e-4). A norm,
 not each element: where a ReLU pre-activation lands within rounding of 0, the two send that unit's
 gradient different ways and Adam carries it on (seen while writing this: ~1e-4 on a few elements,
 3e-5 of the norm). Changing one constant of the graph loop fails the test: the margin or ε_d by 1%,
@@ -153,6 +156,6 @@ def test_reference_learns_what_the_graph_loop_learns(loss, demos, agent_data, bc
     assert_same_weights(agent.target_network.weights, ref.target)
     assert_same_weights(agent.prior_weights, ref.prior)
     graph_p = agent.replay.tree.leaves(agent.replay.stored_indices()).numpy()
-    # p = (|δ| + ε)^α is steep near δ = 0 (slope ≤ α·ε_a^(α−1) ≈ 25): atol 1e-4 is |δ| within 4e-6.
-    np.testing.assert_allclose(ref.replay.p[: len(graph_p)], graph_p, rtol=1e-4, atol=1e-4)
+    # p = (|δ| + ε)^α is steep near δ = 0 (slope ≤ α·ε_a^(α−1) ≈ 25): atol 3e-4 is |δ| within 1.2e-5 there.
+    np.testing.assert_allclose(ref.replay.p[: len(graph_p)], graph_p, rtol=1e-4, atol=3e-4)
     assert rows.mismatches <= 1e-3 * rows.draws
