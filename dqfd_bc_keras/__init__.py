@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     import keras
 
     from .bc import BCModel
+    from .model import DQfD
 
-__all__ = ["TASKS", "BCModel", "load_model", "make_plain_env", "make_task"]
+__all__ = ["TASKS", "BCModel", "DQfD", "load_model", "make_plain_env", "make_task"]
 __version__ = "0.1.0"
 
 
@@ -68,9 +69,13 @@ def load_model(path: str | Path) -> keras.Model:
 
 
 def __getattr__(name: str) -> Any:
-    """`dqfd_bc_keras.BCModel`, imported (with TensorFlow) only when asked for."""
+    """`dqfd_bc_keras.BCModel` and `dqfd_bc_keras.DQfD`, imported (with TensorFlow) only when asked for."""
     if name == "BCModel":
         from .bc import BCModel
 
         return BCModel
+    if name == "DQfD":
+        from .model import DQfD
+
+        return DQfD
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

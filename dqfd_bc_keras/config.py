@@ -450,8 +450,6 @@ def parse_assignments(assignments: list[str]) -> dict[str, object]:
     `env_kwargs` takes a JSON object. Applied before any validation, so an override can make a
     task usable (`max_steps` on an env without a time limit).
     """
-    import difflib
-
     types = {f.name: f.type for f in dataclasses.fields(Config)}
     changes: dict[str, object] = {}
     for assignment in assignments:
@@ -462,11 +460,18 @@ def parse_assignments(assignments: list[str]) -> dict[str, object]:
         if not sep:
             raise ConfigError(f"--set {assignment!r}: expected key=value")
         if key not in types:
-            near = difflib.get_close_matches(key, types, n=1)
-            hint = f"did you mean {near[0]}?" if near else "Config's fields are listed in dqfd_bc_keras/config.py"
-            raise ConfigError(f"--set {assignment!r}: unknown Config field {key!r}; {hint}")
+            raise ConfigError(f"--set {assignment!r}: {unknown_field(key)}")
         changes[key] = _parse(key, types[key], text.strip())
     return changes
+
+
+def unknown_field(key: str) -> str:
+    """What is said of `key`, which is no Config field: the nearest field's name, if any."""
+    import difflib
+
+    near = difflib.get_close_matches(key, [f.name for f in dataclasses.fields(Config)], n=1)
+    hint = f"did you mean {near[0]}?" if near else "Config's fields are listed in dqfd_bc_keras/config.py"
+    return f"unknown Config field {key!r}; {hint}"
 
 
 def _parse(key: str, annotation: str, text: str) -> object:

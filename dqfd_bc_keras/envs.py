@@ -28,12 +28,13 @@ return next to the shaped one; `evaluation` always scores on the plain env itsel
 from __future__ import annotations
 
 import difflib
+import copy
 import functools
 import importlib
 import inspect
 import json
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -293,6 +294,53 @@ def make_plain_env(
     if timeout == "time-aware":
         env = TimeFeature(env, step_limit(name, max_steps))
     return env
+
+
+PYTHON_ENV_PREFIX = "dqfd_bc_keras/python-"
+"""The namespace of the ids `env_id_of` registers for env objects: no later process can make them."""
+
+
+def env_id_of(env: str | gym.Env | Callable[[], gym.Env], env_id: str | None = None) -> tuple[str, dict[str, Any]]:
+    """A task name for `env` and its env kwargs: a name as it is; an env made by `gym.make` from a
+    registered id (unwrapped since), that id and the JSON keyword arguments it was made with; any
+    other env object or a zero-argument factory, a new id `dqfd_bc_keras/python-<Class>-v<k>`
+    registered in this process, whose every `gym.make` calls the factory or returns a deep copy of
+    the instance (the instance itself when it cannot be copied: then training, evaluation and
+    demonstrations step the same object, and its evaluations reset it with their own seeds).
+    `env_id` registers the object under that id instead (a saved run's, given its env again)."""
+    if isinstance(env, str):
+        return env, {}
+    spec = getattr(env, "spec", None) if isinstance(env, gym.Env) else None
+    if spec is not None and spec.id in gym.registry and not spec.additional_wrappers:
+        registered = gym.spec(spec.id).kwargs
+        kwargs = {k: v for k, v in spec.kwargs.items() if k != "render_mode" and registered.get(k) != v}
+        try:
+            return spec.id, json.loads(json.dumps(kwargs))
+        except TypeError:
+            pass  # kwargs no later process could pass: registered as an object below
+    if isinstance(env, gym.Env):
+        name, instance = type(env.unwrapped).__name__, env
+        make: Callable[[], gym.Env] = lambda: _copy_or_same(instance)  # noqa: E731
+    elif callable(env):
+        name, make = getattr(env, "__qualname__", type(env).__name__).replace(".<locals>.", "."), env
+    else:
+        raise ConfigError(f"env must be a Gymnasium id, a preset name, a gymnasium.Env or a factory of one, "
+                          f"got {type(env).__name__}")
+    if env_id is None:
+        base, k = f"{PYTHON_ENV_PREFIX}{''.join(c if c.isalnum() else '_' for c in name)}", 0
+        while f"{base}-v{k}" in gym.registry:
+            k += 1
+        env_id = f"{base}-v{k}"
+    gym.registry.pop(env_id, None)
+    gym.register(id=env_id, entry_point=make, max_episode_steps=None, disable_env_checker=True)
+    return env_id, {}
+
+
+def _copy_or_same(env: gym.Env) -> gym.Env:
+    try:
+        return copy.deepcopy(env)
+    except Exception:  # noqa: BLE001  (an env holding a window, a socket, a simulator handle)
+        return env
 
 
 def register_tasks() -> None:

@@ -27,6 +27,9 @@ class Interaction(tf.Module):
         self.agent, self.env, self.config = agent, env, config
         self.env_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="env_steps")
         self.rng = tf.random.Generator.from_seed(config.seed + 1)
+        self.decay_steps = tf.Variable(config.epsilon_fraction * config.total_steps, dtype=tf.float32,
+                                       trainable=False, name="decay_steps")
+        """ε's decay length, a variable: a budget raised after tracing (`Learner.extend`) stretches it."""
         self.episode = EpisodeStats()
         self.recorder = EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed,
                                                 env_kwargs=config.env_kwargs) \
@@ -38,7 +41,7 @@ class Interaction(tf.Module):
         """ε, linear from its start to `epsilon_end` over `epsilon_fraction` of the budget."""
         c = self.config
         start = c.initial_epsilon
-        progress = tf.cast(self.env_steps, tf.float32) / (c.epsilon_fraction * c.total_steps)
+        progress = tf.cast(self.env_steps, tf.float32) / self.decay_steps
         return tf.maximum(c.epsilon_end, start - (start - c.epsilon_end) * progress)
 
     def reset(self, seed: int) -> np.ndarray:

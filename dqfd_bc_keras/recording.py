@@ -25,7 +25,7 @@ from .demo_data import ARRAYS, DemoDataset, DemoMeta
 from .envs import get_task, make_plain_env, make_task, task_spaces
 from .errors import ConfigError, DqfdError, one_line
 from .seeds import demo_seed
-from .tasks import EXPERT_NAMES, Rule, check_demonstrator, families, family_preset
+from .tasks import EXPERT_NAMES, NOT_REMADE, Rule, check_demonstrator, families, family_preset
 
 if TYPE_CHECKING:
     from .config import Config
@@ -156,6 +156,9 @@ def make_demonstrator(spec: str, task: str, epsilon: float = 0.0, seed: int | No
     function of the observation as the networks see it, flattened, → action), or the greedy
     policy of a saved `.keras` Q-network or BC model (checked against the task's spaces)."""
     check_demonstrator(spec, get_task(task))
+    if spec.startswith(NOT_REMADE):
+        raise ConfigError(f"expert {spec!r} existed only in the Python process that used it: give the "
+                          "demonstrations themselves (--demos FILE.npz)")
     n_actions = task_spaces(task, env_kwargs).n_actions  # first: an env we cannot learn on is the error
     family = get_task(task).family
     if spec in EXPERT_NAMES or spec in get_task(task).experts:
@@ -211,7 +214,7 @@ def expert_returns(
 
 def record(
     task: str,
-    expert: str,
+    expert: str | Demonstrator,
     episodes: int,
     seed: int = 0,
     epsilon: float = 0.0,
@@ -220,13 +223,15 @@ def record(
     env_kwargs: dict[str, Any] | None = None,
 ) -> DemoDataset:
     """Run the demonstrator `expert` (`make_demonstrator`: strong | imperfect |
-    module:function | model.keras) for `episodes` episodes of `task` made with `env_kwargs`,
-    `max_steps` steps at most; episode i resets with seed + i."""
+    module:function | model.keras; or one already made) for `episodes` episodes of `task` made
+    with `env_kwargs`, `max_steps` steps at most; episode i resets with seed + i."""
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
-    policy = make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
+    policy = (expert if isinstance(expert, Demonstrator)
+              else make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs))
     env = make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs)
-    dataset = rollout(env, policy, [seed + i for i in range(episodes)], task=task, source=expert,
+    source = policy.name if policy is expert else expert
+    dataset = rollout(env, policy, [seed + i for i in range(episodes)], task=task, source=source,
                       epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
     env.close()
     return dataset

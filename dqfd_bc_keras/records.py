@@ -172,9 +172,10 @@ class DemoUpdate(Record):
     bc_accuracy: float
 
 
-DEMO_SOURCES = ("recorded", "file", "minari")
+DEMO_SOURCES = ("recorded", "file", "minari", "python")
 """Where a run's demonstrations come from: recorded from its `expert` at the start, a file of ours
-given to it (`train.py --demos FILE`), or a Minari dataset (`--demos minari:ID`)."""
+given to it (`train.py --demos FILE`), a Minari dataset (`--demos minari:ID`), or a `DemoDataset`
+object given from Python (`DQfD(env, demos=dataset)`)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -37,10 +37,9 @@ import shutil
 import sys
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import tensorflow as tf
 
 from . import demos as demo_io
@@ -54,8 +53,9 @@ from .records import DemoSummary, EpisodeRow, EvalRow
 from .run_files import (COMPLETE, METRICS, RESTART, RESUME, append_row, check_dir, clear, plot_learning_curve,
                         write_demonstrations, write_dynamic_demos, write_evals, write_metrics)
 from .run_state import TrainingState
-from .seeds import eval_seed, final_eval_seed
-from .training import Learner, build, run_evaluation, train_episodes
+from .seeds import final_eval_seed
+from .training import (Callback, Learner, StopTraining, build, evaluate_at, run_evaluation, train_episodes,
+                       with_callback)
 
 GIVEN_DEMOS = "demos_given.npz"
 """D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
@@ -75,6 +75,8 @@ class RunResult:
     stopped_early: bool
     wall_time: float
     evaluation: EvalResult
+    run: RunDirectory | None = field(default=None, repr=False)
+    """The run directory's learner and state, to go on training (`continue_run`)."""
 
 
 TB_SKIPS = ("episode", "interactions", "wall_time")
@@ -110,13 +112,16 @@ class RunDirectory:
             raise RunDirectoryError(f"{self.out / 'tb'}: cannot write the TensorBoard events "
                                     f"({one_line(error)})") from None
 
-    def write_demonstrations(self, data: demo_io.DemoDataset | None, given: bool) -> None:
-        """What the run started from before any interaction (not interactions themselves): a
-        dataset it was `given` (a file, a Minari dataset) or one it recorded from its expert."""
+    def write_demonstrations(self, source: str | None) -> None:
+        """What the run started from before any interaction (not interactions themselves), as it
+        was given (checkpoints/demos_given.npz) and its summary: a dataset from `source` (a file, a
+        Minari dataset, a Python object: DEMO_SOURCES), or one it recorded from its expert (None)."""
+        data = self.learner.demos
         if data is None:
             return
+        demo_io.save(data, self.out / "checkpoints" / GIVEN_DEMOS, force=True)
         meta = data.meta
-        source = ("minari" if meta.expert.startswith("minari:") else "file") if given else "recorded"
+        source = source or "recorded"
         write_demonstrations(self.out, DemoSummary(
             transitions=len(data), episodes=data.n_episodes, expert=meta.expert,
             episode_returns=meta.episode_returns, plain_returns=meta.plain_returns,
@@ -151,24 +156,19 @@ class RunDirectory:
             write_metrics(self.out, rows)
         self.metrics_rows = len(rows)
 
-    def evaluate(self, points: list[int]) -> None:
+    def evaluate(self, points: list[int]) -> list[EvalRow]:
         """One greedy evaluation of the current network, logged at each grid point in `points`."""
-        result = run_evaluation(self.config, self.learner.agent, self.config.eval_episodes,
-                                eval_seed(self.config.seed))
-        env_step = int(self.learner.interaction.env_steps.numpy())
-        for point in points:
-            self.state.evals.append(EvalRow(
-                env_step=env_step, interactions=point, episode=self.state.episode, mean_return=result.mean_return,
-                std_return=result.std_return,
-                mean_goals=float(np.mean(result.goals)) if result.goals is not None else None))
-            with self.tb_errors(), self.tb.as_default(step=point):
-                tf.summary.scalar("eval/plain_return", result.mean_return)
-                tf.summary.scalar("eval/env_step", env_step)
-                if result.goals is not None:
-                    tf.summary.scalar("eval/goals", float(np.mean(result.goals)))
+        rows = evaluate_at(self.learner, self.state, points)
+        for row in rows:
+            with self.tb_errors(), self.tb.as_default(step=row.interactions):
+                tf.summary.scalar("eval/plain_return", row.mean_return)
+                tf.summary.scalar("eval/env_step", row.env_step)
+                if row.mean_goals is not None:
+                    tf.summary.scalar("eval/goals", row.mean_goals)
         write_evals(self.out, self.state.evals)
         with self.tb_errors():
             self.tb.flush()
+        return rows
 
     # --- checkpoints ------------------------------------------------------------------------
     def save_checkpoint(self) -> None:
@@ -251,9 +251,13 @@ def train(
     resume: bool = False,
     force: bool = False,
     quiet: bool = False,
+    source: str | None = None,
+    callback: Callback | None = None,
 ) -> RunResult:
     """Train `config` into run directory `out` (or continue the run there with `resume`), as
-    its only writer. A new run that fails before its first checkpoint leaves nothing behind."""
+    its only writer. A new run that fails before its first checkpoint leaves nothing behind.
+    `source` says where a given `dataset` came from (DEMO_SOURCES; None: a file or a Minari
+    dataset, as its metadata says); `callback` is given each episode's and evaluation's row."""
     out = Path(out)
     if not resume:
         config.check_memory()  # before anything is written: a run that cannot fit is refused, not killed halfway
@@ -271,7 +275,7 @@ def train(
         if not resume:
             clear(out)
         try:
-            run = _start(config, out, dataset, resume, quiet)
+            run = _start(config, out, dataset, resume, quiet, source)
         except BaseException as error:
             if not resume:
                 shutil.rmtree(out) if created else clear(out)
@@ -283,12 +287,60 @@ def train(
         if resume:  # restored: what a kill cut short goes
             remove_temporaries(out)
             (out / COMPLETE).unlink(missing_ok=True)  # written again when it finishes again
-        try:
-            train_episodes(run.learner, run.state, run.on_episode, run.evaluate)
-        except DivergedError as error:
-            kept = json.loads((out / "checkpoints" / "latest.json").read_text())["dir"]
-            raise DivergedError(f"{out}: {error}; the last good checkpoint, {kept}, is kept") from None
-        return run.finish()
+        return _train_into(run, callback)
+
+
+def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None = None) -> RunResult:
+    """Go on training the learner of `run`, finished or stopped in this process, to a budget of
+    `total_steps`: its config.json says the new budget once a checkpoint has it."""
+    with DirectoryLock(run.out):
+        run.learner.extend(total_steps)
+        run.config = run.learner.config
+        run.progress = None
+        run.__dict__.pop("tb", None)  # closed by `finish`: opened again at the next summary
+        (run.out / COMPLETE).unlink(missing_ok=True)
+        run.save_checkpoint()
+        write_config(run.config, run.out)
+        return _train_into(run, callback)
+
+
+def _train_into(run: RunDirectory, callback: Callback | None) -> RunResult:
+    """Steps 3–5 into the run's directory (until a False of `callback`), then its end."""
+    on_episode, on_eval = with_callback(run.on_episode, run.evaluate, callback)
+    try:
+        train_episodes(run.learner, run.state, on_episode, on_eval)
+    except StopTraining:
+        pass
+    except DivergedError as error:
+        kept = json.loads((run.out / "checkpoints" / "latest.json").read_text())["dir"]
+        raise DivergedError(f"{run.out}: {error}; the last good checkpoint, {kept}, is kept") from None
+    result = run.finish()
+    result.run = run
+    return result
+
+
+def save_run(out: str | Path, learner: Learner, state: TrainingState, source: str | None) -> None:
+    """Write `learner` and its `state`, trained in this process, as a complete run directory `out`
+    (replacing a run there): what `evaluate.py`, `train.py --resume` and `DQfD.load` read."""
+    out = Path(out)
+    check_dir(out, resume=False, force=True)
+    with DirectoryLock(out):
+        check_dir(out, resume=False, force=True)
+        clear(out)
+        write_config(learner.config, out)
+        run = RunDirectory(learner.config, out, learner, state, quiet=True)
+        run.write_demonstrations(source)
+        write_metrics(out, state.metrics)
+        write_evals(out, state.evals)
+        if state.demo_updates:
+            write_dynamic_demos(out, state.demo_updates)
+        run.finish()
+
+
+def write_config(config: Config, out: Path) -> None:
+    """config.json: every field, and under "observation" the env's observation space and its flattening."""
+    observation = task_spaces(config.task, config.env_kwargs).layout.to_dict()
+    write_text(out / "config.json", json.dumps({**config.to_dict(), "observation": observation}, indent=1))
 
 
 def saved_config(out: str | Path) -> Config:
@@ -323,15 +375,13 @@ def _read_config(path: Path) -> Config:
         raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
 
 
-def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool) -> RunDirectory:
+def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool,
+           source: str | None = None) -> RunDirectory:
     """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
     if resume:
         config = saved_config(out)
     else:
-        observation = task_spaces(config.task, config.env_kwargs).layout.to_dict()
-        write_text(out / "config.json", json.dumps({**config.to_dict(), "observation": observation}, indent=1))
-    if config.deterministic:
-        tf.config.experimental.enable_op_determinism()
+        write_config(config, out)
     given = out / "checkpoints" / GIVEN_DEMOS
     if resume and given.is_file():  # the run's own D_demo, not a new recording (nor the --demos of this call)
         dataset = _given_demos(given, config)
@@ -340,12 +390,15 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
     if resume:
         run.restore_checkpoint()
     else:
-        if learner.demos is not None:
-            demo_io.save(learner.demos, given, force=True)
-        run.write_demonstrations(learner.demos, given=dataset is not None)
+        run.write_demonstrations(source or (given_source(dataset) if dataset is not None else None))
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
     return run
+
+
+def given_source(dataset: demo_io.DemoDataset) -> str:
+    """Where a dataset given to a run came from, as its metadata says: a Minari dataset or a file."""
+    return "minari" if dataset.meta.expert.startswith("minari:") else "file"
 
 
 def _given_demos(given: Path, config: Config) -> demo_io.DemoDataset:

@@ -22,6 +22,10 @@ def demo_seed(seed: int) -> int:
     return seed * 1000
 
 
+EVAL_SEED = 12345
+"""Reset seed of the first episode of `evaluate.py` (and `DQfD.evaluate`), unless told another."""
+
+
 def eval_seed(seed: int) -> int:
     """Reset seed of the first periodic-evaluation episode, apart from training's seeds."""
     return 10_000 + seed * 1000

@@ -17,6 +17,7 @@ episode ends in a `records.EpisodeRow`, and `runs.py` writes the files of a run.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -35,10 +36,10 @@ from .envs import make_task
 from .errors import DivergedError
 from .evaluation import EvalResult, GreedyPolicy, evaluate
 from .interaction import Interaction
-from .recording import record, rollout
-from .records import DemoUpdate, EpisodeRow, Losses
+from .recording import Demonstrator, record, rollout
+from .records import DemoUpdate, EpisodeRow, EvalRow, Losses
 from .run_state import TrainingState, early_stop
-from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed
+from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed, eval_seed
 from .wrappers import CountInteractions, Tally
 
 METRIC_FIELDS = EpisodeRow.columns()
@@ -49,11 +50,14 @@ def demonstrations(config: Config, dataset: DemoDataset | None) -> DemoDataset |
     """Step 1: the given dataset, or `demo_episodes` recorded from the scripted `expert`."""
     if not config.uses_demos:
         return None
-    if dataset is not None:
-        return dataset
-    return record(config.task, config.expert, config.demo_episodes, seed=demo_seed(config.seed),
-                          epsilon=config.expert_epsilon, timeout=config.timeout, max_steps=config.max_steps,
-                          env_kwargs=config.env_kwargs)
+    return dataset if dataset is not None else record_demos(config, config.expert)
+
+
+def record_demos(config: Config, expert: str | Demonstrator) -> DemoDataset:
+    """`demo_episodes` episodes of `expert` (a name `make_demonstrator` takes, or one made) on the task."""
+    return record(config.task, expert, config.demo_episodes, seed=demo_seed(config.seed),
+                  epsilon=config.expert_epsilon, timeout=config.timeout, max_steps=config.max_steps,
+                  env_kwargs=config.env_kwargs)
 
 
 def fit_bc(config: Config, bc: BCModel, data: DemoDataset, epochs: int, fit_index: int) -> float:
@@ -177,6 +181,20 @@ def run_evaluation(config: Config, agent: DQfDAgent, episodes: int, seed: int) -
                     timeout=config.timeout, max_steps=config.max_steps, env_kwargs=config.env_kwargs)
 
 
+def evaluate_at(learner: Learner, state: TrainingState, points: list[int]) -> list[EvalRow]:
+    """One greedy evaluation of the current network, as a row at each grid point in `points`
+    (appended to `state.evals`)."""
+    config = learner.config
+    result = run_evaluation(config, learner.agent, config.eval_episodes, eval_seed(config.seed))
+    env_step = int(learner.interaction.env_steps.numpy())
+    rows = [EvalRow(env_step=env_step, interactions=point, episode=state.episode, mean_return=result.mean_return,
+                    std_return=result.std_return,
+                    mean_goals=float(np.mean(result.goals)) if result.goals is not None else None)
+            for point in points]
+    state.evals.extend(rows)
+    return rows
+
+
 @dataclass
 class Learner:
     """Everything a run trains: the agent, π_bc, the interaction loop, D_demo's episodes and
@@ -195,6 +213,14 @@ class Learner:
     def interactions(self) -> int:
         return self.tally.count
 
+    def extend(self, total_steps: int) -> None:
+        """Raise the step budget to `total_steps`: the run goes on, ε's schedule stretched to the new budget."""
+        self.config = dataclasses.replace(self.config, total_steps=total_steps)
+        self.interaction.config = self.config
+        self.interaction.decay_steps.assign(self.config.epsilon_fraction * total_steps)
+        if self.dynamic is not None:
+            self.dynamic.config = self.config
+
     def checkpoint(self) -> tf.train.Checkpoint:
         extra = {"bc_optimizer": self.bc.optimizer} if self.bc is not None else {}
         return tf.train.Checkpoint(agent=self.agent.checkpoint(), env_steps=self.interaction.env_steps,
@@ -204,6 +230,8 @@ class Learner:
 def build(config: Config, dataset: DemoDataset | None = None, fresh: bool = True) -> tuple[Learner, dict]:
     """Steps 1–2: demonstrations, π_bc, the pre-trained agent; returns the learner and
     pre-training's losses. `fresh=False` skips the fits: a resume restores their results."""
+    if config.deterministic:
+        tf.config.experimental.enable_op_determinism()
     tally = Tally()
     env = CountInteractions(task_env(config), tally)
     data = demonstrations(config, dataset)
@@ -233,8 +261,37 @@ def check_finite(losses: dict[str, float], where: str) -> None:
         raise DivergedError(f"training diverged in {where}: " + ", ".join(f"{k} = {v}" for k, v in bad.items()))
 
 
-Evaluate = Callable[[list[int]], None]
-"""Evaluates the current Q-network once and logs it at each of the given grid points."""
+Evaluate = Callable[[list[int]], list[EvalRow]]
+"""Evaluates the current Q-network once and logs it at each of the given grid points (its rows)."""
+OnEpisode = Callable[[Learner, TrainingState, EpisodeRow], None]
+Callback = Callable[[EpisodeRow | EvalRow], object]
+"""A user's callback: given each episode's and each evaluation's row; `False` stops training."""
+
+
+class StopTraining(Exception):
+    """A user's callback returned False: training ends where it is (`train_episodes`' callers catch it)."""
+
+
+def with_callback(on_episode: OnEpisode, on_eval: Evaluate, callback: Callback | None) -> tuple[OnEpisode, Evaluate]:
+    """`on_episode` and `on_eval`, each then giving its rows to `callback` (raising StopTraining at a False)."""
+    if callback is None:
+        return on_episode, on_eval
+
+    def tell(rows: list) -> None:
+        for row in rows:
+            if callback(row) is False:
+                raise StopTraining
+
+    def episode(learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
+        on_episode(learner, state, row)
+        tell([row])
+
+    def evaluate(points: list[int]) -> list[EvalRow]:
+        rows = on_eval(points)
+        tell(rows)
+        return rows
+
+    return episode, evaluate
 
 
 def evaluate_due(learner: Learner, state: TrainingState, on_eval: Evaluate) -> None:
@@ -249,10 +306,7 @@ def evaluate_due(learner: Learner, state: TrainingState, on_eval: Evaluate) -> N
         on_eval(due)
 
 
-def train_episodes(
-    learner: Learner, state: TrainingState, on_episode: Callable[[Learner, TrainingState, EpisodeRow], None],
-    on_eval: Evaluate,
-) -> TrainingState:
+def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode, on_eval: Evaluate) -> TrainingState:
     """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs and saves,
     `on_eval` evaluates at exactly every `eval_every` interactions."""
     c, agent, interaction = learner.config, learner.agent, learner.interaction

@@ -20,6 +20,7 @@ from collections.abc import Callable, Sequence
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
 from ..errors import ConfigError
 from ..files import write_text
+from ..seeds import EVAL_SEED
 
 POLICIES = ("bc", "q")
 """What `--policy` may name: the keys of `evaluation.POLICY_FILES` (a run directory's model files),
@@ -50,7 +51,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--policy", choices=POLICIES,
                         help="a run directory's q_network.keras (q, the default) or bc_model.keras (bc)")
     parser.add_argument("--episodes", type=positive_int, default=100, help="greedy episodes (default 100)")
-    parser.add_argument("--seed", type=seed, default=12345, help="episode i is reset with seed + i (default 12345)")
+    parser.add_argument("--seed", type=seed, default=EVAL_SEED,
+                        help=f"episode i is reset with seed + i (default {EVAL_SEED})")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
     parser.add_argument("--out", help="also write the JSON result to this file")
     parser.add_argument("--video", metavar="DIR", help="also record the episodes as MP4 files in DIR "

@@ -14,9 +14,9 @@ your module the same way, and `--task my_module:my-task` imports `my_module` fir
 This package imports neither TensorFlow nor Gymnasium: reading a config.json loads neither.
 """
 
-from .registry import (ENV_DEFAULTS, EXPERT_NAMES, ID_NAMESPACE, TASKS, LabSettings, Rule, TaskSpec, check_demonstrator,
-                       families, family_preset, find_preset, register_task)
+from .registry import (ENV_DEFAULTS, EXPERT_NAMES, ID_NAMESPACE, NOT_REMADE, TASKS, LabSettings, Rule, TaskSpec,
+                       check_demonstrator, families, family_preset, find_preset, register_task)
 from . import cartpole, mountaincar, acrobot, lunarlander, minatar  # noqa: E402,F401,I001  (they register, in this order)
 
-__all__ = ["ENV_DEFAULTS", "EXPERT_NAMES", "ID_NAMESPACE", "TASKS", "LabSettings", "Rule", "TaskSpec", "check_demonstrator", "families",
-           "family_preset", "find_preset", "register_task"]
+__all__ = ["ENV_DEFAULTS", "EXPERT_NAMES", "ID_NAMESPACE", "NOT_REMADE", "TASKS", "LabSettings", "Rule", "TaskSpec",
+           "check_demonstrator", "families", "family_preset", "find_preset", "register_task"]

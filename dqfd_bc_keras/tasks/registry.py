@@ -17,6 +17,10 @@ Rule = Callable[[np.ndarray], int]
 
 EXPERT_NAMES = ("strong", "imperfect")
 """The scripted experts every package preset has: a strong one and an imperfect one."""
+NOT_REMADE = ("python callable ", "demonstrations from ")
+"""How a config names demonstrations that no later process can make again (a Python function
+recorded in the process that ran, a dataset given from Python): accepted as an `expert`, never
+made again; such a run's D_demo is kept in its checkpoints (runs.GIVEN_DEMOS)."""
 DEFAULT_EXPERT = "imperfect"
 """Config's default `expert`; a preset without an expert of that name demonstrates with its first one."""
 ENV_DEFAULTS: Mapping[str, object] = {"demo_episodes": 10, "total_steps": 100_000, "eval_every": 5_000,
@@ -116,7 +120,8 @@ def check_demonstrator(spec: str, task: TaskSpec) -> None:
     """A `ConfigError` unless `spec` names a demonstrator for `task`: a scripted expert's name,
     a rule `module:function` or a `.keras` model file (what each is, is checked when it is made)."""
     scripted = tuple(dict.fromkeys((*EXPERT_NAMES, *task.experts)))
-    if spec not in scripted and not spec.endswith(".keras") and not re.fullmatch(r"[\w.]+:\w+", spec):
+    if (spec not in scripted and not spec.endswith(".keras") and not re.fullmatch(r"[\w.]+:\w+", spec)
+            and not spec.startswith(NOT_REMADE)):
         raise ConfigError(f"expert={spec!r} is none of {', '.join(scripted)}, module:function or a .keras model file")
 
 

@@ -1,0 +1,227 @@
+"""`DQfD`: Algorithm 1 from Python, exactly as `train.py` runs it (the same seed and settings give
+the same metrics), with an env and demonstrations given as Python objects.
+
+    model = DQfD("cartpole", demos="imperfect", seed=0, total_steps=20_000)   # any Config field
+    model.learn(20_000)                       # steps 1–5; a second learn goes on with the same run
+    model.predict(obs)                        # the greedy action(s)
+    model.evaluate(100)                       # evaluate.py's EvalResult
+    model.save("runs/mine")                   # a run directory evaluate.py and train.py --resume read
+
+Nothing is written to disk unless asked: `out=` trains into a run directory as `train.py --out`
+does (checkpoints, atomic files, the lock), `save` writes one at the end.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from . import demos as demo_io
+from .config import Config, unknown_field
+from .envs import PYTHON_ENV_PREFIX, env_id_of, task_spaces
+from .errors import ConfigError, DqfdWarning
+from .evaluation import EvalResult, GreedyPolicy
+from .methods import METHODS, Method, register
+from .recording import Demonstrator
+from .records import EpisodeRow, EvalRow
+from .run_state import TrainingState
+from .runs import RunDirectory, continue_run, given_source, save_run, train
+from .seeds import EVAL_SEED, demo_seed
+from .training import (Learner, StopTraining, build, evaluate_at, record_demos, run_evaluation, train_episodes,
+                       with_callback)
+
+EnvLike = str | gym.Env | Callable[[], gym.Env]
+DemosLike = demo_io.DemoDataset | str | Path | Callable[[np.ndarray], int] | None
+
+
+class DQfD:
+    """Deep Q-learning from demonstrations (with a BC model and the Bayesian expert loss by default).
+
+    `env`: a preset name or Gymnasium id, a `gymnasium.Env` or a zero-argument factory of one. An
+    env object no id can make is registered in this process (`envs.env_id_of`): evaluation plays
+    a fresh copy of it (the factory's, or a deep copy of the instance; an instance that cannot be
+    copied is played itself, so its evaluation episodes, reset with their own seeds, come between
+    training's). `max_steps=` gives an env without a time limit of its own one.
+    `demos`: a `DemoDataset`, a `.npz` path, `minari:ID`, or a demonstrator recorded for
+    `demo_episodes` episodes: a preset expert's name, `module:function`, a `.keras` model or a Python
+    callable obs → action. `expert_loss`: a registered method's name or a `Method`. `out`: a run
+    directory to train into. Any other keyword is a Config field.
+    """
+
+    def __init__(self, env: EnvLike = "cartpole", demos: DemosLike = None, *, expert_loss: str | Method | None = None,
+                 seed: int = 0, out: str | Path | None = None, **fields: Any) -> None:
+        for key in fields:
+            if key == "task" or key not in Config.__dataclass_fields__:
+                raise ConfigError(f"DQfD({key}=…): " + ("the task is the env argument" if key == "task"
+                                                        else unknown_field(key)))
+        task, env_kwargs = env_id_of(env)
+        if isinstance(expert_loss, Method):
+            if METHODS.get(expert_loss.name) is not expert_loss:
+                register(expert_loss)
+            expert_loss = expert_loss.name
+        settings = {"env_kwargs": env_kwargs, "seed": seed, **fields}
+        if expert_loss is not None:
+            settings["expert_loss"] = expert_loss
+        dataset, self._source, rule = None, None, None
+        if isinstance(demos, demo_io.DemoDataset):
+            dataset, self._source = demos, "python"
+            settings["expert"] = f"demonstrations from a Python DemoDataset ({demos.meta.expert})"
+        elif isinstance(demos, (str, Path)) and (str(demos).endswith(".npz") or str(demos).startswith("minari:")):
+            preset = Config.for_task(task, **settings)
+            dataset = demo_io.load_source(str(demos), task, preset.timeout, preset.env_kwargs, preset.demo_capacity)
+            self._source = given_source(dataset)
+            settings["expert"] = f"demonstrations from {demos} ({dataset.meta.expert})"
+        elif isinstance(demos, (str, Path)):
+            settings["expert"] = str(demos)
+        elif callable(demos):
+            rule, self._source = demos, "recorded"
+            settings["expert"] = f"python callable {getattr(demos, '__qualname__', type(demos).__name__)}"
+        self.config = Config.for_task(task, **settings)
+        if rule is not None and self.config.uses_demos:  # step 1 for a callable: recorded now, given to training
+            c = self.config
+            dataset = record_demos(c, Demonstrator(c.expert, rule, task_spaces(c.task, c.env_kwargs).n_actions,
+                                                   c.expert_epsilon, np.random.default_rng(demo_seed(c.seed))))
+        self.dataset, self.out = dataset, None if out is None else Path(out)
+        self.learner: Learner | None = None
+        self.state: TrainingState | None = None
+        self._run: RunDirectory | None = None
+
+    # --- Algorithm 1 ------------------------------------------------------------------------------
+    def learn(self, total_timesteps: int, callback: Callable[[EpisodeRow | EvalRow], object] | None = None,
+              progress_bar: bool = False) -> DQfD:
+        """Train `total_timesteps` more env steps (steps 1–2 at the first call); `callback` is given
+        each episode's and evaluation's row, and a `False` from it stops training there."""
+        done = 0 if self.learner is None else int(self.learner.interaction.env_steps.numpy())
+        budget = done + int(total_timesteps)
+        if self.out is not None:
+            result = (train(dataclasses.replace(self.config, total_steps=budget), self.out, self.dataset,
+                            quiet=not progress_bar, source=self._source, callback=callback) if self._run is None
+                      else continue_run(self._run, budget, callback))
+            self._run = result.run
+            self.learner, self.state = self._run.learner, self._run.state
+        else:
+            if self.learner is None:
+                config = dataclasses.replace(self.config, total_steps=budget).check_memory()
+                self.learner, self.state = build(config, self.dataset)[0], TrainingState()
+            else:
+                self.learner.extend(budget)
+            self._train(callback, progress_bar)
+        self.config = self.learner.config
+        return self
+
+    def _train(self, callback: Callable[[EpisodeRow | EvalRow], object] | None, progress_bar: bool) -> None:
+        """Steps 3–5 in memory: the rows kept in `state`, given to `callback`."""
+        learner, state = self.learner, self.state
+        bar = None
+        if progress_bar:
+            from tqdm import tqdm
+
+            bar = tqdm(total=learner.config.total_steps, unit="step",
+                       initial=int(learner.interaction.env_steps.numpy()))
+
+        def on_episode(_: Learner, __: TrainingState, row: EpisodeRow) -> None:
+            if bar is not None:
+                bar.update(row.env_step - bar.n)
+
+        on_episode, on_eval = with_callback(on_episode, lambda points: evaluate_at(learner, state, points), callback)
+        try:
+            train_episodes(learner, state, on_episode, on_eval)
+        except StopTraining:
+            pass
+        finally:
+            if bar is not None:
+                bar.close()
+
+    # --- the trained policy -----------------------------------------------------------------------
+    def predict(self, obs: Any, deterministic: bool = True) -> int | np.ndarray:
+        """The greedy action for one observation as the env gives it (an int), or for a batch of them
+        (an int array): observations are flattened, and frames kept, as in training. Only greedy
+        actions exist (`deterministic=False` is refused)."""
+        if not deterministic:
+            raise ConfigError("predict(deterministic=False): DQfD's policy is the greedy one")
+        if self.config.timeout == "time-aware":
+            raise ConfigError("predict: a time-aware run also needs the time left; play it with evaluate()")
+        learner = self._trained()
+        layout = task_spaces(self.config.task, self.config.env_kwargs).layout
+        if layout.image:
+            x = np.asarray(obs, dtype=np.uint8)
+            batch = None if x.ndim == len(layout.frames.shape) else len(x)
+        else:
+            batch = _batch_size(layout.kept, obs)
+            x = layout.flatten(obs, batch)
+        values = GreedyPolicy.from_model(learner.agent.q_network).values(x)
+        return int(np.argmax(values)) if batch is None else np.argmax(values, axis=-1).astype(np.int64)
+
+    def evaluate(self, episodes: int = 100, seed: int = EVAL_SEED) -> EvalResult:
+        """Greedy episodes on the plain env, as `evaluate.py` plays them (episode i reset with `seed` + i)."""
+        return run_evaluation(self.config, self._trained().agent, episodes, seed)
+
+    def _trained(self) -> Learner:
+        if self.learner is None:
+            raise ConfigError("the model has not been trained: call learn() first")
+        return self.learner
+
+    # --- files ------------------------------------------------------------------------------------
+    def save(self, path: str | Path) -> Path:
+        """Write a complete run directory at `path` (replacing a run there). What a later process
+        cannot make again (an env object, a Python callable as the expert) is said in one warning."""
+        learner = self._trained()
+        lost = [what for what, yes in (
+            (f"the env {self.config.task} (an object: DQfD.load(path, env=...) needs it again)",
+             self.config.task.startswith(PYTHON_ENV_PREFIX)),
+            (f"the expert {self.config.expert!r} (its demonstrations are saved)", self.config.expert.startswith(
+                "python callable "))) if yes]
+        if lost:
+            warnings.warn(f"{path}: a later process cannot make {' nor '.join(lost)}", DqfdWarning, stacklevel=2)
+        if self._run is not None and Path(path) == self.out:
+            return self.out
+        save_run(path, learner, self.state, self._source)
+        return Path(path)
+
+    @classmethod
+    def load(cls, path: str | Path, env: EnvLike | None = None) -> DQfD:
+        """The model saved in run directory `path`, ready to predict, evaluate or learn more; `env`
+        gives the env again (required when it was a Python object)."""
+        path = Path(path)
+        fields = {k: v for k, v in json.loads((path / "config.json").read_text()).items() if k != "observation"}
+        saved_task = fields["task"]
+        if env is not None:
+            task, env_kwargs = env_id_of(env, saved_task if saved_task.startswith(PYTHON_ENV_PREFIX) else None)
+            fields.update(task=task, **({} if isinstance(env, str) else {"env_kwargs": env_kwargs}))
+        elif saved_task.startswith(PYTHON_ENV_PREFIX) and saved_task not in gym.registry:
+            raise ConfigError(f"{path}: trained on a Python env object ({saved_task}); give it again: "
+                              "DQfD.load(path, env=...)")
+        config = Config.from_dict(fields)
+        given = path / "checkpoints" / "demos_given.npz"
+        dataset = demo_io.load(given) if given.is_file() else None
+        learner = build(config, dataset, fresh=False)[0]
+        run = RunDirectory(config, path, learner, TrainingState(), quiet=True)
+        run.restore_checkpoint()
+        model = cls.__new__(cls)
+        model.config, model.dataset, model.out, model._run = config, dataset, None, None
+        model.learner, model.state = learner, run.state
+        demos_json = path / "demonstrations.json"
+        model._source = json.loads(demos_json.read_text()).get("source") if demos_json.is_file() else None
+        return model
+
+    def __repr__(self) -> str:
+        return f"DQfD({self.config.task!r}, expert_loss={self.config.expert_loss!r}, seed={self.config.seed})"
+
+
+
+def _batch_size(space: gym.Space, obs: Any) -> int | None:
+    """None for one observation of `space` (its numeric parts), else the length of the batch."""
+    if isinstance(space, gym.spaces.Dict):
+        key = next(iter(space.spaces))
+        return _batch_size(space.spaces[key], obs[key])
+    if isinstance(space, gym.spaces.Tuple):
+        return _batch_size(space.spaces[0], obs[getattr(space, "indices", range(1))[0]])
+    x = np.asarray(obs)
+    return None if x.ndim == len(space.shape or ()) else len(x)
