@@ -3,7 +3,7 @@ the same metrics), with an env and demonstrations given as Python objects.
 
     model = DQfD("cartpole", demos="imperfect", seed=0, total_steps=20_000)   # any Config field
     model.learn(20_000)                       # steps 1–5; a second learn goes on with the same run
-    model.predict(obs)                        # the greedy action(s)
+    model.predict(obs)                        # the greedy action(s), in NumPy (not Keras' predict)
     model.evaluate(100)                       # evaluate.py's EvalResult
     model.save("runs/mine")                   # a run directory evaluate.py and train.py --resume read
 
@@ -92,12 +92,14 @@ class DQfD:
         self.learner: Learner | None = None
         self.state: TrainingState | None = None
         self._run: RunDirectory | None = None
+        self._policy: GreedyPolicy | None = None
 
     # --- Algorithm 1 ------------------------------------------------------------------------------
     def learn(self, total_timesteps: int, callback: Callable[[EpisodeRow | EvalRow], object] | None = None,
               progress_bar: bool = False) -> DQfD:
         """Train `total_timesteps` more env steps (steps 1–2 at the first call); `callback` is given
         each episode's and evaluation's row, and a `False` from it stops training there."""
+        self._policy = None  # the weights change
         done = 0 if self.learner is None else int(self.learner.interaction.env_steps.numpy())
         budget = done + int(total_timesteps)
         if self.out is not None:
@@ -156,7 +158,9 @@ class DQfD:
         else:
             batch = _batch_size(layout.kept, obs)
             x = layout.flatten(obs, batch)
-        values = GreedyPolicy.from_model(learner.agent.q_network).values(x)
+        if self._policy is None:  # one copy of the weights (one traced call for frames) until learn changes them
+            self._policy = GreedyPolicy.from_model(learner.agent.q_network)
+        values = self._policy.values(x)
         return int(np.argmax(values)) if batch is None else np.argmax(values, axis=-1).astype(np.int64)
 
     def evaluate(self, episodes: int = 100, seed: int = EVAL_SEED) -> EvalResult:
@@ -205,7 +209,7 @@ class DQfD:
         run = RunDirectory(config, path, learner, TrainingState(), quiet=True)
         run.restore_checkpoint()
         model = cls.__new__(cls)
-        model.config, model.dataset, model.out, model._run = config, dataset, None, None
+        model.config, model.dataset, model.out, model._run, model._policy = config, dataset, None, None, None
         model.learner, model.state = learner, run.state
         demos_json = path / "demonstrations.json"
         model._source = json.loads(demos_json.read_text()).get("source") if demos_json.is_file() else None
@@ -213,7 +217,6 @@ class DQfD:
 
     def __repr__(self) -> str:
         return f"DQfD({self.config.task!r}, expert_loss={self.config.expert_loss!r}, seed={self.config.seed})"
-
 
 
 def _batch_size(space: gym.Space, obs: Any) -> int | None:
