@@ -130,31 +130,28 @@ def claim(directory: Path) -> Iterator[None]:
         raise RunDirectoryError(f"{directory} is a file, not a run directory")
     made = not directory.exists()
     directory.mkdir(parents=True, exist_ok=True)
-    fd = os.open(directory, os.O_RDONLY)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            lock = directory / DirectoryLock.NAME
-            holder = (lock.read_text().strip() if lock.is_file() else "") or "(unknown)"
-            raise DirectoryInUseError(f"{directory} is in use by process {holder}; wait for it to finish or stop "
-                                      "it") from None
+    with locked(directory, wait=False):
         try:
             yield
         finally:
             if made and all(path.name == DirectoryLock.NAME for path in directory.iterdir()):
                 shutil.rmtree(directory)
-    finally:
-        os.close(fd)  # closing releases the flock
 
 
 @contextlib.contextmanager
-def locked(directory: Path) -> Iterator[None]:
-    """Wait for, and hold, an exclusive `flock` on `directory` itself (a sweep's `--out`: no file
-    of its own is needed, and the kernel drops it if the holder dies)."""
+def locked(directory: Path, wait: bool = True) -> Iterator[None]:
+    """Hold an exclusive `flock` on `directory` itself (no file of its own is needed, and the kernel
+    drops it if the holder dies); without `wait`, DirectoryInUseError if another process holds it,
+    naming the PID its run's `.lock` holds."""
     fd = os.open(directory, os.O_RDONLY)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            lock = directory / DirectoryLock.NAME
+            holder = (lock.read_text().strip() if lock.is_file() else "") or "(unknown)"
+            raise DirectoryInUseError(f"{directory} is in use by process {holder}; wait for it to finish or stop "
+                                      "it") from None
         yield
     finally:
         os.close(fd)
