@@ -20,8 +20,8 @@ from .demo_files import load, save
 from .minari_io import from_minari
 from .recording import EpisodeRecorder, record, rollout
 
-__all__ = ["ARRAYS", "FORMAT_VERSION", "DemoDataset", "DemoMeta", "EpisodeRecorder", "concatenate", "load",
-           "load_source", "record", "rollout", "save", "validate"]
+__all__ = ["ARRAYS", "FORMAT_VERSION", "DemoDataset", "DemoMeta", "EpisodeRecorder", "concatenate", "given_expert",
+           "given_source", "load", "load_source", "record", "rollout", "save", "validate"]
 
 
 def load_source(source: str, task: str, timeout: str, env_kwargs: dict[str, Any] | None = None,
@@ -33,6 +33,19 @@ def load_source(source: str, task: str, timeout: str, env_kwargs: dict[str, Any]
         return from_minari(source.removeprefix("minari:"), task, timeout, env_kwargs, max_transitions)
     return load(source, task=task, timeout=timeout, env_kwargs=env_kwargs, max_transitions=max_transitions)
 
+
+
+def given_source(dataset: DemoDataset) -> str:
+    """Where a dataset given to a run came from, as its metadata says: a Minari dataset or a file."""
+    return "minari" if dataset.meta.expert.startswith("minari:") else "file"
+
+
+def given_expert(source: str, dataset: DemoDataset) -> str:
+    """What a run's config names as its `expert` when demonstrations were given, not recorded:
+    where they came from and who demonstrated them, as their metadata says. Not a demonstrator
+    any process could call (tasks.registry.NOT_REMADE): the run keeps its D_demo in its checkpoints."""
+    by = dataset.meta.expert
+    return f"demonstrations from {source}" + ("" if by == source else f" ({by})")
 
 if __name__ == "__main__":
     import sys

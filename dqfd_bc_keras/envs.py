@@ -300,22 +300,27 @@ PYTHON_ENV_PREFIX = "dqfd_bc_keras/python-"
 """The namespace of the ids `env_id_of` registers for env objects: no later process can make them."""
 
 
-def env_id_of(env: str | gym.Env | Callable[[], gym.Env], env_id: str | None = None) -> tuple[str, dict[str, Any]]:
-    """A task name for `env` and its env kwargs: a name as it is; an env made by `gym.make` from a
-    registered id (unwrapped since), that id and the JSON keyword arguments it was made with; any
-    other env object or a zero-argument factory, a new id `dqfd_bc_keras/python-<Class>-v<k>`
+def env_id_of(env: str | gym.Env | Callable[[], gym.Env],
+              env_id: str | None = None) -> tuple[str, dict[str, Any], int | None]:
+    """A task name for `env`, its env kwargs and the step limit it was given: a name as it is; an
+    env made by `gym.make` from a registered id (unwrapped since), that id, the JSON keyword
+    arguments and the `max_episode_steps` it was made with where they differ from the registry's;
+    any other env object or a zero-argument factory, a new id `dqfd_bc_keras/python-<Class>-v<k>`
     registered in this process, whose every `gym.make` calls the factory or returns a deep copy of
     the instance (the instance itself when it cannot be copied: then training, evaluation and
-    demonstrations step the same object, and its evaluations reset it with their own seeds).
-    `env_id` registers the object under that id instead (a saved run's, given its env again)."""
+    demonstrations step the same object, and its evaluations reset it with their own seeds), with
+    the instance's own limit if it has a spec. `env_id` registers the object under that id instead
+    (a saved run's, given its env again)."""
     if isinstance(env, str):
-        return env, {}
+        return env, {}, None
     spec = getattr(env, "spec", None) if isinstance(env, gym.Env) else None
+    limit = None if spec is None else spec.max_episode_steps
     if spec is not None and spec.id in gym.registry and not spec.additional_wrappers:
-        registered = gym.spec(spec.id).kwargs
-        kwargs = {k: v for k, v in spec.kwargs.items() if k != "render_mode" and registered.get(k) != v}
+        registered = gym.spec(spec.id)
+        kwargs = {k: v for k, v in spec.kwargs.items() if k != "render_mode" and registered.kwargs.get(k) != v}
         try:
-            return spec.id, json.loads(json.dumps(kwargs))
+            return (_importable_id(spec), json.loads(json.dumps(kwargs)),
+                    None if limit == registered.max_episode_steps else limit)
         except TypeError:
             pass  # kwargs no later process could pass: registered as an object below
     if isinstance(env, gym.Env):
@@ -333,7 +338,16 @@ def env_id_of(env: str | gym.Env | Callable[[], gym.Env], env_id: str | None = N
         env_id = f"{base}-v{k}"
     gym.registry.pop(env_id, None)
     gym.register(id=env_id, entry_point=make, max_episode_steps=None, disable_env_checker=True)
-    return env_id, {}
+    return env_id, {}, limit
+
+
+def _importable_id(spec: gym.envs.registration.EnvSpec) -> str:
+    """`package:ID` for an env a third-party package registers (`minigrid:MiniGrid-Empty-5x5-v0`),
+    as `--env` takes it: a later process imports the package, which registers the id again."""
+    entry = spec.entry_point
+    module = entry.partition(":")[0] if isinstance(entry, str) else getattr(entry, "__module__", "")
+    package = module.partition(".")[0]
+    return spec.id if package in ("", "gymnasium", "dqfd_bc_keras", "__main__") else f"{package}:{spec.id}"
 
 
 def _copy_or_same(env: gym.Env) -> gym.Env:

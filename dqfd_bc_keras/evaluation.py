@@ -158,9 +158,9 @@ class EvalResult:
         return result
 
     def summary(self) -> str:
-        n = len(self.returns)
+        n, env_id = len(self.returns), get_task(self.task).env_id
         lines = [
-            f"{self.task} ({get_task(self.task).env_id}), {self.policy} policy, {n} greedy episodes "
+            f"{self.task}{'' if env_id == self.task else f' ({env_id})'}, {self.policy} policy, {n} greedy episodes "
             f"(seeds {self.seed}..{self.seed + n - 1})",
             f"return {self.mean_return:.2f} ± {self.std_return:.2f}  "
             f"(min {min(self.returns):g}, max {max(self.returns):g}, {solved_text(self.task)})",

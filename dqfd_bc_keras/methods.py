@@ -110,6 +110,8 @@ for _method in (
            reads=BC_FIELDS, q_learning=False),
 ):
     register(_method)
+BUILT_IN = tuple(METHODS)
+"""The package's own methods: any other name in METHODS was registered by a user's code."""
 
 
 _SAVED = ContextVar("reading_saved_config", default=False)
@@ -134,8 +136,11 @@ def get_method(name: str) -> Method:
         return METHODS[name]
     module, sep, attribute = name.rpartition(":")
     if not sep or not module:
+        if _SAVED.get():  # a run of a Method a script registered (DQfD(expert_loss=Method(...)))
+            return Method(name, "a method a script registered, not registered here")
         raise ConfigError(f"expert_loss={name!r} is not one of {tuple(METHODS)} (or a method of your own as "
-                          "module:NAME, a dqfd_bc_keras.methods.Method)")
+                          "module:NAME, a dqfd_bc_keras.methods.Method; one a script registered is registered "
+                          "again with dqfd_bc_keras.methods.register)")
     try:
         method = getattr(importlib.import_module(module), attribute)
     except (ImportError, AttributeError) as error:

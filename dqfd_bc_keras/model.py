@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -26,14 +27,15 @@ import numpy as np
 from . import demos as demo_io
 from .config import Config, unknown_field
 from .envs import PYTHON_ENV_PREFIX, env_id_of, task_spaces
-from .errors import ConfigError, DqfdWarning
+from .errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
 from .evaluation import EvalResult, GreedyPolicy
-from .methods import METHODS, Method, register
-from .recording import Demonstrator
+from .methods import BUILT_IN, METHODS, Method, register
+from .recording import callable_name
 from .records import EpisodeRow, EvalRow
+from .run_files import is_run
 from .run_state import TrainingState
-from .runs import RunDirectory, continue_run, given_source, save_run, train
-from .seeds import EVAL_SEED, demo_seed
+from .runs import RunDirectory, continue_run, save_run, saved_config, train
+from .seeds import EVAL_SEED
 from .training import (Learner, StopTraining, build, evaluate_at, record_demos, run_evaluation, train_episodes,
                        with_callback)
 
@@ -61,33 +63,29 @@ class DQfD:
             if key == "task" or key not in Config.__dataclass_fields__:
                 raise ConfigError(f"DQfD({key}=…): " + ("the task is the env argument" if key == "task"
                                                         else unknown_field(key)))
-        task, env_kwargs = env_id_of(env)
+        task, env_kwargs, limit = env_id_of(env)
         if isinstance(expert_loss, Method):
-            if METHODS.get(expert_loss.name) is not expert_loss:
-                register(expert_loss)
-            expert_loss = expert_loss.name
-        settings = {"env_kwargs": env_kwargs, "seed": seed, **fields}
+            expert_loss = _method_name(expert_loss)
+        settings = {"env_kwargs": env_kwargs, "seed": seed, **({"max_steps": limit} if limit else {}), **fields}
         if expert_loss is not None:
             settings["expert_loss"] = expert_loss
         dataset, self._source, rule = None, None, None
         if isinstance(demos, demo_io.DemoDataset):
             dataset, self._source = demos, "python"
-            settings["expert"] = f"demonstrations from a Python DemoDataset ({demos.meta.expert})"
+            settings["expert"] = demo_io.given_expert("a Python DemoDataset", demos)
         elif isinstance(demos, (str, Path)) and (str(demos).endswith(".npz") or str(demos).startswith("minari:")):
             preset = Config.for_task(task, **settings)
             dataset = demo_io.load_source(str(demos), task, preset.timeout, preset.env_kwargs, preset.demo_capacity)
-            self._source = given_source(dataset)
-            settings["expert"] = f"demonstrations from {demos} ({dataset.meta.expert})"
+            self._source = demo_io.given_source(dataset)
+            settings["expert"] = demo_io.given_expert(str(demos), dataset)
         elif isinstance(demos, (str, Path)):
             settings["expert"] = str(demos)
         elif callable(demos):
             rule, self._source = demos, "recorded"
-            settings["expert"] = f"python callable {getattr(demos, '__qualname__', type(demos).__name__)}"
+            settings["expert"] = callable_name(demos)
         self.config = Config.for_task(task, **settings)
         if rule is not None and self.config.uses_demos:  # step 1 for a callable: recorded now, given to training
-            c = self.config
-            dataset = record_demos(c, Demonstrator(c.expert, rule, task_spaces(c.task, c.env_kwargs).n_actions,
-                                                   c.expert_epsilon, np.random.default_rng(demo_seed(c.seed))))
+            dataset = record_demos(self.config, rule)
         self.dataset, self.out = dataset, None if out is None else Path(out)
         self.learner: Learner | None = None
         self.state: TrainingState | None = None
@@ -95,10 +93,15 @@ class DQfD:
         self._policy: GreedyPolicy | None = None
 
     # --- Algorithm 1 ------------------------------------------------------------------------------
-    def learn(self, total_timesteps: int, callback: Callable[[EpisodeRow | EvalRow], object] | None = None,
-              progress_bar: bool = False) -> DQfD:
-        """Train `total_timesteps` more env steps (steps 1–2 at the first call); `callback` is given
-        each episode's and evaluation's row, and a `False` from it stops training there."""
+    def learn(self, total_timesteps: int | None = None,
+              callback: Callable[[EpisodeRow | EvalRow], object] | None = None, progress_bar: bool = False) -> DQfD:
+        """Train `total_timesteps` more env steps (the config's `total_steps` if not given; steps 1–2
+        at the first call); `callback` is given each episode's and evaluation's row, and a `False`
+        from it stops training there. Early stopping (`early_stop_window`) ends it too."""
+        if total_timesteps is None:
+            total_timesteps = self.config.total_steps
+        if int(total_timesteps) < 1:
+            raise ConfigError(f"learn(total_timesteps={total_timesteps}): must be ≥ 1")
         self._policy = None  # the weights change
         done = 0 if self.learner is None else int(self.learner.interaction.env_steps.numpy())
         budget = done + int(total_timesteps)
@@ -177,11 +180,14 @@ class DQfD:
         """Write a complete run directory at `path` (replacing a run there). What a later process
         cannot make again (an env object, a Python callable as the expert) is said in one warning."""
         learner = self._trained()
+        c = self.config
         lost = [what for what, yes in (
-            (f"the env {self.config.task} (an object: DQfD.load(path, env=...) needs it again)",
-             self.config.task.startswith(PYTHON_ENV_PREFIX)),
-            (f"the expert {self.config.expert!r} (its demonstrations are saved)", self.config.expert.startswith(
-                "python callable "))) if yes]
+            (f"the env {c.task} (an object: DQfD.load(path, env=...) needs it again)",
+             c.task.startswith(PYTHON_ENV_PREFIX)),
+            (f"the method {c.expert_loss!r} (registered in this process: register it again to learn more)",
+             c.expert_loss not in BUILT_IN and ":" not in c.expert_loss),
+            (f"the expert {c.expert!r} (its demonstrations are saved)", c.expert.startswith("python callable ")),
+        ) if yes]
         if lost:
             warnings.warn(f"{path}: a later process cannot make {' nor '.join(lost)}", DqfdWarning, stacklevel=2)
         if self._run is not None and Path(path) == self.out:
@@ -194,15 +200,22 @@ class DQfD:
         """The model saved in run directory `path`, ready to predict, evaluate or learn more; `env`
         gives the env again (required when it was a Python object)."""
         path = Path(path)
-        fields = {k: v for k, v in json.loads((path / "config.json").read_text()).items() if k != "observation"}
-        saved_task = fields["task"]
+        if not (path / "checkpoints" / "latest.json").is_file():
+            held = "does not exist" if not path.exists() else "is not a directory" if not path.is_dir() else (
+                "has no checkpoint (checkpoints/latest.json)" if is_run(path) else "is not a run directory")
+            raise RunDirectoryError(f"{path} {held}: DQfD.load reads a run directory that save, out= or train.py wrote")
+        try:
+            saved_task = json.loads((path / "config.json").read_text())["task"]
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise BrokenRunError(f"{path / 'config.json'}: cannot be read ({one_line(error)})") from None
+        changes = {}
         if env is not None:
-            task, env_kwargs = env_id_of(env, saved_task if saved_task.startswith(PYTHON_ENV_PREFIX) else None)
-            fields.update(task=task, **({} if isinstance(env, str) else {"env_kwargs": env_kwargs}))
+            task, env_kwargs, _ = env_id_of(env, saved_task if saved_task.startswith(PYTHON_ENV_PREFIX) else None)
+            changes = {"task": task, **({} if isinstance(env, str) else {"env_kwargs": env_kwargs})}
         elif saved_task.startswith(PYTHON_ENV_PREFIX) and saved_task not in gym.registry:
             raise ConfigError(f"{path}: trained on a Python env object ({saved_task}); give it again: "
                               "DQfD.load(path, env=...)")
-        config = Config.from_dict(fields)
+        config = dataclasses.replace(saved_config(path), **changes)
         given = path / "checkpoints" / "demos_given.npz"
         dataset = demo_io.load(given) if given.is_file() else None
         learner = build(config, dataset, fresh=False)[0]
@@ -217,6 +230,21 @@ class DQfD:
 
     def __repr__(self) -> str:
         return f"DQfD({self.config.task!r}, expert_loss={self.config.expert_loss!r}, seed={self.config.seed})"
+
+
+def _method_name(method: Method) -> str:
+    """The name a config gives `method`: `module:NAME` when it is an attribute of the module its term
+    comes from (a later process imports it from there, as `--expert-loss module:NAME`), else its
+    own name, registered in this process."""
+    if METHODS.get(method.name) is method:
+        return method.name
+    module = sys.modules.get(getattr(method.term, "__module__", None) or "")
+    if module is not None and module.__name__ != "__main__":
+        for attribute, value in vars(module).items():
+            if value is method:
+                return f"{module.__name__}:{attribute}"
+    register(method)
+    return method.name
 
 
 def _batch_size(space: gym.Space, obs: Any) -> int | None:

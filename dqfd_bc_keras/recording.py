@@ -212,9 +212,15 @@ def expert_returns(
     return returns
 
 
+def callable_name(rule: Rule) -> str:
+    """How a run names a Python callable given as its demonstrator (tasks.NOT_REMADE): no later
+    process can call it again, so the name says what it was, never a reference to import."""
+    return f"python callable {getattr(rule, '__qualname__', type(rule).__name__)}"
+
+
 def record(
     task: str,
-    expert: str | Demonstrator,
+    expert: str | Demonstrator | Rule,
     episodes: int,
     seed: int = 0,
     epsilon: float = 0.0,
@@ -223,10 +229,14 @@ def record(
     env_kwargs: dict[str, Any] | None = None,
 ) -> DemoDataset:
     """Run the demonstrator `expert` (`make_demonstrator`: strong | imperfect |
-    module:function | model.keras; or one already made) for `episodes` episodes of `task` made
-    with `env_kwargs`, `max_steps` steps at most; episode i resets with seed + i."""
+    module:function | model.keras; a Python callable obs → action; or one already made) for
+    `episodes` episodes of `task` made with `env_kwargs`, `max_steps` steps at most; episode i
+    resets with seed + i."""
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
+    if callable(expert) and not isinstance(expert, Demonstrator):
+        expert = Demonstrator(callable_name(expert), expert, task_spaces(task, env_kwargs).n_actions,
+                              _check_epsilon(epsilon), np.random.default_rng(seed))
     policy = (expert if isinstance(expert, Demonstrator)
               else make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs))
     env = make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs)

@@ -355,7 +355,11 @@ def saved_config(out: str | Path) -> Config:
     except (OSError, ValueError, KeyError, TypeError):
         return config  # an unreadable latest.json is the restore's to report
     if own.is_file():  # checkpoints written before the copy existed have none
-        changed = differences(_read_config(own).to_dict(), config.to_dict())
+        trained = _read_config(own)
+        changed = differences(trained.to_dict(), config.to_dict())
+        if changed == differences({"total_steps": trained.total_steps}, {"total_steps": config.total_steps}) and (
+                trained.total_steps > config.total_steps):
+            return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
         if changed:
             raise BrokenRunError(f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
                                  f"{'; '.join(changed)}; put it back, or start the run over with --force")
@@ -380,6 +384,8 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
     """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
     if resume:
         config = saved_config(out)
+        if _read_config(out / "config.json") != config:  # the budget a checkpoint has and config.json lacked
+            write_config(config, out)
     else:
         write_config(config, out)
     given = out / "checkpoints" / GIVEN_DEMOS
@@ -390,15 +396,10 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
     if resume:
         run.restore_checkpoint()
     else:
-        run.write_demonstrations(source or (given_source(dataset) if dataset is not None else None))
+        run.write_demonstrations(source or (demo_io.given_source(dataset) if dataset is not None else None))
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
     return run
-
-
-def given_source(dataset: demo_io.DemoDataset) -> str:
-    """Where a dataset given to a run came from, as its metadata says: a Minari dataset or a file."""
-    return "minari" if dataset.meta.expert.startswith("minari:") else "file"
 
 
 def _given_demos(given: Path, config: Config) -> demo_io.DemoDataset:

@@ -40,6 +40,7 @@ from .recording import Demonstrator, record, rollout
 from .records import DemoUpdate, EpisodeRow, EvalRow, Losses
 from .run_state import TrainingState, early_stop
 from .seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed, eval_seed
+from .tasks import Rule
 from .wrappers import CountInteractions, Tally
 
 METRIC_FIELDS = EpisodeRow.columns()
@@ -53,8 +54,8 @@ def demonstrations(config: Config, dataset: DemoDataset | None) -> DemoDataset |
     return dataset if dataset is not None else record_demos(config, config.expert)
 
 
-def record_demos(config: Config, expert: str | Demonstrator) -> DemoDataset:
-    """`demo_episodes` episodes of `expert` (a name `make_demonstrator` takes, or one made) on the task."""
+def record_demos(config: Config, expert: str | Demonstrator | Rule) -> DemoDataset:
+    """`demo_episodes` episodes of `expert` (a name `make_demonstrator` takes, a callable, or one made) on the task."""
     return record(config.task, expert, config.demo_episodes, seed=demo_seed(config.seed),
                   epsilon=config.expert_epsilon, timeout=config.timeout, max_steps=config.max_steps,
                   env_kwargs=config.env_kwargs)

@@ -7,12 +7,13 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from dqfd_bc_keras import DQfD
+from dqfd_bc_keras import DQfD, demos
 from dqfd_bc_keras.config import QUICK
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
 from dqfd_bc_keras.evaluation import EvalResult, evaluate, load_policy
@@ -113,3 +114,173 @@ def test_nothing_is_written_unless_asked(tmp_path, monkeypatch):
 def test_a_bad_keyword_is_a_did_you_mean():
     with pytest.raises(ConfigError, match="unknown Config field 'sigma_sq'; did you mean sigma0_sq"):
         DQfD("cartpole", sigma_sq=1.0)
+
+
+# --- demonstrations given every way the CLI takes them, and the same provenance ----------------------
+
+def test_demonstrations_as_a_dataset_a_file_and_a_minari_id(tmp_path, monkeypatch):
+    """A DemoDataset, its .npz and its Minari copy give the same D_demo; config.json names where it
+    came from, as train.py --demos writes it, and demonstrations.json says which kind of source."""
+    pytest.importorskip("minari")
+    from dqfd_bc_keras.minari_io import to_minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    dataset = demos.record("CartPole-v1", "toy_envs:pole_rule", 2, seed=0)
+    demos.save(dataset, tmp_path / "d.npz")
+    to_minari(dataset, "cartpole/mine-v0")
+    kinds = {"python": dataset, "file": str(tmp_path / "d.npz"), "minari": "minari:cartpole/mine-v0"}
+    for source, given in kinds.items():
+        model = DQfD("CartPole-v1", given, **TINY)
+        assert np.array_equal(model.dataset.actions, dataset.actions), source
+        model.learn(60).save(tmp_path / "runs" / source)
+        summary = json.loads((tmp_path / "runs" / source / "demonstrations.json").read_text())
+        config = json.loads((tmp_path / "runs" / source / "config.json").read_text())
+        assert summary["source"] == source and config["expert"] == model.config.expert
+    assert DQfD("CartPole-v1", kinds["python"]).config.expert == \
+        "demonstrations from a Python DemoDataset (toy_envs:pole_rule)"
+    assert DQfD("CartPole-v1", kinds["minari"]).config.expert == "demonstrations from minari:cartpole/mine-v0"
+
+    done = subprocess.run([sys.executable, "train.py", "--env", "CartPole-v1", "--demos", tmp_path / "d.npz", "--quick",
+                           "--quiet", "--out", tmp_path / "cli"], cwd=REPO, capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    cli = json.loads((tmp_path / "cli" / "config.json").read_text())["expert"]
+    assert cli == json.loads((tmp_path / "runs" / "file" / "config.json").read_text())["expert"] == \
+        f"demonstrations from {tmp_path / 'd.npz'} (toy_envs:pole_rule)"
+
+
+def test_train_py_refuses_demos_and_an_expert_together(tmp_path):
+    done = subprocess.run([sys.executable, "train.py", "--demos", tmp_path / "d.npz", "--expert", "strong", "--out",
+                           tmp_path / "run"], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stderr.strip().splitlines() == [
+        f"error: --demos {tmp_path / 'd.npz'} gives the demonstrations and --expert strong would record them: give one"]
+    assert not (tmp_path / "run").exists()
+
+
+def test_demonstrators_by_name_and_by_saved_model():
+    """A preset expert's name and a shipped .keras Q-network record demo_episodes episodes at learn."""
+    for expert in ("strong", str(REPO / "models" / "cartpole" / "q_network.keras")):
+        model = DQfD("cartpole", expert, **{**TINY, "demo_episodes": 1}).learn(50)
+        assert model.config.expert == expert and int(model.learner.agent.replay.demo_size.numpy()) > 0
+
+
+# --- envs: a factory, a gym.make with its own limit ----------------------------------------------------
+
+def test_a_factory_env_and_a_gym_make_limit():
+    model = DQfD(lambda: Chain(), walk_right, max_steps=15, **TINY).learn(100)
+    assert model.config.task.startswith("dqfd_bc_keras/python-") and model.config.max_steps == 15
+    assert max(model.evaluate(2).lengths) <= 15
+    short = DQfD(gym.make("CartPole-v1", max_episode_steps=30), lambda obs: int(obs[3] > 0), **TINY)
+    assert (short.config.task, short.config.max_steps) == ("CartPole-v1", 30)
+    assert max(row.length for row in short.learn(100).state.metrics) <= 30  # training's limit; evaluation
+    assert short.evaluate(1).lengths[0] > 30  # plays the plain CartPole-v1, 500 steps, as evaluate.py does
+
+
+def test_progress_bar_and_the_default_budget(capsys):
+    model = DQfD("cartpole", total_steps=120, **TINY).learn(progress_bar=True)
+    assert int(model.learner.interaction.env_steps.numpy()) == 120
+    assert "step" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="total_timesteps=0"):
+        model.learn(0)
+
+
+# --- a user's Method object -----------------------------------------------------------------------------
+
+METHOD_MODULE = '''
+from dqfd_bc_keras import losses
+from dqfd_bc_keras.methods import Method
+
+
+def half_ce(agent, q, batch):
+    j_e = losses.cross_entropy_loss(q, batch.pi_bc, agent.config.temperature)
+    return 0.5 * losses.weighted_mean(j_e, batch.weights)
+
+
+HALF_CE = Method("half_ce", "half of DQfD-BC's cross-entropy", bc_fit="mle", term=half_ce, reads=("temperature",))
+'''
+
+
+def test_a_method_object_from_a_users_module_is_saved_as_module_name(tmp_path, monkeypatch):
+    (tmp_path / "my_api_methods.py").write_text(METHOD_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import my_api_methods
+
+    model = DQfD("cartpole", expert_loss=my_api_methods.HALF_CE, **TINY).learn(60)
+    assert model.config.expert_loss == "my_api_methods:HALF_CE"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DqfdWarning)  # nothing is lost: the module can be imported again
+        model.save(tmp_path / "run")
+    assert DQfD.load(tmp_path / "run").learn(20).config.expert_loss == "my_api_methods:HALF_CE"
+
+
+def test_a_method_made_in_the_script_is_registered_and_said_at_save(tmp_path):
+    from dqfd_bc_keras.methods import Method
+
+    method = Method("script_margin", "a margin of our own", term="dqfd_bc_keras.expert_terms:margin",
+                    reads=("margin",))
+    model = DQfD("cartpole", expert_loss=method, **TINY).learn(60)
+    assert model.config.expert_loss == "script_margin"
+    with pytest.warns(DqfdWarning, match="the method 'script_margin' \\(registered in this process"):
+        model.save(tmp_path / "run")
+    script = (f"from dqfd_bc_keras import DQfD\n"
+              f"try:\n    DQfD.load({str(tmp_path / 'run')!r}).learn(10)\n"
+              f"except Exception as error:\n    print(type(error).__name__, error)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert "ConfigError expert_loss='script_margin' is not one of" in done.stdout, done.stderr
+    assert "registered again with dqfd_bc_keras.methods.register" in done.stdout
+    done = subprocess.run([sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and "2 greedy episodes" in done.stdout, done.stderr  # evaluating needs no method
+
+
+# --- load, and a learn-more stopped halfway ----------------------------------------------------------
+
+def test_load_refuses_what_is_not_a_run(tmp_path):
+    from dqfd_bc_keras.errors import RunDirectoryError
+
+    (tmp_path / "notes.txt").write_text("mine")
+    for path, why in ((tmp_path, "is not a run directory"), (tmp_path / "missing", "does not exist"),
+                      (tmp_path / "notes.txt", "is not a directory")):
+        with pytest.raises(RunDirectoryError, match=f"^{path} {why}: DQfD.load reads a run directory"):
+            DQfD.load(path)
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_a_learn_more_stopped_before_config_json_resumes_with_train_py(tmp_path, monkeypatch):
+    """continue_run checkpoints the new budget, then rewrites config.json: stopped between the two,
+    train.py --resume takes the checkpoint's budget (it refused the run before)."""
+    from dqfd_bc_keras import runs
+
+    model = DQfD("cartpole", seed=0, out=tmp_path / "run", **TINY).learn(150)
+
+    def stopped(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runs, "write_config", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        model.learn(150)
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 150
+    done = subprocess.run([sys.executable, "train.py", "--resume", "--quiet", "--out", tmp_path / "run"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 300
+    assert json.loads((tmp_path / "run" / "complete.json").read_text())["env_steps"] == 300
+
+
+def test_a_third_party_env_from_pypi_made_by_gym_make(tmp_path):
+    """MiniGrid (requirements-extras), as a user makes it: the id keeps its package, so evaluate.py
+    in a new process registers it again; predict takes the env's raw Dict observation."""
+    pytest.importorskip("minigrid")
+    import minigrid  # noqa: F401  (registers MiniGrid's ids)
+
+    env = gym.make("MiniGrid-Empty-5x5-v0")
+    model = DQfD(env, lambda obs: 1 if obs[4 + (3 * 7 + 5) * 3] == 2 else 2, max_steps=100, **TINY).learn(200)
+    assert model.config.task == "minigrid:MiniGrid-Empty-5x5-v0" and model.config.max_steps == 100
+    obs, _ = env.reset(seed=0)
+    assert isinstance(obs, dict) and isinstance(model.predict(obs), int)
+    model.save(tmp_path / "run")
+    done = subprocess.run([sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2", "--json"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["lengths"] == model.evaluate(2).lengths

@@ -21,13 +21,16 @@ def quick_start_commands() -> list[str]:
 
 
 def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
+    """The main job, its Python equivalent (after the install), and the tests that CI runs."""
     commands = quick_start_commands()
-    assert len(commands) == 2 and all("\n" not in c for c in commands)
-    assert commands[0].startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/dqfd-train")
-    assert commands[1].startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt")
-    assert commands[1].endswith("-m pytest -q -n 2")
+    assert len(commands) == 3 and all("\n" not in c for c in commands)
+    main, python, tests = commands
+    assert main.startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/dqfd-train")
+    assert python.startswith(".venv/bin/python -c \"from dqfd_bc_keras import DQfD;")
+    assert tests.startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt")
+    assert tests.endswith("-m pytest -q -n 2")
     ci = (REPO / ".ci" / "run").read_text().splitlines()
-    assert commands[1] in ci and "set -euo pipefail" in ci
+    assert tests in ci and "set -euo pipefail" in ci
 
 
 def test_readme_is_a_front_door_of_at_most_250_lines():

@@ -106,3 +106,8 @@ def dies(obs: np.ndarray) -> int:
     import os
 
     os._exit(3)
+
+
+def pole_rule(obs: np.ndarray) -> int:
+    """CartPole: push the way the pole falls (its angular velocity's sign); about 200 of 500."""
+    return int(obs[3] > 0)

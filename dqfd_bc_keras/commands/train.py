@@ -17,6 +17,7 @@ and a bad argument answer in about a second.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -96,6 +97,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     overrides = {**(QUICK if args.quick else {}), **chosen, **env_settings(args), **parse_assignments(args.set)}
     task = chosen_task(args)
     check_out(args.out)
+    if args.demos and args.expert:
+        raise ConfigError(f"--demos {args.demos} gives the demonstrations and --expert {args.expert} would record "
+                          "them: give one")
     defaults = Config.__dataclass_fields__
     out = args.out or (f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
                        f"-seed{overrides.get('seed', defaults['seed'].default)}")
@@ -107,6 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.demos:
             dataset = demos.load_source(args.demos, task=config.task, timeout=config.timeout,
                                         env_kwargs=config.env_kwargs, max_transitions=config.demo_capacity)
+            config = dataclasses.replace(config, expert=demos.given_expert(args.demos, dataset))
         elif config.uses_demos:
             try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
     from ..runs import saved_config, train  # TensorFlow from here on: every argument has been checked
