@@ -10,6 +10,8 @@ and online training go through it, and the graph-call boundary, not the math, is
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import keras
 import numpy as np
 import tensorflow as tf
@@ -21,26 +23,30 @@ from .demos import DemoDataset
 from .errors import ConfigError
 from .networks import NetworkInput, as_input, build_q_network
 from .optimizers import FusedAdam
-from .replay import Batch, PrioritizedReplay
-
 from .records import LOSS_TERMS
+from .replay import Batch, PrioritizedReplay
 
 
 class MeanVector(keras.metrics.Metric):
-    """Running means of several scalars in two variables: one update is two ops, where a
-    `keras.metrics.Mean` per scalar costs ~9 ops each in every learning step."""
+    """Running means of named scalars in two variables: one update is two ops, where a
+    `keras.metrics.Mean` per scalar costs ~9 ops each in every learning step. Values come and
+    go by name, so a term added or reordered cannot land in another's column."""
 
-    def __init__(self, size: int, name: str = "mean_vector") -> None:
+    def __init__(self, names: tuple[str, ...], name: str = "mean_vector") -> None:
         super().__init__(name=name)
-        self.total = self.add_variable(shape=(size,), initializer="zeros", name="total")
+        self.names = names
+        self.total = self.add_variable(shape=(len(names),), initializer="zeros", name="total")
         self.count = self.add_variable(shape=(), initializer="zeros", name="count")
 
-    def update_state(self, values: tf.Tensor) -> None:
-        self.total.assign_add(values)
+    def update_state(self, values: Mapping[str, tf.Tensor]) -> None:
+        """Add one value of each name; a name missing or unknown raises when the graph is traced."""
+        if set(values) != set(self.names):
+            raise ValueError(f"{self.name} takes the values {self.names}, got {tuple(values)}")
+        self.total.assign_add(tf.stack([values[name] for name in self.names]))
         self.count.assign_add(1.0)
 
-    def result(self) -> tf.Tensor:
-        return tf.math.divide_no_nan(self.total, self.count)
+    def result(self) -> dict[str, tf.Tensor]:
+        return dict(zip(self.names, tf.unstack(tf.math.divide_no_nan(self.total, self.count))))
 
 
 class DQfDAgent(keras.Model):
@@ -75,7 +81,7 @@ class DQfDAgent(keras.Model):
         self.prior_weights = [tf.Variable(tf.zeros_like(w), trainable=False, name="prior")
                               for w in self.q_network.trainable_weights]
         self.train_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="train_steps")
-        self.loss_means = MeanVector(len(LOSS_TERMS), name="losses")
+        self.loss_means = MeanVector(LOSS_TERMS, name="losses")
         self.expert_view = tf.function(self.expert_targets, autograph=False,
                                        input_signature=[tf.TensorSpec([None, *self.net_input.shape], self.net_input.dtype)])
         """`expert_targets` of many states outside a graph (D_demo, refits): traced once."""
@@ -92,7 +98,7 @@ class DQfDAgent(keras.Model):
 
     def losses_so_far(self) -> dict[str, tf.Tensor]:
         """The mean of each term of J(Q) over the learning steps since `reset_metrics`."""
-        return dict(zip(LOSS_TERMS, tf.unstack(self.loss_means.result())))
+        return self.loss_means.result()
 
     def refresh_target(self) -> None:
         """θ' ← θ."""
@@ -197,7 +203,7 @@ class DQfDAgent(keras.Model):
         self.optimizer.apply(tape.gradient(loss, theta), theta)
         self.train_steps.assign_add(1)
         tf.cond(self.train_steps % c.target_update_period == 0, self.refresh_target, lambda: None)
-        self.loss_means.update_state(tf.stack([loss, j_dq, j_n, j_e, j_l2]))
+        self.loss_means.update_state({"loss": loss, "td": j_dq, "n_step": j_n, "expert": j_e, "l2": j_l2})
         return delta
 
     def learn_step(self) -> None:

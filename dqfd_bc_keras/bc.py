@@ -4,7 +4,7 @@ Two ways to fit it, one `train_step`:
 - MLE (for `ce` and `bc_margin`, as in DQfD-BC): plain cross entropy, no dropout;
 - MAP (for `bayes`): cross entropy + a Gaussian weight prior ‖w‖²/(2·s²·N), and `predictive`
   returns the mean policy π̄_bc and a variance σ²(s) = σ0² + the epistemic part from one of
-  `config.UNCERTAINTIES`: MC dropout (the paper's: dropout kept active for K passes), an
+  `choices.UNCERTAINTIES`: MC dropout (the paper's: dropout kept active for K passes), an
   ensemble of K members on bootstrap resamples, or the distance to the demonstrations.
 """
 
@@ -16,7 +16,8 @@ import keras
 import numpy as np
 import tensorflow as tf
 
-from .config import UNCERTAINTIES, Config
+from .choices import UNCERTAINTIES
+from .config import Config
 from .networks import NetworkInput, dense_stack, torso_layers
 from .observations import Frames
 from .optimizers import FusedAdam

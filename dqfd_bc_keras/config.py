@@ -3,8 +3,9 @@
 Where the paper is silent, ALGORITHM.md decides; where that is silent too, the value is ours
 and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults (the
 registry in `tasks/`; any other Gymnasium env id gets `tasks.ENV_DEFAULTS`); `validate` rejects
-settings the algorithm cannot use with a `ConfigError` naming the value. Nothing here imports
-TensorFlow: reading a config.json is cheap.
+settings the algorithm cannot use with a `ConfigError` naming the value, without making an env:
+whether the env takes the config is `envs.checked_spaces`'s to say, where envs are about to be made.
+Nothing here imports TensorFlow: reading a config.json is cheap.
 """
 
 from __future__ import annotations
@@ -18,23 +19,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .envs import get_task, step_limit, task_spaces
+from .choices import DYNAMIC_MODES, PRIOR_CENTERS, TARGETS, TD_LOSSES, TIMEOUT_MODES, TORSOS, UNCERTAINTIES
+from .envs import TaskSpaces, get_task, step_limit, task_spaces
 from .errors import ConfigError, DqfdWarning
 from .methods import Method, get_method, reading_saved_config
-from .network_input import CONV_TORSOS, TORSOS, NetworkInput
+from .network_input import CONV_TORSOS, NetworkInput
 from .seeds import MAX_SEED
-from .tasks import check_demonstrator, find_preset
-from .wrappers import TIMEOUT_MODES
-
-TARGETS = ("dqn", "double")
-"""The bootstrap targets (losses.bootstrap_value)."""
-TD_LOSSES = ("squared", "huber")
-"""The per-sample TD losses (losses.td_loss)."""
-UNCERTAINTIES = ("mc_dropout", "ensemble", "distance")
-"""The estimators of σ²(s) (uncertainty.py)."""
-PRIOR_CENTERS = ("pretrained", "zero")
-DYNAMIC_MODES = ("episodes", "rollouts", "off")
-"""How D_demo grows (§5): the agent's own training episodes, M extra greedy roll-outs, or not at all."""
+from .tasks import check_demonstrator
 
 QUICK: dict[str, object] = {
     "total_steps": 600, "pretrain_steps": 50, "bc_epochs": 2, "bc_refit_epochs": 1, "demo_episodes": 2,
@@ -268,12 +259,6 @@ class Config:
         task = get_task(self.task)
         if not isinstance(self.env_kwargs, dict) or not all(isinstance(k, str) for k in self.env_kwargs):
             raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
-        if find_preset(self.task) is None or self.env_kwargs:  # a preset's own spaces are known; an env's are checked
-            task_spaces(self.task, self.env_kwargs)
-        if self.torso != "auto" or self.timeout == "time-aware":  # a torso or the time feature the input cannot take
-            if self.torso not in TORSOS:
-                raise ConfigError(f"torso={self.torso!r} is not one of {TORSOS}")
-            self.network_input
         if not self.method.q_learning:
             raise ConfigError(f"expert_loss={self.expert_loss!r} trains no Q-network: behavioural cloning alone is "
                               "run by the lab's imitation arms (python -m dqfd_bc_keras.experiments grid)")
@@ -345,13 +330,12 @@ class Config:
                           "every n-step return is cut at the end of its episode", DqfdWarning, stacklevel=2)
         return self
 
-    def check_memory(self) -> Config:
+    def check_memory(self, spaces: TaskSpaces) -> Config:
         """Raise ConfigError when a run's replay, networks and batch (`memory_needed`) need more
         memory than this machine has, before TensorFlow would die of it halfway; return self.
-        Called where a run is about to train (not by `for_task`: the lab reads configs of tasks
-        whose envs it need not make)."""
-        spaces = task_spaces(self.task, self.env_kwargs)
-        parts = memory_needed(self, self.network_input, spaces.n_actions)
+        Called where a run is about to train, with its env's `envs.checked_spaces` (not by
+        `for_task`: the lab reads configs of tasks whose envs it need not make)."""
+        parts = memory_needed(self, spaces.network_input(self.torso, self.timeout), spaces.n_actions)
         available = machine_memory()
         if sum(parts.values()) <= available:
             return self

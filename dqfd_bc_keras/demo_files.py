@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from .choices import TIMEOUT_MODES
 from .demo_data import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, check_layout, validate
 from .envs import get_task, task_spaces
 from .errors import ConfigError, DemoFileError
 from .files import atomic_path
-from .wrappers import TIMEOUT_MODES
 
 
 def save(dataset: DemoDataset, path: str | Path, force: bool = False) -> None:

@@ -36,7 +36,7 @@ import json
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -127,6 +127,25 @@ def task_spaces(name: str, env_kwargs: Mapping[str, Any] | None = None) -> TaskS
     """The spaces of task `name` made with `env_kwargs`, checked once per process: a one-line
     `ConfigError` for a keyword the env does not take and for spaces the networks cannot take."""
     return _task_spaces(name, _kwargs_key(env_kwargs))
+
+
+class EnvSettings(Protocol):
+    """What `checked_spaces` reads of a config (`config.Config`; envs never imports it)."""
+
+    task: str
+    env_kwargs: dict[str, Any]
+    torso: str
+    timeout: str
+
+
+def checked_spaces(config: EnvSettings) -> TaskSpaces:
+    """The spaces of `config`'s env, made once with its env kwargs, refused in one `ConfigError`
+    line when the networks cannot take them as the config asks (its torso, the time feature of
+    `timeout='time-aware'`). Called where a config is about to make envs: `Config.validate`
+    checks values alone, so the lab reads configs of tasks whose envs it need not make."""
+    spaces = task_spaces(config.task, config.env_kwargs)
+    spaces.network_input(config.torso, config.timeout)
+    return spaces
 
 
 def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import tensorflow as tf
 
-from .config import TARGETS, TD_LOSSES
-
 
 def bootstrap_value(q_next_target: tf.Tensor, q_next_online: tf.Tensor | None, target: str = "dqn") -> tf.Tensor:
     """The value of s' the target bootstraps from, (B,).
@@ -27,7 +25,7 @@ def bootstrap_value(q_next_target: tf.Tensor, q_next_online: tf.Tensor | None, t
     if target == "double":
         a_star = tf.argmax(q_next_online, axis=1, output_type=tf.int32)
         return tf.gather(q_next_target, a_star, axis=1, batch_dims=1)
-    raise ValueError(f"unknown target {target!r}; expected one of {TARGETS}")
+    raise ValueError(f"unknown target {target!r}; expected 'dqn' or 'double'")
 
 
 def td_target(returns: tf.Tensor, discount: tf.Tensor, next_value: tf.Tensor) -> tf.Tensor:
@@ -60,7 +58,7 @@ def td_loss(delta: tf.Tensor, kind: str = "squared") -> tf.Tensor:
     if kind == "huber":
         abs_delta = tf.abs(delta)
         return tf.where(abs_delta <= 1.0, 0.5 * tf.square(delta), abs_delta - 0.5)
-    raise ValueError(f"unknown TD loss {kind!r}; expected one of {TD_LOSSES}")
+    raise ValueError(f"unknown TD loss {kind!r}; expected 'squared' or 'huber'")
 
 
 def margin_loss(q: tf.Tensor, expert_actions: tf.Tensor, margin: float = 0.8) -> tf.Tensor:

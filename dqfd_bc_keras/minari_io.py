@@ -32,11 +32,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from .choices import TIMEOUT_MODES
 from .demo_data import ARRAYS, DemoDataset, DemoMeta, validate
 from .envs import TaskSpec, effective_kwargs, get_task, task_spaces
 from .errors import ConfigError, DemoFileError, one_line
 from .observations import describe
-from .wrappers import TIMEOUT_MODES
 
 _ABSENT = object()
 

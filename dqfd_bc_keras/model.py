@@ -26,7 +26,7 @@ import numpy as np
 
 from . import demos as demo_io
 from .config import Config, unknown_field
-from .envs import PYTHON_ENV_PREFIX, env_id_of, task_spaces
+from .envs import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
 from .errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
 from .evaluation import EvalResult, GreedyPolicy
 from .methods import BUILT_IN, METHODS, Method, register
@@ -84,6 +84,7 @@ class DQfD:
             rule, self._source = demos, "recorded"
             settings["expert"] = callable_name(demos)
         self.config = Config.for_task(task, **settings)
+        checked_spaces(self.config)  # a bad env or torso refused here, not at `learn`
         if rule is not None and self.config.uses_demos:  # step 1 for a callable: recorded now, given to training
             dataset = record_demos(self.config, rule)
         self.dataset, self.out = dataset, None if out is None else Path(out)
@@ -113,7 +114,8 @@ class DQfD:
             self.learner, self.state = self._run.learner, self._run.state
         else:
             if self.learner is None:
-                config = dataclasses.replace(self.config, total_steps=budget).check_memory()
+                config = dataclasses.replace(self.config, total_steps=budget)
+                config.check_memory(checked_spaces(config))
                 self.learner, self.state = build(config, self.dataset)[0], TrainingState()
             else:
                 self.learner.extend(budget)

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .choices import TORSOS
 from .errors import ConfigError
 from .observations import Frames
 
-TORSOS = ("auto", "mlp", "minatar", "nature")
-"""`Config.torso`'s choices."""
 CONV_TORSOS: dict[str, tuple[tuple[int, int, int], ...]] = {
     "minatar": ((16, 3, 1),),
     "nature": ((32, 8, 4), (64, 4, 2), (64, 3, 1)),

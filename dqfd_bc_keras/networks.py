@@ -18,9 +18,9 @@ from collections.abc import Sequence
 import keras
 import numpy as np
 
-from .network_input import CONV_TORSOS, NATURE_MIN_SIZE, TORSOS, NetworkInput, as_input, resolve_torso
+from .network_input import CONV_TORSOS, NATURE_MIN_SIZE, NetworkInput, as_input, resolve_torso
 
-__all__ = ["CONV_TORSOS", "NATURE_MIN_SIZE", "TORSOS", "NetworkInput", "as_input", "build_q_network",
+__all__ = ["CONV_TORSOS", "NATURE_MIN_SIZE", "NetworkInput", "as_input", "build_q_network",
            "dense_stack", "normalization", "resolve_torso", "torso_layers"]
 
 def torso_layers(spec: NetworkInput, obs_scale: tuple[np.ndarray, np.ndarray] | None = None

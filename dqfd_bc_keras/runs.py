@@ -44,7 +44,7 @@ import tensorflow as tf
 
 from . import demos as demo_io
 from .config import Config
-from .envs import task_spaces
+from .envs import checked_spaces, task_spaces
 from .errors import (BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line)
 from .evaluation import EvalResult
 from .files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
@@ -260,7 +260,8 @@ def train(
     dataset, as its metadata says); `callback` is given each episode's and evaluation's row."""
     out = Path(out)
     if not resume:
-        config.check_memory()  # before anything is written: a run that cannot fit is refused, not killed halfway
+        # before anything is written: a run that cannot fit (or whose env cannot) is refused, not killed halfway
+        config.check_memory(checked_spaces(config))
     created = not out.exists()
     if not (out / DirectoryLock.NAME).exists():  # else a live writer is named first, holding the lock
         check_dir(out, resume, force)

@@ -1,5 +1,5 @@
 """The BC model's epistemic variance σ²(s) − σ0² (ALGORITHM.md §3): three estimators
-(config.UNCERTAINTIES).
+(choices.UNCERTAINTIES).
 
     mc_dropout  the paper's: the variance of K dropout passes of one MAP network.
     ensemble    K MAP networks from different initialisations, each fitted on its own bootstrap

@@ -18,13 +18,9 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
+from .choices import TIMEOUT_MODES
 from .errors import ConfigError
 
-TIMEOUT_MODES = ("bootstrap", "naive", "time-aware")
-"""How the step limit reaches the learner: `bootstrap` truncates (Gymnasium semantics, the
-paper's fix: learners bootstrap from Q(s')); `naive` reports it as a termination (old Gym,
-the problem the paper starts from); `time-aware` appends the remaining-time fraction to the
-observation and then a termination is the truth (Pardo et al. 2018)."""
 
 class FallPenalty(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """CartPole: the step on which the pole falls pays `penalty` (paper: −100) instead of +1.

@@ -8,8 +8,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import dqfd_bc_keras  # noqa: F401  (registers the ids)
-from dqfd_bc_keras.envs import TASKS, make_plain_env, make_task
-from dqfd_bc_keras.wrappers import TIMEOUT_MODES
+from dqfd_bc_keras.choices import TIMEOUT_MODES
+from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.envs import TASKS, checked_spaces, make_plain_env, make_task
 from dqfd_bc_keras.errors import ConfigError
 
 RIGHT, LEFT = 1, 0
@@ -175,3 +176,16 @@ def test_plain_env_is_unmodified():
 def test_bad_task_settings_are_rejected_by_name(kwargs, match):
     with pytest.raises(ConfigError, match=match):
         make_task(**kwargs)
+
+
+@pytest.mark.parametrize("task, fields, match", [
+    ("cartpole", {"torso": "minatar"}, "torso='minatar' needs frames"),
+    ("cartpole", {"torso": "nature"}, "torso='nature' needs frames"),
+    ("CartPole-v1", {"env_kwargs": {"bad": 1}}, "CartPole-v1 takes no keyword argument 'bad'"),
+])
+def test_the_env_is_checked_against_a_config_where_envs_are_made(task, fields, match):
+    """`Config.validate` checks values alone; whether the env takes them is `checked_spaces`'s to say."""
+    config = Config.for_task(task, **fields)
+    with pytest.raises(ConfigError, match=match):
+        checked_spaces(config)
+    assert checked_spaces(Config.for_task(task)).n_actions == 2

@@ -13,6 +13,7 @@ import pytest
 import tensorflow as tf
 from dqfd_bc_keras.bc import BCModel
 from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.envs import checked_spaces
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.networks import NetworkInput, build_q_network, resolve_torso
 from dqfd_bc_keras.observations import Frames
@@ -157,11 +158,11 @@ def test_the_torso_is_chosen_by_the_observation_and_refused_where_it_cannot_read
     assert resolve_torso("auto", Frames((84, 84, 4), 1 / 255, 4)) == "nature"
     assert resolve_torso("mlp", Frames((10, 10, 4), 1.0)) == "mlp"  # frames flattened in the network
     with pytest.raises(ConfigError, match="torso='minatar' needs frames"):
-        Config.for_task("cartpole", torso="minatar")
+        checked_spaces(Config.for_task("cartpole", torso="minatar"))
     with pytest.raises(ConfigError, match="torso=nature needs frames of at least 36×36"):
-        Config.for_task("minatar-breakout", torso="nature")
+        checked_spaces(Config.for_task("minatar-breakout", torso="nature"))
     with pytest.raises(ConfigError, match="timeout='time-aware' appends the time left to a vector"):
-        Config.for_task("minatar-breakout", timeout="time-aware")
+        checked_spaces(Config.for_task("minatar-breakout", timeout="time-aware"))
     with pytest.raises(ConfigError, match="torso='conv' is not one of"):
         Config.for_task("cartpole", torso="conv")
     assert Config.for_task("minatar-breakout").network_input.torso == "minatar"

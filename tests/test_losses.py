@@ -4,12 +4,16 @@ Every expected value is worked out by hand (the arithmetic is in the comments / 
 none is computed by calling the function under test.
 """
 
+import ast
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 import tensorflow as tf
 
+from dqfd_bc_keras import losses
+from dqfd_bc_keras.choices import TARGETS, TD_LOSSES
 from dqfd_bc_keras.losses import (
     bayes_likelihood_loss,
     bayes_prior_loss,
@@ -62,6 +66,22 @@ def test_bootstrap_value_dqn_takes_max_and_double_takes_target_at_online_argmax(
 def test_bootstrap_value_unknown_target_raises_naming_it() -> None:
     with pytest.raises(ValueError, match="sarsa"):
         bootstrap_value(f32(Q_NEXT_TARGET), f32(Q_NEXT_ONLINE), "sarsa")
+
+
+def test_the_modes_config_accepts_are_the_modes_the_losses_take() -> None:
+    """choices.py spells them for config and the CLIs; losses.py takes the strings it is given."""
+    for target in TARGETS:
+        bootstrap_value(f32(Q_NEXT_TARGET), f32(Q_NEXT_ONLINE), target)
+    for kind in TD_LOSSES:
+        td_loss(f32(DELTA), kind)
+
+
+def test_the_loss_module_imports_tensorflow_alone() -> None:
+    """Pure math: no config, envs or Gymnasium come in with it."""
+    tree = ast.parse(Path(losses.__file__).read_text())
+    imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+    imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    assert imported == {"__future__", "tensorflow"}
 
 
 # ---------------------------------------------------------------- 2. td_target / td_error

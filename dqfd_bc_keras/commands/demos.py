@@ -14,13 +14,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ..choices import TIMEOUT_MODES
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, seed
 from ..demo_files import load, save
 from ..errors import ConfigError
 from ..experts import EXPERT_NAMES
 from ..minari_io import to_minari
 from ..recording import record
-from ..wrappers import TIMEOUT_MODES
 
 
 def main(argv: Sequence[str] | None = None) -> int:

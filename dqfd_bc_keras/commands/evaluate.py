@@ -17,14 +17,11 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 
+from ..choices import POLICY_FILES
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
 from ..errors import ConfigError
 from ..files import write_text
 from ..seeds import EVAL_SEED
-
-POLICIES = ("bc", "q")
-"""What `--policy` may name: the keys of `evaluation.POLICY_FILES` (a run directory's model files),
-spelled here so that a wrong name is refused before TensorFlow loads (a test keeps the two equal)."""
 
 PROGRESS_EVERY = 10.0
 """Seconds between two progress lines of a long evaluation."""
@@ -48,7 +45,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("target", help="a run directory (config.json + models) or a .keras file")
     add_task_arguments(parser)  # default: the config.json's task
-    parser.add_argument("--policy", choices=POLICIES,
+    parser.add_argument("--policy", choices=sorted(POLICY_FILES),
                         help="a run directory's q_network.keras (q, the default) or bc_model.keras (bc)")
     parser.add_argument("--episodes", type=positive_int, default=100, help="greedy episodes (default 100)")
     parser.add_argument("--seed", type=seed, default=EVAL_SEED,

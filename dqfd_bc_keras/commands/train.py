@@ -24,14 +24,14 @@ from pathlib import Path
 
 from .. import demos
 from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
-from ..config import QUICK, TARGETS, Config, parse_assignments
-from ..envs import task_slug
+from ..choices import TARGETS, TIMEOUT_MODES
+from ..config import QUICK, Config, parse_assignments
+from ..envs import checked_spaces, task_slug, task_spaces
 from ..errors import ConfigError
 from ..experts import EXPERT_NAMES, try_demonstrator
 from ..files import DirectoryLock
 from ..methods import METHODS
 from ..run_files import check_dir
-from ..wrappers import TIMEOUT_MODES
 
 
 def parse(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -105,7 +105,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                        f"-seed{overrides.get('seed', defaults['seed'].default)}")
     dataset = None
     if not args.resume:  # what a new run needs, checked before TensorFlow loads
-        config = Config.for_task(task, **overrides).check_memory()
+        task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
+        config = Config.for_task(task, **overrides)
+        config.check_memory(checked_spaces(config))
         if not (Path(out) / DirectoryLock.NAME).exists():  # else the lock's holder is named first, in `train`
             check_dir(Path(out), resume=False, force=args.force)
         if args.demos:

@@ -31,23 +31,23 @@ import numpy as np
 import tensorflow as tf
 
 from ..bc import build_bc_model
+from ..choices import UNCERTAINTIES
 from ..config import Config
 from ..demos import record, rollout
 from ..envs import make_task
 from ..evaluation import GreedyPolicy, load_model
 from ..files import write_text
-from ..tasks import TASKS as PRESETS
 from ..seeds import demo_seed
-from ..config import UNCERTAINTIES
 from ..uncertainty import max_policy_variance
 from .arms import ArmRuns, find_arm
 from .claims import CLAIMS, judge
 from .efficiency import ratio_ci
+from .lab_settings import LAB_SETTINGS
 from .stats import CensoredSummary, Summary
 from .suites import SUITES
 
-TASKS = tuple(name for name, spec in PRESETS.items() if spec.lab.calibrate)
-"""The tasks the estimators are calibrated on (each preset's `lab.calibrate`, tasks/)."""
+TASKS = tuple(task for task, lab in LAB_SETTINGS.items() if lab.calibrate)
+"""The tasks the estimators are calibrated on (each task's `calibrate`, lab_settings.py)."""
 STATE_SETS = ("held-out demos", "trained agent", "random policy", "3–6 std away")
 OFF_DEMO = ("random policy", "3–6 std away")
 """The sets an epistemic estimator must single out (the trained agent may stay near the demos)."""
