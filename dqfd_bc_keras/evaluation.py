@@ -21,17 +21,15 @@ import numpy as np
 import tensorflow as tf
 
 from .bc import BCModel
+from .choices import POLICY_FILES, TIMEOUT_MODES
 from .config import Config
 from .envs import get_task, make_plain_env, make_task, task_slug, task_spaces
-from .wrappers import TIMEOUT_MODES
+from .episodes import play
 from .errors import ConfigError, ModelFileError
 from .uncertainty import EnsembleDense
 
 FRAME_LAYERS = (keras.layers.Conv2D, keras.layers.Rescaling, keras.layers.Flatten, keras.layers.Reshape)
 """Layers of a network on frames (networks.torso_layers), which plays through the model itself."""
-
-POLICY_FILES = {"q": "q_network.keras", "bc": "bc_model.keras"}
-"""The model each policy kind plays, as saved in a run directory."""
 
 
 class GreedyPolicy:
@@ -191,12 +189,14 @@ def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
     if timeout not in TIMEOUT_MODES:
         raise ConfigError(f"unknown timeout mode {timeout!r}; expected one of {TIMEOUT_MODES}")
-    env = make_plain_env(task, timeout, max_steps, env_kwargs=env_kwargs)
-    returns, lengths, _ = _play(env, policy, episodes, seed, progress)
+    seeds = range(seed, seed + episodes)
+    with make_plain_env(task, timeout, max_steps, env_kwargs=env_kwargs) as env:
+        played = play(env, policy, seeds, progress=progress)
     goals = None
     if get_task(task).goal_count:
-        goals = _play(make_task(task, timeout, max_steps, env_kwargs=env_kwargs), policy, episodes, seed)[2]
-    return EvalResult(task, getattr(policy, "kind", "custom"), seed, returns, lengths, goals, timeout,
+        with make_task(task, timeout, max_steps, env_kwargs=env_kwargs) as env:
+            goals = play(env, policy, seeds).goals
+    return EvalResult(task, getattr(policy, "kind", "custom"), seed, played.returns, played.lengths, goals, timeout,
                       dict(env_kwargs or {}))
 
 
@@ -219,27 +219,9 @@ def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str 
     env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array", env_kwargs=env_kwargs)
     env = gym.wrappers.RecordVideo(env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix,
                                    disable_logger=True)
-    _play(env, policy, episodes, seed)
+    play(env, policy, range(seed, seed + episodes))
+    env.close()  # RecordVideo writes the last episode's file
     return sorted(directory.glob(f"{prefix}-episode-*.mp4"))
-
-
-def _play(env, policy, episodes: int, seed: int,
-          progress: Callable[[int], None] | None = None) -> tuple[list[float], list[int], list[int]]:
-    """(returns, lengths, info["goals"] at each episode's end, 0 where absent)."""
-    returns, lengths, goals = [], [], []
-    for i in range(episodes):
-        obs, info = env.reset(seed=seed + i)
-        total, steps, done = 0.0, 0, False
-        while not done:
-            obs, reward, terminated, truncated, info = env.step(policy(obs))
-            total, steps, done = total + float(reward), steps + 1, terminated or truncated
-        returns.append(total)
-        lengths.append(steps)
-        goals.append(int(info.get("goals", 0)))
-        if progress is not None:
-            progress(i + 1)
-    env.close()
-    return returns, lengths, goals
 
 
 def load_model(path: str | Path) -> keras.Model:

@@ -23,6 +23,7 @@ import numpy as np
 
 from .demo_data import ARRAYS, DemoDataset, DemoMeta
 from .envs import get_task, make_plain_env, make_task, task_spaces
+from .episodes import play
 from .errors import ConfigError, DqfdError, one_line
 from .seeds import demo_seed
 from .tasks import EXPERT_NAMES, NOT_REMADE, Rule, check_demonstrator, families, family_preset
@@ -197,19 +198,8 @@ def expert_returns(
     """Undiscounted returns of the expert on the plain env (`envs.make_plain_env`: frames as
     uint8, the preset's limit where the env has none); episode i is reset with seed + i."""
     expert = make_expert(family, name, epsilon, seed)
-    env = make_plain_env(family_preset(family).name)
-    returns = np.zeros(episodes, dtype=np.float64)
-    try:
-        for i in range(episodes):
-            obs, _ = env.reset(seed=seed + i)
-            done = False
-            while not done:
-                obs, reward, terminated, truncated, _ = env.step(expert(obs))
-                returns[i] += float(reward)
-                done = terminated or truncated
-    finally:
-        env.close()
-    return returns
+    with make_plain_env(family_preset(family).name) as env:
+        return np.asarray(play(env, expert, range(seed, seed + episodes)).returns, dtype=np.float64)
 
 
 def callable_name(rule: Rule) -> str:
@@ -239,12 +229,10 @@ def record(
                               _check_epsilon(epsilon), np.random.default_rng(seed))
     policy = (expert if isinstance(expert, Demonstrator)
               else make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs))
-    env = make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs)
     source = policy.name if policy is expert else expert
-    dataset = rollout(env, policy, [seed + i for i in range(episodes)], task=task, source=source,
-                      epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
-    env.close()
-    return dataset
+    with make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs) as env:
+        return rollout(env, policy, range(seed, seed + episodes), task=task, source=source, epsilon=epsilon,
+                       seed=seed, env_kwargs=env_kwargs)
 
 
 class EpisodeRecorder:
@@ -318,13 +306,5 @@ def rollout(
     greedy policy for dynamic demonstrations); `env_kwargs` are those `env` was made with.
     """
     recorder = EpisodeRecorder(env, task=task, source=source, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
-    for episode_seed in seeds:
-        obs, _ = env.reset(seed=int(episode_seed))
-        recorder.reset(obs)
-        done = False
-        while not done:
-            action = policy(obs)
-            obs, reward, terminated, truncated, info = env.step(action)
-            recorder.step(action, obs, reward, terminated, truncated, info)
-            done = terminated or truncated
+    play(env, policy, seeds, recorder)
     return recorder.dataset()

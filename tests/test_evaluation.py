@@ -1,11 +1,12 @@
-"""Greedy evaluation: the NumPy policy against Keras, episodes on the plain env, loading errors,
-and `evaluate.py` end to end."""
+"""Greedy evaluation: the NumPy policy against Keras, episodes played (`episodes.play`) on the plain
+env, loading errors, and `evaluate.py` end to end."""
 
 import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import dqfd_bc_keras  # noqa: F401  (first: TF settings, BCModel registered)
 import keras
@@ -14,6 +15,8 @@ import pytest
 from dqfd_bc_keras.bc import BCModel
 from dqfd_bc_keras.cli import run
 from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.envs import make_plain_env
+from dqfd_bc_keras.episodes import play
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy, evaluate, load_model, load_policy
 from dqfd_bc_keras.networks import build_q_network
@@ -77,6 +80,17 @@ def test_cartpole_returns_are_the_plain_envs():
     assert result.returns == [500.0] * 3 and result.lengths == [500] * 3 and result.goals is None
     falls = evaluate(lambda obs: 1, "cartpole-200", episodes=3, seed=0)
     assert all(5 < r < 50 for r in falls.returns) and falls.returns == [float(n) for n in falls.lengths]
+
+
+def test_play_gives_each_seed_one_watched_episode_and_leaves_the_env_open():
+    starts, steps, done = [], [], []
+    watcher = SimpleNamespace(reset=starts.append, step=lambda *transition: steps.append(transition))
+    env = make_plain_env("cartpole-200")
+    played = play(env, lambda obs: 1, [3, 3, 4], watcher, progress=done.append)
+    assert done == [1, 2, 3] and played.goals == [0, 0, 0] and len(starts) == 3
+    assert played.returns[:2] == [float(played.lengths[0])] * 2  # the same seed, the same episode
+    assert len(steps) == sum(played.lengths) and steps[-1][3]  # ends terminated
+    np.testing.assert_array_equal(env.reset(seed=3)[0], starts[0])
 
 
 def test_goal_count_task_counts_goals_and_scores_the_plain_env():

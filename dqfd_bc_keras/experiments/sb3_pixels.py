@@ -47,6 +47,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from ..cli import ArgumentParser, positive_int, run
+from ..episodes import play
 from ..errors import ConfigError
 from ..files import write_text
 from ..seeds import eval_seed
@@ -202,15 +203,10 @@ class Grid(BaseCallback):
         self.evaluations: list[dict] = []
 
     def _evaluate(self) -> None:
-        returns = []
-        for i in range(self.episodes):
-            obs, _ = self.env.reset(seed=self.seed + i)
-            total, done = 0.0, False
-            while not done:
-                action = int(self.model.predict(obs, deterministic=True)[0])
-                obs, reward, terminated, truncated, _ = self.env.step(action)
-                total, done = total + float(reward), terminated or truncated
-            returns.append(total)
+        def greedy(obs: np.ndarray) -> int:
+            return int(self.model.predict(obs, deterministic=True)[0])
+
+        returns = play(self.env, greedy, range(self.seed, self.seed + self.episodes)).returns
         self.evaluations.append({"interactions": self.num_timesteps, "mean_return": float(np.mean(returns)),
                                  "returns": returns})
 
