@@ -2,6 +2,7 @@
 
 import csv
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -10,11 +11,15 @@ from scipy import stats as sps
 from dqfd_bc_keras.experiments import arms as grouping, claims as analysis, metrics, plans as planning, report as results
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
 from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
+from dqfd_bc_keras.experiments.efficiency import ArmSteps
+from dqfd_bc_keras.experiments.lab_settings import (LAB_SETTINGS, NO_SETTINGS, LabSettings, lab_settings,
+                                                    register_lab_settings)
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
 from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.runs import EVAL_FIELDS
+from dqfd_bc_keras.tasks import TASKS
 from dqfd_bc_keras.training import METRIC_FIELDS
 
 # cartpole-200 naive: an episode of length L < 200 is a fall, task return L − 1 − 100, plain L
@@ -448,6 +453,40 @@ def test_ablations_pair_with_the_full_arm_and_are_judged_against_the_margin(tmp_
     assert verdicts == {"prior": "no measurable contribution", "dyn": "contributes", "mc": "hurts"}
     line = "- Ablations (one part of the Bayesian machinery off, against the full arm): contributes in 1, hurts in 1, "
     assert line + "no measurable contribution in 1, of 3." in summary([full, prior, dynamic, dropout], tmp_path)
+
+
+USERS_TASK = """
+from dqfd_bc_keras.experiments.lab_settings import LabSettings, register_lab_settings
+from dqfd_bc_keras.tasks import TaskSpec, register_task
+
+register_task(TaskSpec("lab-pole", "CartPole-v1", max_steps=60))
+register_lab_settings("lab-pole", LabSettings(target_ratio=3.0, ablation_metric="mean_train_return"))
+"""
+
+
+@pytest.fixture
+def users_task(tmp_path, monkeypatch):
+    """A user's preset with lab settings, registered by their module; forgotten afterwards."""
+    (tmp_path / "my_lab_tasks.py").write_text(USERS_TASK)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield "my_lab_tasks:lab-pole"
+    TASKS.pop("lab-pole", None)
+    LAB_SETTINGS.pop("lab-pole", None)
+    sys.modules.pop("my_lab_tasks", None)
+
+
+def test_a_task_has_the_lab_settings_registered_under_its_name_else_none(users_task, tmp_path):
+    """`module:preset` imports the module, which registers them; a preset without any (cartpole-200)
+    has NO_SETTINGS, so its ablations are not judged."""
+    assert lab_settings(users_task) == LabSettings(target_ratio=3.0, ablation_metric="mean_train_return")
+    assert ArmSteps(users_task, "bayes", [None], [0.0], 55.0).target == 3.0
+    assert lab_settings("cartpole-200") is NO_SETTINGS and lab_settings("Acrobot-v1") is NO_SETTINGS
+    full, prior = (ArmRuns(run.config.to_dict(), [run], name) for name, run in (
+        ("full", make_run(tmp_path / "full", cartpole_rows([100] * 5), task="cartpole-200")),
+        ("prior", make_run(tmp_path / "prior", cartpole_rows([100] * 5), task="cartpole-200", bayes_prior=False))))
+    assert analysis.ablation_pairs([full, prior]) == []
+    with pytest.raises(ConfigError, match="register_lab_settings\\(\\) takes LabSettings, got dict"):
+        register_lab_settings("lab-pole", {"target_ratio": 3.0})
 
 
 def test_the_summary_counts_how_sensitivity_arms_move_the_verdict(tmp_path):

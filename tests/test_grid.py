@@ -12,9 +12,9 @@ import pytest
 
 from dqfd_bc_keras.experiments.estimators import (CALIBRATION_FILE, OFF_DEMO, STATE_SETS, best_other,
                                                   estimators_section, meets_goal)
-from dqfd_bc_keras.envs import get_task
 from dqfd_bc_keras.experiments.grid import BC_ALONE, DQN, GRID_FILE, Cell, Entry, effect, escapes
 from dqfd_bc_keras.experiments.imitation import IMITATION_DIR
+from dqfd_bc_keras.experiments.lab_settings import lab_settings
 from dqfd_bc_keras.experiments.suites import GRID_METHODS, GRID_TASKS, SUITES, grid_arms, grid_cells
 from dqfd_bc_keras.experts import expert_returns
 
@@ -27,14 +27,14 @@ def lab(*args, timeout=600):
                           text=True, timeout=timeout, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
 
 
-TEACHERS = [(task, teacher) for task in GRID_TASKS for teacher in sorted(get_task(task).lab.grid_teachers)]
+TEACHERS = [(task, teacher) for task in GRID_TASKS for teacher in sorted(lab_settings(task).grid_teachers)]
 
 
 @pytest.mark.parametrize("task, teacher", TEACHERS)
 def test_teacher_means_are_the_measured_ones(task, teacher):
     expert, epsilon = teacher
     measured = expert_returns(task, expert, episodes=100, seed=0, epsilon=epsilon).mean()
-    assert round(measured, 2) == get_task(task).lab.grid_teachers[teacher]
+    assert round(measured, 2) == lab_settings(task).grid_teachers[teacher]
 
 
 def test_the_grid_is_every_method_on_every_cell_of_each_task_with_plain_dqn_once():
@@ -43,7 +43,7 @@ def test_the_grid_is_every_method_on_every_cell_of_each_task_with_plain_dqn_once
     arms = SUITES["demos"]
     assert GRID_TASKS == ("cartpole", "mountaincar") and len(arms) == 2 * (1 + 12 * len(GRID_METHODS))
     for task in GRID_TASKS:
-        assert {(c["expert"], c["expert_epsilon"]) for c in cells} == set(get_task(task).lab.grid_teachers)
+        assert {(c["expert"], c["expert_epsilon"]) for c in cells} == set(lab_settings(task).grid_teachers)
         on_task = [a for a in arms if a.task == task]
         assert len(on_task) == 1 + 12 * len(GRID_METHODS) and sum(a.expert_loss == "none" for a in on_task) == 1
     assert all(a.seeds == 5 for a in arms) and len({a.name for a in arms}) == len(arms)

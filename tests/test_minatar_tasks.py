@@ -13,6 +13,7 @@ from gymnasium.wrappers import TimeLimit
 
 import dqfd_bc_keras.tasks.minatar as minatar_tasks
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.lab_settings import lab_settings
 from dqfd_bc_keras.tasks import TASKS, find_preset
 
 pytest.importorskip("minatar")
@@ -59,9 +60,10 @@ def test_the_presets_are_registered_with_their_env_and_experts(task: str) -> Non
 
 def test_the_presets_record_their_teachers_and_stay_out_of_the_vector_suites() -> None:
     for task in PRESETS:  # the MinAtar study is its own suite (its SB3 baseline differs)
-        assert TASKS[task].lab.efficiency_demos is None and TASKS[task].lab.teacher_return is None
+        lab = lab_settings(task)
+        assert lab.efficiency_demos is None and lab.teacher_return is None
         measured = {(name, 0.0): MEASURED[task, name][0] for name in ("strong", "imperfect")}
-        assert TASKS[task].lab.grid_teachers == measured
+        assert lab.grid_teachers == measured
 
 
 def test_the_ids_are_those_minatar_registers(monkeypatch: pytest.MonkeyPatch) -> None:

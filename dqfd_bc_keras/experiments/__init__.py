@@ -10,6 +10,7 @@ nothing in the learning core imports it.
     arms.py     runs grouped into arms by config; a bayes arm's ce pair
     claims.py   the claims C1–C4, the ablations and their verdict rules
     plans.py    seeds per arm of each claim setting, planned by power
+    lab_settings.py  what the lab judges each task by (teachers, efficiency goal, ablation metric)
     efficiency.py  sample efficiency against SB3: steps to threshold, ratios
     stats.py    bootstrap CIs, IQM, tests, TOST equivalence, power
     figures.py  learning curves over seeds, the paper's single runs

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Config
-from ..envs import get_task
 from .arms import ArmRuns, Setting, common_seeds
+from .lab_settings import lab_settings
 from .metrics import CENSORED, SHARES
 from .stats import (CensoredSummary, Summary, beyond, bootstrap_diff_ci, bound_power, equivalence_power, equivalent,
                     fisher_exact, mann_whitney, pooled_sd, tost_ci)
@@ -226,7 +226,7 @@ def flips(verdict: str, reference: str) -> str:
 ABLATED = {"dynamic_demos": "off", "bayes_prior": False, "mc_dropout": False}
 """The part each ablation switches off, and its value when off."""
 ABLATION_MARGINS = {"mean_train_return": RETURN_MARGIN, "goals_first30": None}
-"""The metrics an ablation can be judged on (a task's `lab.ablation_metric`, tasks/) and each one's
+"""The metrics an ablation can be judged on (a task's `ablation_metric`, lab_settings.py) and each one's
 margin: a fraction of the limit, or None for GOALS_MARGIN."""
 
 
@@ -237,7 +237,7 @@ def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
         return {k: v for k, v in arm.config.items() if k != key}
 
     return [(key, *common_seeds(ablated, full)) for key, off in ABLATED.items() for ablated in arms
-            if ablated.config[key] == off and get_task(ablated.config["task"]).lab.ablation_metric
+            if ablated.config[key] == off and lab_settings(ablated.config["task"]).ablation_metric
             for full in arms if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)]
 
 
@@ -252,7 +252,7 @@ def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
     wholly below −margin; else inconclusive."""
     if min(len(full.runs), len(ablated.runs)) < 2:
         return Verdict("inconclusive (n < 2)")
-    metric = get_task(full.config["task"]).lab.ablation_metric
+    metric = lab_settings(full.config["task"]).ablation_metric
     fraction = ABLATION_MARGINS[metric]
     margin = GOALS_MARGIN if fraction is None else fraction * full.runs[0].config.limit
     comparison = compare(metric, full, ablated)

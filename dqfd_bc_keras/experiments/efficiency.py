@@ -20,19 +20,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..envs import get_task
 from ..files import write_text
-from ..tasks import TASKS
 from .metrics import first_reaching
 from .data import FinishedRun
+from .lab_settings import LAB_SETTINGS, lab_settings
 from .stats import bootstrap_ci
 
 SB3_METHOD = "SB3 DQN (rl-zoo3)"
 """The method name of the Stable-Baselines3 arms."""
 EFFICIENCY_FILE = "efficiency.json"
 """Written into the suite directory by `experiments efficiency` (baselines.py); quoted by the report."""
-TEACHER = {name: spec.lab.teacher_return for name, spec in TASKS.items() if spec.lab.teacher_return is not None}
-"""The imperfect teachers our final returns are compared with (each preset's `lab.teacher_return`, tasks/)."""
+TEACHER = {task: lab.teacher_return for task, lab in LAB_SETTINGS.items() if lab.teacher_return is not None}
+"""The imperfect teachers our final returns are compared with (each task's `teacher_return`, lab_settings.py)."""
 RESAMPLES, RNG_SEED, LEVEL = 10_000, 0, 0.95
 """Percentile bootstrap of every interval here: resamples, generator seed, coverage."""
 
@@ -62,7 +61,7 @@ class ArmSteps:
 
     @property
     def target(self) -> float:
-        return get_task(self.task).lab.target_ratio
+        return lab_settings(self.task).target_ratio
 
     @property
     def label(self) -> str:
@@ -120,7 +119,8 @@ def ratio_ci(theirs: np.ndarray, ours: np.ndarray, resamples: int = RESAMPLES,
 
 def rows(arms: list[ArmSteps]) -> list[dict]:
     """`summarise` of each arm; ours also get `ratio` = [point, low, high] of SB3's median ÷
-    theirs (`ratio_ci`) where the task has an SB3 arm, and `target_met` (point ≥ the task's `lab.target_ratio`)."""
+    theirs (`ratio_ci`) where the task has an SB3 arm, and `target_met` (point ≥ the task's `target_ratio`,
+    lab_settings.py)."""
     sb3 = {a.task: a.steps for a in arms if a.method == SB3_METHOD}
     out = []
     for arm in arms:
@@ -142,7 +142,7 @@ def _times(value: float) -> str:
 
 def table(arms: list[ArmSteps]) -> list[str]:
     """The arms as a markdown table: each of ours with SB3's median ÷ its median (95% CI) and
-    whether that reaches the task's `lab.target_ratio`; each SB3 arm with its independent check beside
+    whether that reaches the task's `target_ratio` (lab_settings.py); each SB3 arm with its independent check beside
     the median; then a note on any open-ended or undefined interval."""
     lines = ["| arm | median steps to threshold | 95% CI | seeds that reached it | above it at the end "
              "(median final return) | SB3's median ÷ this median [95% CI] | goal |",

@@ -31,6 +31,7 @@ from .metrics import interactions_to_threshold
 from .data import load_runs
 from .efficiency import ratio_ci, teacher_verdict
 from .imitation import imitation_arms, load_imitation, run_imitation
+from .lab_settings import lab_settings
 from .suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
 from .sweep import run_suite
 
@@ -55,8 +56,8 @@ class Cell:
 
     @property
     def teacher_return(self) -> float:
-        """The teacher's mean plain return over 100 episodes (its preset's `lab.grid_teachers`, tasks/)."""
-        return get_task(self.task).lab.grid_teachers[self.expert, self.epsilon]
+        """The teacher's mean plain return over 100 episodes (its task's `grid_teachers`, lab_settings.py)."""
+        return lab_settings(self.task).grid_teachers[self.expert, self.epsilon]
 
     @property
     def threshold(self) -> float:

@@ -20,10 +20,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..config import QUICK, Config, parse_assignments, preset_defaults
-from ..envs import task_slug
+from ..envs import checked_spaces, task_slug
 from ..errors import ConfigError
-from ..tasks import TASKS
 from .claims import CLAIMS, PAPER as PAPER_READING, PAPER_READING_STEPS
+from .lab_settings import LAB_SETTINGS
 from .plans import planned_seeds
 
 @dataclass(frozen=True)
@@ -85,7 +85,9 @@ def on_task(arms: Sequence[Arm], task: str | None, assignments: Sequence[str] = 
     moved = []
     for a in arms:
         target = a.task if task is None else task
-        parsed = Config.for_task(target, **{**dict(a.overrides), **parse_assignments(list(assignments))}).to_dict()
+        config = Config.for_task(target, **{**dict(a.overrides), **parse_assignments(list(assignments))})
+        checked_spaces(config)  # an env the networks cannot take is refused here, before any run starts
+        parsed = config.to_dict()
         moved.append(arm(target, a.timeout, a.expert_loss, a.seeds, **{**dict(a.overrides),
                                                                        **{k: parsed[k] for k in keys}}))
     return list(dict.fromkeys(moved))
@@ -103,8 +105,9 @@ def claim_seeds(claim_id: str, task: str) -> int:
 PROTOCOL = {"eval_every": 1_000, "eval_episodes": 10}
 """The sample-efficiency protocol, ours and SB3's alike: 10 greedy episodes on the plain env with
 fixed seeds (`seeds.eval_seed`) at exactly every 1,000 interactions."""
-EFFICIENCY_TASKS = {name: spec.lab.efficiency_demos for name, spec in TASKS.items() if spec.lab.efficiency_demos}
-"""Sample-efficiency tasks → demonstration episodes of the imperfect expert (each preset's `lab`, tasks/)."""
+EFFICIENCY_TASKS = {task: lab.efficiency_demos for task, lab in LAB_SETTINGS.items() if lab.efficiency_demos}
+"""Sample-efficiency tasks → demonstration episodes of the imperfect expert (each task's `efficiency_demos`,
+lab_settings.py)."""
 PAPER_TASKS = ("cartpole", "mountaincar")
 """The paper's two envs: the dynamic-demonstration readings and every expert loss run on them."""
 C2_PAPER_READING = {"early_stop_window": 0, "total_steps": PAPER_READING_STEPS}
@@ -160,7 +163,8 @@ BEST_OTHER_ESTIMATOR = "distance"
 """`calibration.best_other` of docs/data/calibration.json (PREREGISTRATION §8), picked before any run with it."""
 OTHER_ESTIMATORS = (BEST_OTHER_ESTIMATOR, "ensemble")
 GRID_TASKS = ("cartpole", "mountaincar")
-"""The grid's tasks (PREREGISTRATION §8, §12); each preset's `lab.grid_teachers` holds its teachers' means."""
+"""The grid's tasks (PREREGISTRATION §8, §12); each one's `grid_teachers` (lab_settings.py) holds its
+teachers' means."""
 GRID_TEACHERS = (("strong", 0.0), ("imperfect", 0.0), ("strong", 0.2), ("strong", 0.5))
 """(expert, ε): the strong and imperfect scripted experts, and the strong one acting at random w.p. ε."""
 GRID_EPISODES = (1, 5, 20)

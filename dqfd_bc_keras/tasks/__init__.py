@@ -2,11 +2,11 @@
 
 A family module (cartpole.py, mountaincar.py, acrobot.py, lunarlander.py, minatar.py) declares, for each of
 its presets, which plain Gymnasium env it wraps and how (ALGORITHM.md §6), the preset's Config
-defaults, its scripted experts, and the thresholds the lab judges it by. Adding a family to the
-package is one such module (imported below) and its tests. A preset of your own registers from
-your module the same way, and `--task my_module:my-task` imports `my_module` first:
+defaults and its scripted experts; what the lab judges it by is the lab's (experiments/lab_settings.py).
+Adding a family to the package is one such module (imported below) and its tests. A preset of your
+own registers from your module the same way, and `--task my_module:my-task` imports `my_module` first:
 
-    from dqfd_bc_keras.tasks import LabSettings, TaskSpec, register_task
+    from dqfd_bc_keras.tasks import TaskSpec, register_task
 
     register_task(TaskSpec("pendulum-bins", "my_envs:BinnedPendulum-v0", family="pendulum-bins", max_steps=200,
                            defaults={"total_steps": 30_000}, experts={"strong": swing_up}))
@@ -14,9 +14,9 @@ your module the same way, and `--task my_module:my-task` imports `my_module` fir
 This package imports neither TensorFlow nor Gymnasium: reading a config.json loads neither.
 """
 
-from .registry import (ENV_DEFAULTS, EXPERT_NAMES, ID_NAMESPACE, NOT_REMADE, TASKS, LabSettings, Rule, TaskSpec,
+from .registry import (ENV_DEFAULTS, EXPERT_NAMES, ID_NAMESPACE, NOT_REMADE, TASKS, Rule, TaskSpec,
                        check_demonstrator, families, family_preset, find_preset, register_task)
 from . import cartpole, mountaincar, acrobot, lunarlander, minatar  # noqa: E402,F401,I001  (they register, in this order)
 
-__all__ = ["ENV_DEFAULTS", "EXPERT_NAMES", "ID_NAMESPACE", "NOT_REMADE", "TASKS", "LabSettings", "Rule", "TaskSpec",
+__all__ = ["ENV_DEFAULTS", "EXPERT_NAMES", "ID_NAMESPACE", "NOT_REMADE", "TASKS", "Rule", "TaskSpec",
            "check_demonstrator", "families", "family_preset", "find_preset", "register_task"]

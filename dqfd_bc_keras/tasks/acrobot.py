@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import ENV_DEFAULTS, LabSettings, TaskSpec, register_task
+from .registry import ENV_DEFAULTS, TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:
@@ -24,5 +24,4 @@ register_task(TaskSpec(
     experts={"strong": strong, "imperfect": imperfect},
     doc="Acrobot-v1, 500 steps, solved at −100; the generic env defaults (SB3's budget of 100k steps) with "
         "an evaluation every 1k, the sample-efficiency grid",
-    lab=LabSettings(efficiency_demos=10, target_ratio=5.0, teacher_return=-112.68),
 ))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import LabSettings, TaskSpec, register_task
+from .registry import TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:
@@ -27,9 +27,6 @@ steps-to-threshold meaningful."""
 register_task(TaskSpec(
     "cartpole", "CartPole-v1", "cartpole", 500, fall_penalty=-100.0, solved_return=475.0, defaults=DEFAULTS,
     experts=EXPERTS, doc="CartPole-v1, 500 steps, −100 on a fall; stops early at 10 episodes ≥ 490",
-    lab=LabSettings(efficiency_demos=5, target_ratio=10.0, ablation_metric="mean_train_return", calibrate=True,
-                    grid_teachers={("strong", 0.0): 500.0, ("imperfect", 0.0): 198.06, ("strong", 0.2): 495.54,
-                                   ("strong", 0.5): 169.67}),
 ))
 register_task(TaskSpec(
     "cartpole-200", "CartPole-v1", "cartpole", 200, fall_penalty=-100.0, solved_return=475.0, defaults=DEFAULTS,

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
-from .registry import LabSettings, TaskSpec, register_task
+from .registry import TaskSpec, register_task
 
 GAMES = ("asterix", "breakout", "freeway", "seaquest", "space_invaders")
 """MinAtar's games, as `minatar.gym.register_envs` names them (Breakout-v0: all 6 actions, -v1: the minimal set)."""
@@ -249,7 +249,6 @@ register_task(TaskSpec(
     "minatar-breakout", "MinAtar/Breakout-v1", "minatar-breakout", 1000, defaults=DEFAULTS,
     experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
     doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
-    lab=LabSettings(target_ratio=5.0, grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
 ))
 
 # Freeway ends itself after 2501 frames, on a clock the frame does not show; the 2500-step limit ends
@@ -258,5 +257,4 @@ register_task(TaskSpec(
     "minatar-freeway", "MinAtar/Freeway-v1", "minatar-freeway", 2500, defaults=DEFAULTS,
     experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
     doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
-    lab=LabSettings(grid_teachers={("strong", 0.0): 65.85, ("imperfect", 0.0): 15.72}),
 ))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import LabSettings, TaskSpec, register_task
+from .registry import TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:
@@ -26,12 +26,8 @@ DEFAULTS = {"demo_episodes": 10, "total_steps": 100_000, "early_stop_window": 0}
 register_task(TaskSpec(
     "mountaincar", "MountainCar-v0", "mountaincar", 200, solved_return=-110.0, defaults=DEFAULTS, experts=EXPERTS,
     doc="MountainCar-v0, 200 steps, sparse; no early stop (the budget ends it)",
-    lab=LabSettings(efficiency_demos=10, target_ratio=10.0, calibrate=True,
-                    grid_teachers={("strong", 0.0): -106.39, ("imperfect", 0.0): -120.02, ("strong", 0.2): -145.22,
-                                   ("strong", 0.5): -189.23}),
 ))
 register_task(TaskSpec(
     "mountaincar-goals", "MountainCar-v0", "mountaincar", 200, goal_reward=100.0, solved_return=-110.0,
     defaults=DEFAULTS, experts=EXPERTS, doc="the paper's goal-count variant (Figs. 9–11): +100 on each flag",
-    lab=LabSettings(ablation_metric="goals_first30"),
 ))

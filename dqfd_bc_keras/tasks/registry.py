@@ -30,26 +30,6 @@ ENV_DEFAULTS: Mapping[str, object] = {"demo_episodes": 10, "total_steps": 100_00
 
 
 @dataclass(frozen=True)
-class LabSettings:
-    """What the lab (dqfd_bc_keras/experiments) judges a preset by; every field optional."""
-
-    efficiency_demos: int | None = None
-    """Demonstrated episodes of the imperfect expert in the sample-efficiency suite; None: not in it."""
-    target_ratio: float = 10.0
-    """The sample-efficiency goal: SB3's median interactions to threshold ÷ ours ≥ this."""
-    teacher_return: float | None = None
-    """The imperfect expert's mean plain return over 100 episodes (seeds 0–99), which the efficiency
-    report compares our final returns with; pinned by tests/test_efficiency.py."""
-    grid_teachers: Mapping[tuple[str, float], float] = field(default_factory=dict)
-    """(expert, ε) → mean plain return over 100 episodes of each teacher of the quality × quantity
-    grid (`python -m dqfd_bc_keras.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
-    ablation_metric: str | None = None
-    """The metric the ablations are judged on (experiments/claims.py's ABLATION_MARGINS); None: no ablations."""
-    calibrate: bool = False
-    """Whether the σ² estimators are calibrated on this task (experiments/estimators.py)."""
-
-
-@dataclass(frozen=True)
 class TaskSpec:
     """A task: which plain env, which shaping, which step limit, its defaults and its experts."""
 
@@ -70,7 +50,6 @@ class TaskSpec:
     """The preset's Config defaults where they differ from Config's shared ones."""
     experts: Mapping[str, Rule] = field(default_factory=dict, repr=False)
     """Scripted demonstrators by name (strong, imperfect)."""
-    lab: LabSettings = field(default_factory=LabSettings)
     doc: str = ""
 
     @property
