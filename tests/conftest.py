@@ -1,5 +1,5 @@
 """Fixtures shared by the learning tests: the strong CartPole expert's demonstrations and one
-fitted BC model per kind (fitted once per session: each fit takes a few seconds)."""
+fitted BC model per kind of fit (fitted once per session: each fit takes a few seconds)."""
 
 import dqfd_bc_keras  # noqa: F401  (first: TF settings; custom objects, Gymnasium ids)
 import keras
@@ -7,6 +7,7 @@ import pytest
 from dqfd_bc_keras.bc import build_bc_model
 from dqfd_bc_keras.config import Config
 from dqfd_bc_keras.demos import DemoDataset, record
+from dqfd_bc_keras.methods import METHODS
 
 
 @pytest.fixture(scope="session")
@@ -23,12 +24,14 @@ def held_out() -> DemoDataset:
 
 @pytest.fixture(scope="session")
 def bc_models(demos) -> dict:
-    """{expert_loss: BC model fitted with the defaults}: MAP for bayes, MLE for ce and bc_margin."""
+    """{expert_loss: BC model fitted with the defaults} for every registered method with a BC model:
+    one model per kind of fit (`Method.bc_fit`: MAP for bayes, MLE for ce and bc_margin), shared by
+    the methods of that kind, so a new method finds its model here without an edit."""
     keras.utils.set_random_seed(0)
-    models = {}
-    for loss in ("bayes", "ce"):
+    by_fit = {}
+    for fit in sorted({m.bc_fit for m in METHODS.values() if m.uses_bc}):  # map, then mle: one seed sequence
+        loss = next(m.name for m in METHODS.values() if m.bc_fit == fit and m.q_learning)
         config = Config.for_task("cartpole", expert_loss=loss)
-        models[loss] = build_bc_model(config, 4, 2, demos.obs_scale())
-        models[loss].fit_demos(demos.obs, demos.actions, epochs=config.bc_epochs)
-    models["bc_margin"] = models["ce"]
-    return models
+        by_fit[fit] = build_bc_model(config, 4, 2, demos.obs_scale())
+        by_fit[fit].fit_demos(demos.obs, demos.actions, epochs=config.bc_epochs)
+    return {name: by_fit[m.bc_fit] for name, m in METHODS.items() if m.uses_bc}

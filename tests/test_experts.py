@@ -4,10 +4,13 @@ import numpy as np
 import pytest
 
 from dqfd_bc_keras.commands.experts import main
+from dqfd_bc_keras.envs import task_spaces
 from dqfd_bc_keras.experts import EXPERT_NAMES, expert_returns, make_expert
-from dqfd_bc_keras.tasks import TASKS, families
+from dqfd_bc_keras.tasks import TASKS, families, family_preset
 
 FAMILIES = families()
+EXPERTS = {family: family_preset(family).experts for family in FAMILIES}
+"""Each family's scripted experts by name, as its first preset declares them."""
 
 
 def test_cartpole_strong_balances_and_imperfect_is_clearly_worse() -> None:
@@ -53,16 +56,23 @@ def test_lunarlander_strong_is_gymnasiums_heuristic() -> None:
         assert TASKS["lunarlander"].experts["strong"](obs) == heuristic(env, obs)
 
 
-OBS_DIM = {"cartpole": 4, "mountaincar": 2, "acrobot": 6, "lunarlander": 8}
-"""The families observed as vectors; MinAtar's frame experts are tested in test_minatar_tasks.py."""
+OBS_DIM = {family: spaces.obs_dim for family in FAMILIES
+           if (spaces := task_spaces(family_preset(family).name)).layout.flat}
+"""The families observed as vectors, by width, read from their envs; the frame families' experts
+(MinAtar's) are tested in test_minatar_tasks.py."""
 
 
-def test_every_family_is_a_vector_family_or_a_minatar_one() -> None:
-    assert set(FAMILIES) == set(OBS_DIM) | {"minatar-breakout", "minatar-freeway"}
+def test_every_family_has_the_package_experts() -> None:
+    assert all(set(EXPERT_NAMES) <= set(experts) for experts in EXPERTS.values())
 
 
-@pytest.mark.parametrize("family", list(OBS_DIM))
-@pytest.mark.parametrize("name", EXPERT_NAMES)
+def test_the_vector_families_are_told_from_the_frame_ones_by_their_observations() -> None:
+    assert {family: OBS_DIM.get(family) for family in ("cartpole", "mountaincar", "acrobot", "lunarlander")} == {
+        "cartpole": 4, "mountaincar": 2, "acrobot": 6, "lunarlander": 8}
+    assert {"minatar-breakout", "minatar-freeway"} <= set(FAMILIES) - set(OBS_DIM)
+
+
+@pytest.mark.parametrize(("family", "name"), [(family, name) for family in OBS_DIM for name in EXPERTS[family]])
 def test_epsilon_zero_equals_rule_and_ignores_extra_feature(family: str, name: str) -> None:
     rng = np.random.default_rng(1)
     expert = make_expert(family, name, epsilon=0.0, seed=0)
@@ -71,7 +81,7 @@ def test_epsilon_zero_equals_rule_and_ignores_extra_feature(family: str, name: s
         obs = rng.uniform(-0.5, 0.5, size=width).astype(np.float32)
         action = expert(obs)
         assert type(action) is int
-        assert action == TASKS[family].experts[name](obs)
+        assert action == EXPERTS[family][name](obs)
         assert expert(np.append(obs, np.float32(0.3))) == action
 
 
@@ -116,6 +126,6 @@ def test_cli_prints_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--episodes", "2"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0].startswith("| family | expert | env id |")
-    assert len(lines) == 2 + len(FAMILIES) * len(EXPERT_NAMES)
+    assert len(lines) == 2 + sum(len(experts) for experts in EXPERTS.values())
     assert any("| cartpole | strong | CartPole-v1 | 2 | 500.00" in line for line in lines)
     assert any("| mountaincar | imperfect | MountainCar-v0 | 2 |" in line for line in lines)

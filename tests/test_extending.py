@@ -1,0 +1,149 @@
+"""docs/EXTENDING.md's three recipes, performed as the doc writes them: a user's own method, task preset
+and suite, each in a module of their own outside the package. The modules are the doc's python blocks
+and the commands its bash blocks, read from the doc when the tests run, so the tests follow the doc
+when it changes. Each recipe runs in tmp_path (the user's directory, where the modules are written)
+with the repository on PYTHONPATH, standing in for the installed package; the doc's own `PYTHONPATH=.`
+adds tmp_path. `dqfd-train` and `dqfd-evaluate` run as the repository's train.py and evaluate.py (the
+same programs as the entry points).
+
+Budgets: the method's commands are the doc's as written (`--quick`, and evaluate's 100 episodes of a
+quick run); the preset's training gets `--quick` (the doc's preset trains 20,000 steps); the suite's
+run gets `--seeds 1` and a run of seconds (the doc's suite is 3 arms × 5 seeds of full runs)."""
+
+import csv
+import json
+import os
+import re
+import runpy
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tensorflow as tf
+
+from dqfd_bc_keras import expert_terms
+from dqfd_bc_keras.agent import make_agent
+from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.methods import METHODS
+
+REPO = Path(__file__).resolve().parents[1]
+DOC = REPO / "docs" / "EXTENDING.md"
+PROGRAMS = {"dqfd-train": [sys.executable, str(REPO / "train.py")],
+            "dqfd-evaluate": [sys.executable, str(REPO / "evaluate.py")], "python": [sys.executable]}
+"""The doc's programs as this checkout runs them."""
+TINY_RUN = [arg for setting in ("total_steps=100", "pretrain_steps=10", "eval_every=50", "checkpoint_every=50",
+                                "demo_episodes=1", "eval_episodes=1", "final_eval_episodes=1", "bc_epochs=1")
+            for arg in ("--set", setting)]
+"""A run of seconds: what the suite recipe needs is its runs, not learning."""
+
+
+def recipe(heading: str) -> tuple[dict[str, str], list[str]]:
+    """The `## heading` section of the doc: its python blocks by the file each names on its first line
+    (`# my_methods.py`), and the lines of its bash blocks."""
+    section = re.search(rf"^## {re.escape(heading)}\n(.*?)(?=^## |\Z)", DOC.read_text(), re.DOTALL | re.MULTILINE)[1]
+    blocks = re.findall(r"^```(python|bash)\n(.*?)^```", section, re.DOTALL | re.MULTILINE)
+    modules = {re.match(r"# (\S+\.py)\n", code)[1]: code for kind, code in blocks if kind == "python"}
+    commands = [line for kind, code in blocks if kind == "bash" for line in code.splitlines() if line.strip()]
+    assert modules and commands, f"no module or no command in the doc's section {heading!r}"
+    return modules, commands
+
+
+def run(line: str, *extra: str, cwd: Path) -> subprocess.CompletedProcess:
+    """One of the doc's command lines, typed in `cwd`, with `extra` arguments appended; its leading
+    `NAME=VALUE` words set the environment (`PYTHONPATH=.`: `cwd`, then the repository)."""
+    words = shlex.split(line)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    while "=" in words[0]:
+        name, _, value = words.pop(0).partition("=")
+        env[name] = os.pathsep.join([str(cwd / value), str(REPO)]) if name == "PYTHONPATH" else value
+    return subprocess.run([*PROGRAMS[words[0]], *words[1:], *extra], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=900, check=False)
+
+
+def write(modules: dict[str, str], where: Path) -> None:
+    for name, code in modules.items():
+        (where / name).write_text(code)
+
+
+def test_the_method_recipe_trains_and_evaluates_with_the_users_method(tmp_path):
+    modules, (train, evaluate) = recipe("A method (an expert loss)")
+    write(modules, tmp_path)
+    done = run(train, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    out = tmp_path / re.search(r"--out (\S+)", train)[1]
+    config = json.loads((out / "config.json").read_text())
+    assert config["expert_loss"] == re.search(r"--expert-loss (\S+)", train)[1]  # my_methods:HALF_CE, for --resume
+    assert (out / "bc_model.keras").is_file()  # bc_fit="mle": a BC model is fitted, saved and used
+    evaluated = run(evaluate, cwd=tmp_path)
+    assert evaluated.returncode == 0, evaluated.stderr
+    assert "100 greedy episodes" in evaluated.stdout
+
+
+@pytest.fixture
+def users_method(tmp_path, monkeypatch):
+    """The doc's method module, importable in this process; forgotten afterwards."""
+    modules, _ = recipe("A method (an expert loss)")
+    write(modules, tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield
+    METHODS.pop("half_ce", None)
+    sys.modules.pop("my_methods", None)
+
+
+def test_the_recipes_method_is_the_j_e_the_agent_learns_with(users_method, demos, bc_models):
+    """The agent's J_E on a batch is the user's term, half of ce's, not a built-in one."""
+    agent = make_agent(Config.for_task("cartpole", expert_loss="my_methods:HALF_CE"), demos, bc_models["ce"])
+    b = agent.replay.sample(8, agent.beta())
+    expected = 0.5 * float(expert_terms.ce(agent, tf.constant(agent.q_network(b.obs)), b))
+    agent.reset_metrics()
+    agent.train_step(b)
+    np.testing.assert_allclose(float(agent.losses_so_far()["expert"]), expected, rtol=1e-5)
+    assert expected > 0.0
+
+
+def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_path):
+    """`--quick` added to the doc's command; evaluating the run, as the doc's introduction says,
+    needs the preset's module and plays the plain env."""
+    modules, (train,) = recipe("A task preset, or a task family")
+    write(modules, tmp_path)
+    done = run(train, "--quick", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    (out,) = [path.parent for path in (tmp_path / "runs").glob("*/config.json")]
+    config = json.loads((out / "config.json").read_text())
+    assert (config["task"], config["expert"]) == (re.search(r"--task (\S+)", train)[1], "lean")
+    assert json.loads((out / "demonstrations.json").read_text())["expert"] == "lean"
+    with open(out / "metrics.csv") as rows:
+        lengths = [int(row["length"]) for row in csv.DictReader(rows)]
+    assert lengths and max(lengths) <= 60  # the preset's own step limit, max_steps=60
+    evaluated = run(f"PYTHONPATH=. dqfd-evaluate {out}", "--episodes", "2", "--json", cwd=tmp_path)
+    assert evaluated.returncode == 0, evaluated.stderr
+    assert max(json.loads(evaluated.stdout)["lengths"]) <= 500  # scored on the plain CartPole-v1
+
+
+def test_the_suite_recipe_runs_its_arms_and_reports_them(tmp_path):
+    """`--seeds 1` and a run of seconds added to the doc's `run`; its `report` as written. What each
+    arm should be is read from the doc's module (the SIGMAS arms)."""
+    modules, (sweep, report) = recipe("A suite of runs")
+    write(modules, tmp_path)
+    module, _, name = re.search(r" run (\S+)", sweep)[1].partition(":")
+    arms = runpy.run_path(str(tmp_path / f"{module}.py"))[name]
+    done = run(sweep, "--seeds", "1", *TINY_RUN, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    results = tmp_path / re.search(r"--out (\S+)", sweep)[1]
+    configs = [json.loads(p.read_text()) for p in results.glob("*/seed0/config.json")]
+    assert arms and len(configs) == len(list(results.glob("*/seed0/complete.json"))) == len(arms)
+    varied = {k for arm in arms for k, _ in arm.overrides}  # sigma0_sq (an arm at the default sets none)
+    wanted = [{k: getattr(arm.config(0), k) for k in ("task", "timeout", "expert_loss", *varied)} for arm in arms]
+    for arm in wanted:  # one finished run per arm, with the arm's task, loss and fields
+        assert [all(c[k] == v for k, v in arm.items()) for c in configs].count(True) == 1, arm
+    reported = run(report, cwd=tmp_path)
+    assert reported.returncode == 0, reported.stderr
+    with open(results / "per_seed.csv") as rows:
+        named = [row["arm"] for row in csv.DictReader(rows)]
+    for arm in wanted:  # one row per arm, named by the fields the arms differ in (e.g. bayes sigma0_sq=0.1)
+        assert [all(f"{k}={arm[k]}" in n for k in varied) for n in named].count(True) == 1, arm
+    assert len(named) == len(arms)
+    assert all(f"| {n} |" in (results / "RESULTS.md").read_text() for n in named)
