@@ -36,8 +36,7 @@ from .run_files import is_run
 from .run_state import TrainingState
 from .runs import RunDirectory, continue_run, save_run, saved_config, train
 from .seeds import EVAL_SEED
-from .training import (Learner, StopTraining, build, evaluate_at, record_demos, run_evaluation, train_episodes,
-                       with_callback)
+from .training import Learner, build, evaluate_at, record_demos, run_evaluation, train_with_callback
 
 EnvLike = str | gym.Env | Callable[[], gym.Env]
 DemosLike = demo_io.DemoDataset | str | Path | Callable[[np.ndarray], int] | None
@@ -137,11 +136,11 @@ class DQfD:
             if bar is not None:
                 bar.update(row.env_step - bar.n)
 
-        on_episode, on_eval = with_callback(on_episode, lambda points: evaluate_at(learner, state, points), callback)
+        def on_eval(points: list[int]) -> list[EvalRow]:
+            return evaluate_at(learner, state, points)
+
         try:
-            train_episodes(learner, state, on_episode, on_eval)
-        except StopTraining:
-            pass
+            train_with_callback(learner, state, on_episode, on_eval, callback)
         finally:
             if bar is not None:
                 bar.close()

@@ -54,8 +54,7 @@ from .run_files import (COMPLETE, METRICS, RESTART, RESUME, append_row, check_di
                         write_demonstrations, write_dynamic_demos, write_evals, write_metrics)
 from .run_state import TrainingState
 from .seeds import final_eval_seed
-from .training import (Callback, Learner, StopTraining, build, evaluate_at, run_evaluation, train_episodes,
-                       with_callback)
+from .training import Callback, Learner, build, evaluate_at, run_evaluation, train_with_callback
 
 GIVEN_DEMOS = "demos_given.npz"
 """D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
@@ -307,11 +306,8 @@ def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None 
 
 def _train_into(run: RunDirectory, callback: Callback | None) -> RunResult:
     """Steps 3–5 into the run's directory (until a False of `callback`), then its end."""
-    on_episode, on_eval = with_callback(run.on_episode, run.evaluate, callback)
     try:
-        train_episodes(run.learner, run.state, on_episode, on_eval)
-    except StopTraining:
-        pass
+        train_with_callback(run.learner, run.state, run.on_episode, run.evaluate, callback)
     except DivergedError as error:
         kept = json.loads((run.out / "checkpoints" / "latest.json").read_text())["dir"]
         raise DivergedError(f"{run.out}: {error}; the last good checkpoint, {kept}, is kept") from None

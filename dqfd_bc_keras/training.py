@@ -273,7 +273,18 @@ class StopTraining(Exception):
     """A user's callback returned False: training ends where it is (`train_episodes`' callers catch it)."""
 
 
-def with_callback(on_episode: OnEpisode, on_eval: Evaluate, callback: Callback | None) -> tuple[OnEpisode, Evaluate]:
+def train_with_callback(learner: Learner, state: TrainingState, on_episode: OnEpisode, on_eval: Evaluate,
+                        callback: Callback | None) -> None:
+    """`train_episodes`, each episode's and evaluation's rows given to `callback` as well, until a
+    False from it stops training there (the Python API's and a run directory's one stopping rule)."""
+    on_episode, on_eval = _with_callback(on_episode, on_eval, callback)
+    try:
+        train_episodes(learner, state, on_episode, on_eval)
+    except StopTraining:
+        pass
+
+
+def _with_callback(on_episode: OnEpisode, on_eval: Evaluate, callback: Callback | None) -> tuple[OnEpisode, Evaluate]:
     """`on_episode` and `on_eval`, each then giving its rows to `callback` (raising StopTraining at a False)."""
     if callback is None:
         return on_episode, on_eval
