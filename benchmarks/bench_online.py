@@ -26,19 +26,20 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import interleave  # noqa: E402  (the parent imports neither TensorFlow nor torch)
+import interleave
 
 
 def our_rate(steps: int, expert_loss: str) -> float:
     """Env steps per second of `Interaction.play`, episodes back to back, after one warm-up episode."""
-    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
     import tensorflow as tf
 
-    from dqfd_bc_keras import training
-    from dqfd_bc_keras.config import Config
+    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+    from dqfd_bc_keras.core.config import Config
+    from dqfd_bc_keras.training import loop as training
 
-    config = Config.for_task("cartpole", expert_loss=expert_loss, total_steps=10 * steps, pretrain_steps=100,
-                             bc_epochs=2)
+    config = Config.for_task(
+        "cartpole", expert_loss=expert_loss, total_steps=10 * steps, pretrain_steps=100, bc_epochs=2
+    )
     learner, _ = training.build(config)
     interaction = learner.interaction
 
@@ -66,8 +67,17 @@ def sb3_rate(steps: int) -> float | None:
     except ImportError:
         return None
     torch.set_num_threads(1)
-    model = DQN("MlpPolicy", gym.make("CartPole-v1"), batch_size=64, learning_starts=100, train_freq=1,
-                gradient_steps=1, policy_kwargs={"net_arch": [64, 64]}, verbose=0, seed=0)
+    model = DQN(
+        "MlpPolicy",
+        gym.make("CartPole-v1"),
+        batch_size=64,
+        learning_starts=100,
+        train_freq=1,
+        gradient_steps=1,
+        policy_kwargs={"net_arch": [64, 64]},
+        verbose=0,
+        seed=0,
+    )
     model.learn(500)
     start = time.perf_counter()
     model.learn(steps, reset_num_timesteps=False)
@@ -89,11 +99,20 @@ def main(argv=None) -> int:
         return None if rate is None else {"steps_per_s": rate}
 
     sides = {"ours": lambda: {"steps_per_s": our_rate(args.steps, args.expert_loss)}, "sb3": sb3}
-    return interleave.main("bench_online", __file__, argv, args, sides,
-                           ratios={"steps_per_s": ("steps_per_s", "steps_per_s")},
-                           settings={"steps": args.steps, "expert_loss": args.expert_loss,
-                                     "ours": f"{args.expert_loss}, one prioritized update per env step",
-                                     "sb3": "DQN, uniform replay, train_freq=1, gradient_steps=1, batch 64, 64-64"})
+    return interleave.main(
+        "bench_online",
+        __file__,
+        argv,
+        args,
+        sides,
+        ratios={"steps_per_s": ("steps_per_s", "steps_per_s")},
+        settings={
+            "steps": args.steps,
+            "expert_loss": args.expert_loss,
+            "ours": f"{args.expert_loss}, one prioritized update per env step",
+            "sb3": "DQN, uniform replay, train_freq=1, gradient_steps=1, batch 64, 64-64",
+        },
+    )
 
 
 if __name__ == "__main__":

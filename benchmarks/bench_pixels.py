@@ -33,8 +33,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import dqfd_bc_keras  # noqa: E402,F401  (light; before interleave's SB3 child blocks TensorFlow, which its import checks)
-import interleave  # noqa: E402  (the parent imports neither TensorFlow nor torch)
+import interleave
+
+import dqfd_bc_keras  # noqa: F401  (light; before interleave's SB3 child blocks TensorFlow, which its import checks)
 
 TASK, ENV_ID = "minatar-breakout", "MinAtar/Breakout-v1"
 WARMUP = 500
@@ -46,14 +47,21 @@ QUICK_WARMUP = 100
 def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int, warmup: int) -> dict[str, float]:
     """Our online env steps/s (the loop a run runs, after `warmup` steps, one update every
     `train_freq` steps) and pre-training updates/s."""
-    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 
-    from dqfd_bc_keras.config import Config
-    from dqfd_bc_keras.run_state import TrainingState
-    from dqfd_bc_keras.training import build, train_episodes
+    from dqfd_bc_keras.core.config import Config
+    from dqfd_bc_keras.training.loop import build, train_episodes
+    from dqfd_bc_keras.training.state import TrainingState
 
-    config = Config.for_task(TASK, expert_loss=expert_loss, total_steps=warmup + steps, pretrain_steps=warmup,
-                             bc_epochs=2, eval_every=warmup, early_stop_window=0, train_freq=train_freq)
+    config = Config.for_task(
+        TASK,
+        expert_loss=expert_loss,
+        total_steps=warmup + steps,
+        pretrain_steps=warmup,
+        bc_epochs=2,
+        eval_every=warmup,
+        early_stop_window=0,
+        train_freq=train_freq,
+    )
     learner, _ = build(config)
     figures = {}
     if config.uses_demos:
@@ -63,8 +71,12 @@ def our_figures(steps: int, updates: int, expert_loss: str, train_freq: int, war
     # The evaluation grid (every `warmup` env steps, where `train_episodes` pauses an episode) is the
     # clock: each point marks the time and the env steps played; no evaluation is run.
     marks: list[tuple[float, int]] = []
-    train_episodes(learner, TrainingState(), on_episode=lambda *_: None,
-                   on_eval=lambda _: marks.append((time.perf_counter(), int(learner.interaction.env_steps.numpy()))))
+    train_episodes(
+        learner,
+        TrainingState(),
+        on_episode=lambda *_: None,
+        on_eval=lambda _: marks.append((time.perf_counter(), int(learner.interaction.env_steps.numpy()))),
+    )
     (t0, s0), (t1, s1) = marks[1], marks[-1]  # from the first point after the warm-up to the last
     figures["env_steps_per_s"] = (s1 - s0) / (t1 - t0)
     return figures
@@ -103,39 +115,72 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=5000, help="env steps timed for each side in each round")
-    parser.add_argument("--warmup", type=int, default=WARMUP, help="env steps before the clock starts (default %(default)s)")
+    parser.add_argument(
+        "--warmup", type=int, default=WARMUP, help="env steps before the clock starts (default %(default)s)"
+    )
     parser.add_argument("--updates", type=int, default=2000, help="pre-training (SB3: train()) updates timed per round")
-    parser.add_argument("--sides", type=sides_list, default=list(interleave.SIDES),
-                        help="the sides to run (default ours,sb3; sb3 alone runs without our MinAtar support)")
+    parser.add_argument(
+        "--sides",
+        type=sides_list,
+        default=list(interleave.SIDES),
+        help="the sides to run (default ours,sb3; sb3 alone runs without our MinAtar support)",
+    )
     parser.add_argument("--expert-loss", default="bayes")
-    parser.add_argument("--train-freq", type=int, default=4,
-                        help="our env steps per update (default 4, SB3's schedule, so both sides do the same work "
-                             "per step; the preset trains every step, as MinAtar's DQN)")
+    parser.add_argument(
+        "--train-freq",
+        type=int,
+        default=4,
+        help="our env steps per update (default 4, SB3's schedule, so both sides do the same work "
+        "per step; the preset trains every step, as MinAtar's DQN)",
+    )
     interleave.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.quick:
         args.warmup, args.steps, args.updates, args.rounds = QUICK_WARMUP, QUICK_WARMUP, 20, 2
     if args.steps < args.warmup or args.updates < 1:
-        parser.error(f"--steps must be ≥ --warmup {args.warmup} (the clock runs between evaluation-grid points that "
-                     "far apart) "
-                     "and --updates ≥ 1")
+        parser.error(
+            f"--steps must be ≥ --warmup {args.warmup} (the clock runs between evaluation-grid points that "
+            "far apart) "
+            "and --updates ≥ 1"
+        )
 
-    sides = {"ours": lambda: our_figures(args.steps, args.updates, args.expert_loss, args.train_freq, args.warmup)
-             if "ours" in args.sides else None,
-             "sb3": lambda: sb3_figures(args.steps, args.updates, args.warmup) if "sb3" in args.sides else None}
+    sides = {
+        "ours": lambda: (
+            our_figures(args.steps, args.updates, args.expert_loss, args.train_freq, args.warmup)
+            if "ours" in args.sides
+            else None
+        ),
+        "sb3": lambda: sb3_figures(args.steps, args.updates, args.warmup) if "sb3" in args.sides else None,
+    }
     ratios = {"env_steps_per_s": ("env_steps_per_s", "env_steps_per_s")}
     if args.expert_loss != "none":  # plain DQN has no demonstrations to pre-train on
         ratios["pretrain_vs_sb3_train"] = ("pretrain_updates_per_s", "train_updates_per_s")
-    not_run = [f"{side}: not run (--sides {','.join(args.sides)})" for side in interleave.SIDES if side not in args.sides]
-    return interleave.main("bench_pixels", __file__, argv, args, sides, ratios,
-                           settings={"env": ENV_ID, "task": TASK, "steps": args.steps, "warmup": args.warmup,
-                                     "updates": args.updates, "sides": args.sides, "expert_loss": args.expert_loss,
-                                     "train_freq": args.train_freq,
-                                     "ours": f"{TASK} preset, {args.expert_loss}: training.train_episodes, one "
-                                             f"prioritized update of batch 32 every {args.train_freq} env steps",
-                                     "sb3": "DQN as experiments/sb3_pixels.py: MinAtarCNN, uniform replay, "
-                                            "train_freq=4, gradient_steps=1, batch 32"},
-                           describe=lambda _: not_run)
+    not_run = [
+        f"{side}: not run (--sides {','.join(args.sides)})" for side in interleave.SIDES if side not in args.sides
+    ]
+    return interleave.main(
+        "bench_pixels",
+        __file__,
+        argv,
+        args,
+        sides,
+        ratios,
+        settings={
+            "env": ENV_ID,
+            "task": TASK,
+            "steps": args.steps,
+            "warmup": args.warmup,
+            "updates": args.updates,
+            "sides": args.sides,
+            "expert_loss": args.expert_loss,
+            "train_freq": args.train_freq,
+            "ours": f"{TASK} preset, {args.expert_loss}: training.train_episodes, one "
+            f"prioritized update of batch 32 every {args.train_freq} env steps",
+            "sb3": "DQN as experiments/sb3_pixels.py: MinAtarCNN, uniform replay, "
+            "train_freq=4, gradient_steps=1, batch 32",
+        },
+        describe=lambda _: not_run,
+    )
 
 
 if __name__ == "__main__":

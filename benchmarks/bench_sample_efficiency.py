@@ -10,9 +10,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dqfd_bc_keras.cli import run  # noqa: E402
-from dqfd_bc_keras.experiments.__main__ import main as lab  # noqa: E402
-from dqfd_bc_keras.experiments.baselines import PROTOCOL, SB3_METHOD, ZOO, sb3_run, sb3_settings  # noqa: E402, F401  (tests)
+from dqfd_bc_keras.commands.cli import run
+from dqfd_bc_keras.experiments.__main__ import main as lab
+from dqfd_bc_keras.experiments.baselines import PROTOCOL, SB3_METHOD, ZOO, sb3_run, sb3_settings  # noqa: F401  (tests)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

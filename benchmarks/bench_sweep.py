@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import interleave  # noqa: E402  (benchmarks/)
+import interleave
 
 SIDES = {"fresh": 1, "reused": None}
 """Side → runs per worker (None: the sweep's default)."""
@@ -73,34 +73,56 @@ def main(argv=None) -> int:
         scratch = Path(args.keep or temporary)
         for r in range(args.rounds):
             found = {}
-            for side in (list(SIDES) if r % 2 == 0 else list(SIDES)[::-1]):
+            for side in list(SIDES) if r % 2 == 0 else list(SIDES)[::-1]:
                 out = scratch / f"round{r + 1}-{side}"
                 jobs = sweep_jobs(chosen, args.seeds, out)
                 start = time.perf_counter()
-                run_jobs(jobs, out, f"bench_sweep {side}", args.seeds, args.workers,
-                         runs_per_worker=SIDES[side] or RUNS_PER_WORKER, progress=lambda _: None)
+                run_jobs(
+                    jobs,
+                    out,
+                    f"bench_sweep {side}",
+                    args.seeds,
+                    args.workers,
+                    runs_per_worker=SIDES[side] or RUNS_PER_WORKER,
+                    progress=lambda _: None,
+                )
                 seconds[side].append(time.perf_counter() - start)
                 found[side] = results(out)
                 if not args.json:
                     print(f"round {r + 1}: {side} {seconds[side][-1]:.1f} s", flush=True)
             same.append(found["fresh"] == found["reused"] and len(found["fresh"]) == len(jobs))
-    ratios = [f / u for f, u in zip(seconds["fresh"], seconds["reused"])]
-    report = {"benchmark": "bench_sweep", "rounds": args.rounds,
-              "settings": {"arms": [a.name for a in chosen], "seeds": args.seeds, "workers": args.workers,
-                           "runs": len(chosen) * args.seeds, "runs_per_worker": RUNS_PER_WORKER},
-              "seconds": {side: interleave.spread(values, 1) for side, values in seconds.items()},
-              "ratio_fresh_over_reused": interleave.spread(ratios, 3), "same_results": all(same),
-              "code": interleave.code(__file__), "versions": interleave.versions(),
-              "machine": {"cpu_count": os.cpu_count(), "loadavg_start": [round(x, 2) for x in load_start],
-                          "loadavg_end": [round(x, 2) for x in os.getloadavg()]}}
+    ratios = [f / u for f, u in zip(seconds["fresh"], seconds["reused"], strict=True)]
+    report = {
+        "benchmark": "bench_sweep",
+        "rounds": args.rounds,
+        "settings": {
+            "arms": [a.name for a in chosen],
+            "seeds": args.seeds,
+            "workers": args.workers,
+            "runs": len(chosen) * args.seeds,
+            "runs_per_worker": RUNS_PER_WORKER,
+        },
+        "seconds": {side: interleave.spread(values, 1) for side, values in seconds.items()},
+        "ratio_fresh_over_reused": interleave.spread(ratios, 3),
+        "same_results": all(same),
+        "code": interleave.code(__file__),
+        "versions": interleave.versions(),
+        "machine": {
+            "cpu_count": os.cpu_count(),
+            "loadavg_start": [round(x, 2) for x in load_start],
+            "loadavg_end": [round(x, 2) for x in os.getloadavg()],
+        },
+    }
     if args.json:
         print(json.dumps(report))
     else:
         s, q = report["seconds"], report["ratio_fresh_over_reused"]
-        print(f"{len(chosen) * args.seeds} runs on {args.workers} workers, {args.rounds} round(s): "
-              f"fresh process per run {s['fresh']['median']} s [{s['fresh']['min']}, {s['fresh']['max']}], "
-              f"reused workers {s['reused']['median']} s [{s['reused']['min']}, {s['reused']['max']}]; "
-              f"fresh ÷ reused {q['median']} [{q['min']}, {q['max']}]; same results per run: {report['same_results']}")
+        print(
+            f"{len(chosen) * args.seeds} runs on {args.workers} workers, {args.rounds} round(s): "
+            f"fresh process per run {s['fresh']['median']} s [{s['fresh']['min']}, {s['fresh']['max']}], "
+            f"reused workers {s['reused']['median']} s [{s['reused']['min']}, {s['reused']['max']}]; "
+            f"fresh ÷ reused {q['median']} [{q['min']}, {q['max']}]; same results per run: {report['same_results']}"
+        )
     return 0 if all(same) else 1
 
 

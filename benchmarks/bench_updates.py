@@ -28,7 +28,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import interleave  # noqa: E402  (the parent imports neither TensorFlow nor torch)
+import interleave
 
 LOSSES = ("bayes", "ce", "bc_margin", "margin", "none")
 
@@ -36,9 +36,9 @@ LOSSES = ("bayes", "ce", "bc_margin", "margin", "none")
 def agent_for(loss: str, demos):
     import keras
 
-    from dqfd_bc_keras.agent import make_agent
-    from dqfd_bc_keras.bc import build_bc_model
-    from dqfd_bc_keras.config import Config
+    from dqfd_bc_keras.core.agent import make_agent
+    from dqfd_bc_keras.core.bc import build_bc_model
+    from dqfd_bc_keras.core.config import Config
 
     keras.utils.set_random_seed(0)
     config = Config.for_task("cartpole", expert_loss=loss)
@@ -63,6 +63,7 @@ def fused(agent, steps_per_call: int):
     def run(updates: int) -> None:
         for done in range(0, updates, steps_per_call):
             agent.learn(tf.constant(min(steps_per_call, updates - done)))
+
     return run
 
 
@@ -70,9 +71,11 @@ def per_call(agent):
     import tensorflow as tf
 
     one = tf.constant(1)
+
     def run(updates: int) -> None:
         for _ in range(updates):
             agent.learn(one)
+
     return run
 
 
@@ -95,8 +98,10 @@ def parts(agent) -> dict:
             sampled = agent.replay.sample(agent.config.batch_size, agent.beta())
             agent.replay.update_priorities(sampled.indices, ones + 0.0 * sampled.rewards)
 
-    return {"train_step_only": lambda n: train_only(tf.constant(n)),
-            "sample_and_priorities_only": lambda n: replay_only(tf.constant(n))}
+    return {
+        "train_step_only": lambda n: train_only(tf.constant(n)),
+        "sample_and_priorities_only": lambda n: replay_only(tf.constant(n)),
+    }
 
 
 def sb3_rate(updates: int) -> float | None:
@@ -108,8 +113,15 @@ def sb3_rate(updates: int) -> float | None:
     except ImportError:
         return None
     torch.set_num_threads(1)
-    model = DQN("MlpPolicy", gym.make("CartPole-v1"), batch_size=64, learning_starts=0,
-                policy_kwargs={"net_arch": [64, 64]}, verbose=0, seed=0)
+    model = DQN(
+        "MlpPolicy",
+        gym.make("CartPole-v1"),
+        batch_size=64,
+        learning_starts=0,
+        policy_kwargs={"net_arch": [64, 64]},
+        verbose=0,
+        seed=0,
+    )
     model.learn(2000)  # fill the buffer
     model.train(gradient_steps=10, batch_size=64)
     start = time.perf_counter()
@@ -153,12 +165,25 @@ def main(argv=None) -> int:
 
     sides = {"ours": lambda: our_figures(losses, args.updates, args.steps_per_call), "sb3": sb3}
     headline = "bayes" if "bayes" in losses else losses[0]
-    ratios = {f"{loss}/fused_vs_sb3": (f"{loss}/fused", "train")
-              for loss in [headline] + [loss for loss in losses if loss != headline]}
-    return interleave.main("bench_updates", __file__, argv, args, sides, ratios,
-                           settings={"updates": args.updates, "steps_per_call": args.steps_per_call,
-                                     "losses": losses, "per_call_updates": max(args.updates // 5, 50),
-                                     "sb3": "DQN train(), uniform replay, 1-step loss, batch 64, 64-64"})
+    ratios = {
+        f"{loss}/fused_vs_sb3": (f"{loss}/fused", "train")
+        for loss in [headline] + [loss for loss in losses if loss != headline]
+    }
+    return interleave.main(
+        "bench_updates",
+        __file__,
+        argv,
+        args,
+        sides,
+        ratios,
+        settings={
+            "updates": args.updates,
+            "steps_per_call": args.steps_per_call,
+            "losses": losses,
+            "per_call_updates": max(args.updates // 5, 50),
+            "sb3": "DQN train(), uniform replay, 1-step loss, batch 64, 64-64",
+        },
+    )
 
 
 if __name__ == "__main__":

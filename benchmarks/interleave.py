@@ -26,18 +26,25 @@ import statistics
 import subprocess
 import sys
 import time
-from typing import Callable
+from collections.abc import Callable
 
 SIDES = ("ours", "sb3")
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "DQFD_TF_THREADS": "1"}
 """Set in every child's environment, so both sides run on one thread per process."""
 
-VERSIONS = {"tensorflow": "tensorflow", "keras": "keras", "torch": "torch", "stable-baselines3": "stable_baselines3",
-            "gymnasium": "gymnasium", "numpy": "numpy"}
+VERSIONS = {
+    "tensorflow": "tensorflow",
+    "keras": "keras",
+    "torch": "torch",
+    "stable-baselines3": "stable_baselines3",
+    "gymnasium": "gymnasium",
+    "numpy": "numpy",
+}
 """Reported name -> import name (the distribution may differ, e.g. tensorflow_cpu)."""
 
 
 # --- pure helpers (no processes) ------------------------------------------------------------------
+
 
 def order(rounds: int, sides=SIDES) -> list[list[str]]:
     """The sides in the order each round runs them: the first place alternates across rounds."""
@@ -48,12 +55,17 @@ def order(rounds: int, sides=SIDES) -> list[list[str]]:
 def spread(values: list[float], digits: int) -> dict:
     """Median, min, max and the values themselves (rounded to `digits`; the median of the rounded values)."""
     values = [round(float(v), digits) for v in values]
-    return {"median": round(statistics.median(values), digits), "min": min(values), "max": max(values),
-            "per_round": values}
+    return {
+        "median": round(statistics.median(values), digits),
+        "min": min(values),
+        "max": max(values),
+        "per_round": values,
+    }
 
 
-def summarise(per_round: dict[str, list[dict] | None], ratios: dict[str, tuple[str, str]],
-              digits: int = 3, ratio_digits: int = 4) -> dict:
+def summarise(
+    per_round: dict[str, list[dict] | None], ratios: dict[str, tuple[str, str]], digits: int = 3, ratio_digits: int = 4
+) -> dict:
     """`per_round[side]`: one dict of figures per round (or None for an absent side).
 
     `ratios`: name -> (figure of ours, figure of SB3); each is ours ÷ SB3 within one round, then
@@ -76,6 +88,7 @@ def summarise(per_round: dict[str, list[dict] | None], ratios: dict[str, tuple[s
 
 
 # --- environment ----------------------------------------------------------------------------------
+
 
 def versions() -> dict[str, str | None]:
     """Installed versions, read from package metadata: nothing is imported."""
@@ -103,10 +116,15 @@ def code(script: str) -> dict:
     """The commit measured and whether the package differs from it (uncommitted edits change our figures)."""
     repo = os.path.dirname(os.path.dirname(os.path.abspath(script)))
     try:
-        commit = subprocess.run(["git", "-C", repo, "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, timeout=30)
-        status = subprocess.run(["git", "-C", repo, "status", "--porcelain", "--", "dqfd_bc_keras"],
-                                capture_output=True, text=True, timeout=30)
+        commit = subprocess.run(
+            ["git", "-C", repo, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=30
+        )
+        status = subprocess.run(
+            ["git", "-C", repo, "status", "--porcelain", "--", "dqfd_bc_keras"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "package_modified": None}
     if commit.returncode != 0:
@@ -116,14 +134,18 @@ def code(script: str) -> dict:
 
 def in_process() -> dict:
     """What this (child) process loaded and its thread pools: TensorFlow and torch must not meet."""
-    info = {"tensorflow_imported": sys.modules.get("tensorflow") is not None,
-            "torch_imported": sys.modules.get("torch") is not None}
+    info = {
+        "tensorflow_imported": sys.modules.get("tensorflow") is not None,
+        "torch_imported": sys.modules.get("torch") is not None,
+    }
     if info["tensorflow_imported"]:
         import tensorflow as tf
+
         info["tf_intra_op_threads"] = tf.config.threading.get_intra_op_parallelism_threads()
         info["tf_inter_op_threads"] = tf.config.threading.get_inter_op_parallelism_threads()
     if info["torch_imported"]:
         import torch
+
         info["torch_threads"] = torch.get_num_threads()
     return info
 
@@ -140,8 +162,9 @@ def run_side(script: str, argv: list[str], side: str, round_no: int) -> dict:
     if done.returncode != 0 or not lines:
         errors = [line.strip() for line in done.stderr.splitlines() if line.strip()]
         last = errors[-1] if errors else "(no stderr)"
-        sys.exit(f"{os.path.basename(script)}: the {side} side failed in round {round_no} "
-                 f"(exit {done.returncode}): {last}")
+        sys.exit(
+            f"{os.path.basename(script)}: the {side} side failed in round {round_no} (exit {done.returncode}): {last}"
+        )
     try:
         return json.loads(lines[-1])
     except json.JSONDecodeError:
@@ -150,18 +173,33 @@ def run_side(script: str, argv: list[str], side: str, round_no: int) -> dict:
 
 # --- the entry point the scripts share ---------------------------------------------------------------
 
+
 def add_arguments(parser: argparse.ArgumentParser, rounds: int = 3) -> None:
-    parser.add_argument("--rounds", type=int, default=rounds,
-                        help="rounds; each runs every side once, in its own process (default %(default)s)")
+    parser.add_argument(
+        "--rounds",
+        type=int,
+        default=rounds,
+        help="rounds; each runs every side once, in its own process (default %(default)s)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object (the last stdout line)")
-    parser.add_argument("--quick", action="store_true",
-                        help="a tiny budget and 2 rounds: checks that the benchmark runs (CI), its figures mean nothing")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="a tiny budget and 2 rounds: checks that the benchmark runs (CI), its figures mean nothing",
+    )
     parser.add_argument("--side", choices=SIDES, help=argparse.SUPPRESS)  # a child: run one side, print JSON
 
 
-def main(name: str, script: str, argv: list[str], args: argparse.Namespace,
-         sides: dict[str, Callable[[], dict | None]], ratios: dict[str, tuple[str, str]],
-         settings: dict, describe: Callable[[dict], list[str]] | None = None) -> int:
+def main(
+    name: str,
+    script: str,
+    argv: list[str],
+    args: argparse.Namespace,
+    sides: dict[str, Callable[[], dict | None]],
+    ratios: dict[str, tuple[str, str]],
+    settings: dict,
+    describe: Callable[[dict], list[str]] | None = None,
+) -> int:
     """Run as a child (`--side`) or as the parent that interleaves the children.
 
     `sides[side]()` measures one side in this process and returns its figures (or None: absent).
@@ -181,8 +219,11 @@ def main(name: str, script: str, argv: list[str], args: argparse.Namespace,
     plan = order(args.rounds, present)
     per_round: dict[str, list[dict] | None] = {side: [] for side in SIDES}
     if not args.json:
-        print(f"{name}: {args.rounds} rounds, each side in its own process, order per round: "
-              + "; ".join(",".join(sides_) for sides_ in plan), flush=True)
+        print(
+            f"{name}: {args.rounds} rounds, each side in its own process, order per round: "
+            + "; ".join(",".join(sides_) for sides_ in plan),
+            flush=True,
+        )
     processes: dict[str, dict] = {}
     for r, sides_in_round in enumerate(plan, start=1):
         for side in sides_in_round:
@@ -200,18 +241,30 @@ def main(name: str, script: str, argv: list[str], args: argparse.Namespace,
             per_round[side] = None
     summary = summarise(per_round, ratios)
     headline = next(iter(ratios))
-    report = {"benchmark": name, "rounds": args.rounds, "order": plan, "settings": settings,
-              "sides": summary["sides"], "ratio": summary["ratios"][headline], "ratios": summary["ratios"],
-              "versions": versions(), "code": code(script),
-              "machine": {"cpu_count": os.cpu_count(), "loadavg_start": [round(x, 2) for x in load_start],
-                          "loadavg_end": [round(x, 2) for x in os.getloadavg()], "threads": dict(THREAD_ENV),
-                          "processes": processes},
-              "seconds": round(time.perf_counter() - start, 1)}
+    report = {
+        "benchmark": name,
+        "rounds": args.rounds,
+        "order": plan,
+        "settings": settings,
+        "sides": summary["sides"],
+        "ratio": summary["ratios"][headline],
+        "ratios": summary["ratios"],
+        "versions": versions(),
+        "code": code(script),
+        "machine": {
+            "cpu_count": os.cpu_count(),
+            "loadavg_start": [round(x, 2) for x in load_start],
+            "loadavg_end": [round(x, 2) for x in os.getloadavg()],
+            "threads": dict(THREAD_ENV),
+            "processes": processes,
+        },
+        "seconds": round(time.perf_counter() - start, 1),
+    }
     if args.json:
         print(json.dumps(report))
     else:
         print(table(report))
-        for line in (describe(report) if describe else []):
+        for line in describe(report) if describe else []:
             print(line)
     return 0
 
@@ -229,13 +282,21 @@ def table(report: dict) -> str:
         if s is None:
             lines.append(f"ratio {name:34s} None (no SB3 side)")
         else:
-            lines.append(f"ratio {name:34s} {s['median']:8.2f}x {s['min']:8.2f}x {s['max']:8.2f}x   "
-                         f"(per round: {', '.join(f'{v:.2f}' for v in s['per_round'])})")
+            lines.append(
+                f"ratio {name:34s} {s['median']:8.2f}x {s['min']:8.2f}x {s['max']:8.2f}x   "
+                f"(per round: {', '.join(f'{v:.2f}' for v in s['per_round'])})"
+            )
     m = report["machine"]
-    lines.append("versions: " + ", ".join(f"{k} {v}" for k, v in report["versions"].items())
-                 + f"; commit {report['code']['commit']}"
-                 + (" with uncommitted package edits" if report["code"]["package_modified"] else ""))
-    lines.append(f"machine: {m['cpu_count']} CPUs, load average {m['loadavg_start'][0]:.2f} at start, "
-                 f"{m['loadavg_end'][0]:.2f} at end; " + " ".join(f"{k}={v}" for k, v in m["threads"].items())
-                 + f"; {report['seconds']:.0f} s")
+    lines.append(
+        "versions: "
+        + ", ".join(f"{k} {v}" for k, v in report["versions"].items())
+        + f"; commit {report['code']['commit']}"
+        + (" with uncommitted package edits" if report["code"]["package_modified"] else "")
+    )
+    lines.append(
+        f"machine: {m['cpu_count']} CPUs, load average {m['loadavg_start'][0]:.2f} at start, "
+        f"{m['loadavg_end'][0]:.2f} at end; "
+        + " ".join(f"{k}={v}" for k, v in m["threads"].items())
+        + f"; {report['seconds']:.0f} s"
+    )
     return "\n".join(lines)

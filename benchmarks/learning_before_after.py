@@ -29,9 +29,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dqfd_bc_keras.experiments.metrics import PER_RUN  # noqa: E402
-from dqfd_bc_keras.experiments.data import load_runs  # noqa: E402
-from dqfd_bc_keras.experiments.stats import mann_whitney  # noqa: E402
+from dqfd_bc_keras.experiments.data import load_runs
+from dqfd_bc_keras.experiments.metrics import PER_RUN
+from dqfd_bc_keras.experiments.stats import mann_whitney
 
 SIDES = ("base", "new")
 METRICS = ("interactions_to_threshold", "episodes_to_solve", "mean_train_return", "final_eval")
@@ -49,11 +49,25 @@ def train(side: str, tree: Path, seed: int, args: argparse.Namespace) -> None:
     out = args.out / side / f"seed{seed}"
     if (out / "eval.json").is_file():
         return
-    command = [sys.executable, "train.py", "--task", args.task, "--expert-loss", args.expert_loss, "--seed", str(seed),
-               "--out", str(out.resolve()), "--quiet", "--force", *(["--quick"] if args.quick else [])]
+    command = [
+        sys.executable,
+        "train.py",
+        "--task",
+        args.task,
+        "--expert-loss",
+        args.expert_loss,
+        "--seed",
+        str(seed),
+        "--out",
+        str(out.resolve()),
+        "--quiet",
+        "--force",
+        *(["--quick"] if args.quick else []),
+    ]
     started = time.perf_counter()
-    done = subprocess.run(command, cwd=tree, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(tree.resolve())})
+    done = subprocess.run(
+        command, cwd=tree, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(tree.resolve())}
+    )
     seconds = time.perf_counter() - started
     if done.returncode != 0:
         last = (done.stderr.strip().splitlines() or ["(no stderr)"])[-1]
@@ -88,10 +102,15 @@ def summarise(out: Path) -> dict:
     for name, by_side in columns.items():
         finite = all(not math.isnan(v) for side in SIDES for v in by_side[side])
         _, p = mann_whitney(by_side["base"], by_side["new"]) if finite and len(seeds) > 1 else (None, None)
-        summary["metrics"][name] = {**{side: by_side[side] for side in SIDES},
-                                    **{f"{side}_median": statistics.median(by_side[side]) for side in SIDES}, "p": p}
-    summary["curves"] = {side: {s: [(e["interactions"], e["mean_return"]) for e in values[side][s].evals]
-                                for s in seeds} for side in SIDES}
+        summary["metrics"][name] = {
+            **{side: by_side[side] for side in SIDES},
+            **{f"{side}_median": statistics.median(by_side[side]) for side in SIDES},
+            "p": p,
+        }
+    summary["curves"] = {
+        side: {s: [(e["interactions"], e["mean_return"]) for e in values[side][s].evals] for s in seeds}
+        for side in SIDES
+    }
     return summary
 
 
@@ -104,7 +123,7 @@ def figure(summary: dict, path: Path) -> None:
     import numpy as np
 
     fig, ax = plt.subplots(figsize=(7, 4))
-    for side, colour in zip(SIDES, ("tab:blue", "tab:orange")):
+    for side, colour in zip(SIDES, ("tab:blue", "tab:orange"), strict=True):
         curves = summary["curves"][side].values()
         grid = sorted({step for curve in curves for step, _ in curve})
         # A run that stopped early keeps its last value (no survivor bias in the mean).
@@ -131,8 +150,11 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="train.py --quick runs, 1 seed: the CI check")
     parser.add_argument("--no-run", action="store_true", help="summarise the runs in OUT, run nothing")
     parser.add_argument("--figure", type=Path, help="write the learning curves here (PNG)")
-    parser.add_argument("--json", action="store_true",
-                        help="print the summary (per-run metrics, wall times and evaluation curves) as one JSON object")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary (per-run metrics, wall times and evaluation curves) as one JSON object",
+    )
     args = parser.parse_args(argv)
     if args.quick:
         args.seeds = 1
@@ -149,8 +171,9 @@ def main(argv=None) -> int:
     print(f"{len(summary['seeds'])} seeds per side: {summary['seeds']}")
     for name, m in summary["metrics"].items():
         p = "—" if m["p"] is None else f"{m['p']:.2f}"
-        print(f"{name:26s} base median {m['base_median']:9.1f}   new median {m['new_median']:9.1f}   "
-              f"Mann–Whitney p {p}")
+        print(
+            f"{name:26s} base median {m['base_median']:9.1f}   new median {m['new_median']:9.1f}   Mann–Whitney p {p}"
+        )
     return 0
 
 

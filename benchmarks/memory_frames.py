@@ -21,8 +21,11 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-KINDS = {"cartpole (4 floats)": ((4,), 1), "MinAtar Breakout (10×10×4)": ((10, 10, 4), 1),
-         "Atari (84×84, 4 stacked)": ((84, 84, 4), 4)}
+KINDS = {
+    "cartpole (4 floats)": ((4,), 1),
+    "MinAtar Breakout (10×10×4)": ((10, 10, 4), 1),
+    "Atari (84×84, 4 stacked)": ((84, 84, 4), 4),
+}
 
 
 def measure(shape: list[int], stack: int, transitions: int) -> dict:
@@ -31,9 +34,9 @@ def measure(shape: list[int], stack: int, transitions: int) -> dict:
     import numpy as np
 
     import dqfd_bc_keras  # noqa: F401  (threads)
-    from dqfd_bc_keras.networks import NetworkInput
-    from dqfd_bc_keras.observations import Frames
-    from dqfd_bc_keras.replay import PrioritizedReplay
+    from dqfd_bc_keras.core.networks import NetworkInput
+    from dqfd_bc_keras.core.replay import PrioritizedReplay
+    from dqfd_bc_keras.envs.observations import Frames
 
     def rss() -> int:
         for line in Path("/proc/self/status").read_text().splitlines():
@@ -54,8 +57,14 @@ def measure(shape: list[int], stack: int, transitions: int) -> dict:
     sizes = {name: int(np.prod(v.shape)) * v.dtype.size for name, v in parts.items()}
     rows = replay.demo_capacity + replay.capacity
     values = int(np.prod(shape))
-    return {"variables": sizes, "total": sum(sizes.values()) + replay.tree.block_sums.shape[0] * 4, "rss_growth": grown,
-            "rows": rows, "as_float32": 2 * values * 4 * rows, "as_uint8_stacks": 2 * values * rows}
+    return {
+        "variables": sizes,
+        "total": sum(sizes.values()) + replay.tree.block_sums.shape[0] * 4,
+        "rss_growth": grown,
+        "rows": rows,
+        "as_float32": 2 * values * 4 * rows,
+        "as_uint8_stacks": 2 * values * rows,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,15 +80,23 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     scale = 100_000 / transitions
     print(f"replay memory per 100,000 transitions (measured at {transitions:,}; MB = 10^6 bytes)")
-    print(f"{'observation':30} {'variables':>10} {'of which frames':>16} {'RSS growth':>11} {'s,s′ float32':>13} "
-          f"{'s,s′ uint8 stacks':>18}")
+    print(
+        f"{'observation':30} {'variables':>10} {'of which frames':>16} {'RSS growth':>11} {'s,s′ float32':>13} "
+        f"{'s,s′ uint8 stacks':>18}"
+    )
     for name, (shape, stack) in KINDS.items():
-        done = subprocess.run([sys.executable, __file__, "--transitions", str(transitions), "--child",
-                               json.dumps([list(shape), stack])], capture_output=True, text=True, check=True)
+        done = subprocess.run(
+            [sys.executable, __file__, "--transitions", str(transitions), "--child", json.dumps([list(shape), stack])],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         m = json.loads(done.stdout.strip().splitlines()[-1])
         mb = lambda b: f"{b * scale / 1e6:,.1f}"  # noqa: E731
-        print(f"{name:30} {mb(m['total']):>10} {mb(m['variables'].get('frame pool', 0)):>16} "
-              f"{mb(m['rss_growth']):>11} {mb(m['as_float32']):>13} {mb(m['as_uint8_stacks']):>18}")
+        print(
+            f"{name:30} {mb(m['total']):>10} {mb(m['variables'].get('frame pool', 0)):>16} "
+            f"{mb(m['rss_growth']):>11} {mb(m['as_float32']):>13} {mb(m['as_uint8_stacks']):>18}"
+        )
     return 0
 
 

@@ -51,9 +51,23 @@ def measure(steps: int, every: float) -> list[tuple[int, float]]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
         process = subprocess.Popen(
-            [sys.executable, str(REPO / "train.py"), "--task", "mountaincar", "--steps", str(steps), "--quiet",
-             "--set", f"checkpoint_every={max(steps // 10, 1000)}", "--set", f"eval_every={max(steps // 10, 1000)}",
-             "--out", str(out)], cwd=REPO)
+            [
+                sys.executable,
+                str(REPO / "train.py"),
+                "--task",
+                "mountaincar",
+                "--steps",
+                str(steps),
+                "--quiet",
+                "--set",
+                f"checkpoint_every={max(steps // 10, 1000)}",
+                "--set",
+                f"eval_every={max(steps // 10, 1000)}",
+                "--out",
+                str(out),
+            ],
+            cwd=REPO,
+        )
         samples = []
         while process.poll() is None:
             rss = rss_mb(process.pid)
@@ -68,17 +82,23 @@ def measure(steps: int, every: float) -> list[tuple[int, float]]:
 def summarise(steps: int, samples: list[tuple[int, float]]) -> list[str]:
     """The curve per tenth of the budget: median and peak RSS (checkpoint saves make short peaks),
     and the median of the last tenth ÷ the median of the second (from 10% of the budget on)."""
-    lines = [f"MountainCar, {steps:,} env steps: resident memory (MB) per tenth of the budget",
-             "  env steps               median    peak"]
+    lines = [
+        f"MountainCar, {steps:,} env steps: resident memory (MB) per tenth of the budget",
+        "  env steps               median    peak",
+    ]
     tenths: dict[int, list[float]] = {}
     for step, rss in samples:
         tenths.setdefault(min(9, step * 10 // steps), []).append(rss)
     for tenth, values in sorted(tenths.items()):
-        lines.append(f"  {tenth * steps // 10:>9,}–{(tenth + 1) * steps // 10:<9,}  {statistics.median(values):7.0f} "
-                     f"{max(values):7.0f}")
+        lines.append(
+            f"  {tenth * steps // 10:>9,}–{(tenth + 1) * steps // 10:<9,}  {statistics.median(values):7.0f} "
+            f"{max(values):7.0f}"
+        )
     if 1 in tenths and 9 in tenths:
         ratio = statistics.median(tenths[9]) / statistics.median(tenths[1])
-        lines.append(f"RSS over the last tenth ÷ RSS over {steps // 10:,}–{2 * steps // 10:,} steps (medians): {ratio:.3f}")
+        lines.append(
+            f"RSS over the last tenth ÷ RSS over {steps // 10:,}–{2 * steps // 10:,} steps (medians): {ratio:.3f}"
+        )
     return lines
 
 

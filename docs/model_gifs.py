@@ -16,12 +16,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import dqfd_bc_keras  # noqa: E402, F401  (first: TensorFlow's threads and log level)
-from PIL import Image  # noqa: E402
+from PIL import Image
 
-from dqfd_bc_keras.envs import make_plain_env  # noqa: E402
-from dqfd_bc_keras.evaluation import load_policy  # noqa: E402
-from dqfd_bc_keras.files import atomic_path  # noqa: E402
+import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+from dqfd_bc_keras.envs.make import make_plain_env
+from dqfd_bc_keras.evaluation import load_policy
+from dqfd_bc_keras.files import atomic_path
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 
@@ -59,14 +59,22 @@ def main(argv=None) -> int:
     parser.add_argument("--models", help="comma-separated folders of models/ (default: all)")
     args = parser.parse_args(argv)
     wanted = None if args.models is None else set(args.models.split(","))
-    for folder in sorted(p for p in MODELS.iterdir() if (p / "q_network.keras").is_file()
-                         and (wanted is None or p.name in wanted)):
+    for folder in sorted(
+        p for p in MODELS.iterdir() if (p / "q_network.keras").is_file() and (wanted is None or p.name in wanted)
+    ):
         frames, total = episode_frames(folder.name, args.seed)
-        images = [picture(f) for f in frames[::args.every]]
+        images = [picture(f) for f in frames[:: args.every]]
         path = Path(args.out) / f"model-{folder.name}.gif"
         with atomic_path(path, overwrite=True) as tmp:
-            images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=40 * args.every,
-                           loop=0, optimize=True)
+            images[0].save(
+                tmp,
+                format="GIF",
+                save_all=True,
+                append_images=images[1:],
+                duration=40 * args.every,
+                loop=0,
+                optimize=True,
+            )
         print(f"{path}: {len(frames) - 1} steps, return {total:g}, {path.stat().st_size / 1e3:.0f} kB")
     return 0
 

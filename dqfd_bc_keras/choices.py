@@ -24,3 +24,6 @@ TORSOS = ("auto", "mlp", "minatar", "nature")
 """What reads the observation (`Config.torso`, network_input.py)."""
 POLICY_FILES = {"q": "q_network.keras", "bc": "bc_model.keras"}
 """What `evaluate.py --policy` names: a run directory's model file."""
+LOSS_TERMS = ("loss", "td", "n_step", "expert", "l2")
+"""J(Q) and its terms by name (ALGORITHM.md §2): what the agent's `train_step` reports and
+training.records.Losses logs, one column each."""

@@ -20,13 +20,13 @@ import keras
 import numpy as np
 import tensorflow as tf
 
-from .bc import BCModel
-from .choices import POLICY_FILES, TIMEOUT_MODES
-from .config import Config
-from .envs import get_task, make_plain_env, make_task, task_slug, task_spaces
-from .episodes import play
-from .errors import ConfigError, ModelFileError
-from .uncertainty import EnsembleDense
+from dqfd_bc_keras.choices import POLICY_FILES, TIMEOUT_MODES
+from dqfd_bc_keras.core.bc import BCModel
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.uncertainty import EnsembleDense
+from dqfd_bc_keras.envs.episodes import play
+from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
+from dqfd_bc_keras.errors import ConfigError, ModelFileError
 
 FRAME_LAYERS = (keras.layers.Conv2D, keras.layers.Rescaling, keras.layers.Flatten, keras.layers.Reshape)
 """Layers of a network on frames (networks.torso_layers), which plays through the model itself."""
@@ -41,8 +41,12 @@ class GreedyPolicy:
     convolution's arithmetic is worth the call.
     """
 
-    def __init__(self, layers: list[tuple[str, np.ndarray, np.ndarray]], kind: str,
-                 forward: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        layers: list[tuple[str, np.ndarray, np.ndarray]],
+        kind: str,
+        forward: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         """`layers`: ("scale", mean, std) | ("relu" | "linear", kernel, bias), applied in order;
         or `forward`, the model itself, for a network on frames."""
         self.layers, self.kind, self.forward = layers, kind, forward
@@ -73,15 +77,20 @@ class GreedyPolicy:
                 ops.append(("scale", mean, std))
                 continue
             if not isinstance(layer, (keras.layers.Dense, EnsembleDense)):
-                raise ModelFileError(f"unsupported layer {layer.name!r} ({type(layer).__name__}) "
-                                     f"in model {model.name!r}")
+                raise ModelFileError(
+                    f"unsupported layer {layer.name!r} ({type(layer).__name__}) in model {model.name!r}"
+                )
             activation = keras.activations.serialize(layer.activation)
             if activation not in ("relu", "linear"):
-                raise ModelFileError(f"unsupported activation {activation!r} of layer {layer.name!r} "
-                                     f"in model {model.name!r}")
+                raise ModelFileError(
+                    f"unsupported activation {activation!r} of layer {layer.name!r} in model {model.name!r}"
+                )
             kernel = keras.ops.convert_to_numpy(layer.kernel).astype(np.float32)
-            bias = (keras.ops.convert_to_numpy(layer.bias).astype(np.float32) if getattr(layer, "use_bias", True)
-                    else np.zeros(kernel.shape[1], np.float32))
+            bias = (
+                keras.ops.convert_to_numpy(layer.bias).astype(np.float32)
+                if getattr(layer, "use_bias", True)
+                else np.zeros(kernel.shape[1], np.float32)
+            )
             ops.append((activation, kernel, bias))
         return cls(ops, kind)
 
@@ -110,7 +119,7 @@ class GreedyPolicy:
 
 
 def model_kind(model: keras.Model) -> str:
-    """"bc" for a `BCModel`, "q" for a one-input, one-output functional model; else an error."""
+    """ "bc" for a `BCModel`, "q" for a one-input, one-output functional model; else an error."""
     if isinstance(model, BCModel):
         return "bc"
     if len(getattr(model, "inputs", None) or ()) == 1 and len(model.outputs) == 1:
@@ -144,10 +153,18 @@ class EvalResult:
 
     def to_dict(self) -> dict:
         result = {
-            "task": self.task, "env_id": get_task(self.task).env_id, "policy": self.policy,
-            "timeout": self.timeout, "episodes": len(self.returns), "seed": self.seed,
-            "returns": self.returns, "mean_return": self.mean_return, "std_return": self.std_return,
-            "min_return": min(self.returns), "max_return": max(self.returns), "lengths": self.lengths,
+            "task": self.task,
+            "env_id": get_task(self.task).env_id,
+            "policy": self.policy,
+            "timeout": self.timeout,
+            "episodes": len(self.returns),
+            "seed": self.seed,
+            "returns": self.returns,
+            "mean_return": self.mean_return,
+            "std_return": self.std_return,
+            "min_return": min(self.returns),
+            "max_return": max(self.returns),
+            "lengths": self.lengths,
         }
         if self.goals is not None:
             result.update(goals=self.goals, mean_goals=statistics.fmean(self.goals))
@@ -174,10 +191,16 @@ def solved_text(task: str) -> str:
     return "no solved threshold" if threshold is None else f"solved at {threshold:g}"
 
 
-def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed: int,
-             timeout: str = "bootstrap", max_steps: int | None = None,
-             env_kwargs: dict[str, Any] | None = None,
-             progress: Callable[[int], None] | None = None) -> EvalResult:
+def evaluate(
+    policy: Callable[[np.ndarray], int],
+    task: str,
+    episodes: int,
+    seed: int,
+    timeout: str = "bootstrap",
+    max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> EvalResult:
     """Play `episodes` episodes of `policy` on task `task`'s plain env (episode i: seed + i).
 
     `timeout`/`max_steps`/`env_kwargs` are the training run's: in time-aware mode the
@@ -196,13 +219,28 @@ def evaluate(policy: Callable[[np.ndarray], int], task: str, episodes: int, seed
     if get_task(task).goal_count:
         with make_task(task, timeout, max_steps, env_kwargs=env_kwargs) as env:
             goals = play(env, policy, seeds).goals
-    return EvalResult(task, getattr(policy, "kind", "custom"), seed, played.returns, played.lengths, goals, timeout,
-                      dict(env_kwargs or {}))
+    return EvalResult(
+        task,
+        getattr(policy, "kind", "custom"),
+        seed,
+        played.returns,
+        played.lengths,
+        goals,
+        timeout,
+        dict(env_kwargs or {}),
+    )
 
 
-def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str | Path, episodes: int, seed: int,
-                 timeout: str = "bootstrap", max_steps: int | None = None,
-                 env_kwargs: dict[str, Any] | None = None) -> list[Path]:
+def record_video(
+    policy: Callable[[np.ndarray], int],
+    task: str,
+    directory: str | Path,
+    episodes: int,
+    seed: int,
+    timeout: str = "bootstrap",
+    max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> list[Path]:
     """Play `episodes` greedy episodes on the plain env (as `evaluate`) and save each as an MP4
     in `directory` with Gymnasium's `RecordVideo` (needs `moviepy`); returns the files."""
     try:
@@ -214,11 +252,13 @@ def record_video(policy: Callable[[np.ndarray], int], task: str, directory: str 
         raise ConfigError(f"--video {directory}: is a file, not a directory")
     prefix = task_slug(task)
     if any(directory.glob(f"{prefix}-episode-*.mp4")):
-        raise ConfigError(f"--video {directory}: already holds {prefix} videos, which would be overwritten; "
-                          "choose another directory")
+        raise ConfigError(
+            f"--video {directory}: already holds {prefix} videos, which would be overwritten; choose another directory"
+        )
     env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array", env_kwargs=env_kwargs)
-    env = gym.wrappers.RecordVideo(env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix,
-                                   disable_logger=True)
+    env = gym.wrappers.RecordVideo(
+        env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix, disable_logger=True
+    )
     play(env, policy, range(seed, seed + episodes))
     env.close()  # RecordVideo writes the last episode's file
     return sorted(directory.glob(f"{prefix}-episode-*.mp4"))
@@ -237,13 +277,14 @@ def load_model(path: str | Path) -> keras.Model:
         raise ModelFileError(f"{path}: corrupt or not a Keras model (not a .keras zip archive)")
     try:
         return keras.saving.load_model(path, compile=False)  # weights only: no optimizer needed
-    except Exception as error:  # noqa: BLE001  (any failure inside Keras means an unusable file)
+    except Exception as error:
         detail = (str(error).strip().splitlines() or [""])[0]
         raise ModelFileError(f"{path}: Keras cannot load it ({type(error).__name__}: {detail})") from error
 
 
-def check_model_fits(model: keras.Model, obs_shape: int | tuple[int, ...], n_actions: int, path: str | Path,
-                     task: str | None = None) -> None:
+def check_model_fits(
+    model: keras.Model, obs_shape: int | tuple[int, ...], n_actions: int, path: str | Path, task: str | None = None
+) -> None:
     """`ModelFileError` unless `model` maps observations of `obs_shape` (a vector's features, or
     the frames' shape) to `n_actions` outputs."""
     if model_kind(model) == "bc":
@@ -271,9 +312,13 @@ class EvalSettings:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
 
 
-def load_policy(target: str | Path, policy: str | None = None, task: str | None = None,
-                max_steps: int | None = None,
-                env_kwargs: dict[str, Any] | None = None) -> tuple[GreedyPolicy, EvalSettings]:
+def load_policy(
+    target: str | Path,
+    policy: str | None = None,
+    task: str | None = None,
+    max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> tuple[GreedyPolicy, EvalSettings]:
     """The greedy policy saved at `target` (a run directory or a `.keras` file) and its settings.
 
     `policy` picks the run directory's model: "q" (`q_network.keras`, the default) or "bc"
@@ -304,9 +349,12 @@ def load_policy(target: str | Path, policy: str | None = None, task: str | None 
         raise ConfigError(f"{target}: no config.json beside the model says which task it plays; pass --task")
     own = config is not None and task in (None, config.task)  # the config's env settings apply
     settings = EvalSettings(
-        model_path, task or config.task, config.timeout if config else "bootstrap",
+        model_path,
+        task or config.task,
+        config.timeout if config else "bootstrap",
         max_steps if max_steps is not None else config.max_steps if own else None,
-        dict(env_kwargs) if env_kwargs is not None else dict(config.env_kwargs) if own else {})
+        dict(env_kwargs) if env_kwargs is not None else dict(config.env_kwargs) if own else {},
+    )
     spaces = task_spaces(settings.task, settings.env_kwargs)
     obs_shape = spaces.layout.frames.shape if spaces.layout.image else spaces.input_dim(settings.timeout)
     check_model_fits(model, obs_shape, spaces.n_actions, model_path, settings.task)

@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import DirectoryInUseError, OutputExistsError, RunDirectoryError
+from dqfd_bc_keras.errors import DirectoryInUseError, OutputExistsError, RunDirectoryError
 
 
 def _sync(path: Path) -> None:
@@ -135,12 +135,15 @@ class DirectoryLock:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise DirectoryInUseError(f"{self.directory} is in use by process {holder or '(unknown)'}; "
-                                    "wait for it to finish or stop it") from None
+            raise DirectoryInUseError(
+                f"{self.directory} is in use by process {holder or '(unknown)'}; wait for it to finish or stop it"
+            ) from None
         stale = os.pread(fd, 64, 0).decode(errors="replace").strip()  # a clean release leaves it empty
         if stale:
-            print(f"warning: {self.directory}: taking over the lock left by process {stale}, which is no longer "
-                  "running", file=sys.stderr)
+            print(
+                f"warning: {self.directory}: taking over the lock left by process {stale}, which is no longer running",
+                file=sys.stderr,
+            )
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         self.fd = fd

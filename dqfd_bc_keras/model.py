@@ -24,19 +24,19 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from . import demos as demo_io
-from .config import Config, unknown_field
-from .envs import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
-from .errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
-from .evaluation import EvalResult, GreedyPolicy
-from .methods import BUILT_IN, METHODS, Method, register
-from .recording import callable_name
-from .records import EpisodeRow, EvalRow
-from .run_files import is_run
-from .run_state import TrainingState
-from .runs import RunDirectory, continue_run, save_run, saved_config, train
-from .seeds import EVAL_SEED
-from .training import Learner, build, evaluate_at, record_demos, run_evaluation, train_with_callback
+from dqfd_bc_keras import demos as demo_io
+from dqfd_bc_keras.core.config import Config, unknown_field
+from dqfd_bc_keras.core.methods import BUILT_IN, METHODS, Method, register
+from dqfd_bc_keras.demos.recording import callable_name
+from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
+from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
+from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy
+from dqfd_bc_keras.runs.directory import RunDirectory, continue_run, save_run, saved_config, train
+from dqfd_bc_keras.runs.writers import is_run
+from dqfd_bc_keras.seeds import EVAL_SEED
+from dqfd_bc_keras.training.loop import Learner, build, evaluate_at, record_demos, run_evaluation, train_with_callback
+from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
+from dqfd_bc_keras.training.state import TrainingState
 
 EnvLike = str | gym.Env | Callable[[], gym.Env]
 DemosLike = demo_io.DemoDataset | str | Path | Callable[[np.ndarray], int] | None
@@ -56,12 +56,21 @@ class DQfD:
     directory to train into. Any other keyword is a Config field.
     """
 
-    def __init__(self, env: EnvLike = "cartpole", demos: DemosLike = None, *, expert_loss: str | Method | None = None,
-                 seed: int = 0, out: str | Path | None = None, **fields: Any) -> None:
+    def __init__(
+        self,
+        env: EnvLike = "cartpole",
+        demos: DemosLike = None,
+        *,
+        expert_loss: str | Method | None = None,
+        seed: int = 0,
+        out: str | Path | None = None,
+        **fields: Any,
+    ) -> None:
         for key in fields:
             if key == "task" or key not in Config.__dataclass_fields__:
-                raise ConfigError(f"DQfD({key}=…): " + ("the task is the env argument" if key == "task"
-                                                        else unknown_field(key)))
+                raise ConfigError(
+                    f"DQfD({key}=…): " + ("the task is the env argument" if key == "task" else unknown_field(key))
+                )
         task, env_kwargs, limit = env_id_of(env)
         if isinstance(expert_loss, Method):
             expert_loss = _method_name(expert_loss)
@@ -93,8 +102,12 @@ class DQfD:
         self._policy: GreedyPolicy | None = None
 
     # --- Algorithm 1 ------------------------------------------------------------------------------
-    def learn(self, total_timesteps: int | None = None,
-              callback: Callable[[EpisodeRow | EvalRow], object] | None = None, progress_bar: bool = False) -> DQfD:
+    def learn(
+        self,
+        total_timesteps: int | None = None,
+        callback: Callable[[EpisodeRow | EvalRow], object] | None = None,
+        progress_bar: bool = False,
+    ) -> DQfD:
         """Train `total_timesteps` more env steps (the config's `total_steps` if not given; steps 1–2
         at the first call); `callback` is given each episode's and evaluation's row, and a `False`
         from it stops training there. Early stopping (`early_stop_window`) ends it too."""
@@ -106,9 +119,18 @@ class DQfD:
         done = 0 if self.learner is None else int(self.learner.interaction.env_steps.numpy())
         budget = done + int(total_timesteps)
         if self.out is not None:
-            result = (train(dataclasses.replace(self.config, total_steps=budget), self.out, self.dataset,
-                            quiet=not progress_bar, source=self._source, callback=callback) if self._run is None
-                      else continue_run(self._run, budget, callback))
+            result = (
+                train(
+                    dataclasses.replace(self.config, total_steps=budget),
+                    self.out,
+                    self.dataset,
+                    quiet=not progress_bar,
+                    source=self._source,
+                    callback=callback,
+                )
+                if self._run is None
+                else continue_run(self._run, budget, callback)
+            )
             self._run = result.run
             self.learner, self.state = self._run.learner, self._run.state
         else:
@@ -129,8 +151,9 @@ class DQfD:
         if progress_bar:
             from tqdm import tqdm
 
-            bar = tqdm(total=learner.config.total_steps, unit="step",
-                       initial=int(learner.interaction.env_steps.numpy()))
+            bar = tqdm(
+                total=learner.config.total_steps, unit="step", initial=int(learner.interaction.env_steps.numpy())
+            )
 
         def on_episode(_: Learner, __: TrainingState, row: EpisodeRow) -> None:
             if bar is not None:
@@ -182,13 +205,21 @@ class DQfD:
         cannot make again (an env object, a Python callable as the expert) is said in one warning."""
         learner = self._trained()
         c = self.config
-        lost = [what for what, yes in (
-            (f"the env {c.task} (an object: DQfD.load(path, env=...) needs it again)",
-             c.task.startswith(PYTHON_ENV_PREFIX)),
-            (f"the method {c.expert_loss!r} (registered in this process: register it again to learn more)",
-             c.expert_loss not in BUILT_IN and ":" not in c.expert_loss),
-            (f"the expert {c.expert!r} (its demonstrations are saved)", c.expert.startswith("python callable ")),
-        ) if yes]
+        lost = [
+            what
+            for what, yes in (
+                (
+                    f"the env {c.task} (an object: DQfD.load(path, env=...) needs it again)",
+                    c.task.startswith(PYTHON_ENV_PREFIX),
+                ),
+                (
+                    f"the method {c.expert_loss!r} (registered in this process: register it again to learn more)",
+                    c.expert_loss not in BUILT_IN and ":" not in c.expert_loss,
+                ),
+                (f"the expert {c.expert!r} (its demonstrations are saved)", c.expert.startswith("python callable ")),
+            )
+            if yes
+        ]
         if lost:
             warnings.warn(f"{path}: a later process cannot make {' nor '.join(lost)}", DqfdWarning, stacklevel=2)
         if self._run is not None and Path(path) == self.out:
@@ -202,8 +233,13 @@ class DQfD:
         gives the env again (required when it was a Python object)."""
         path = Path(path)
         if not (path / "checkpoints" / "latest.json").is_file():
-            held = "does not exist" if not path.exists() else "is not a directory" if not path.is_dir() else (
-                "has no checkpoint (checkpoints/latest.json)" if is_run(path) else "is not a run directory")
+            held = (
+                "does not exist"
+                if not path.exists()
+                else "is not a directory"
+                if not path.is_dir()
+                else ("has no checkpoint (checkpoints/latest.json)" if is_run(path) else "is not a run directory")
+            )
             raise RunDirectoryError(f"{path} {held}: DQfD.load reads a run directory that save, out= or train.py wrote")
         try:
             saved_task = json.loads((path / "config.json").read_text())["task"]
@@ -214,8 +250,9 @@ class DQfD:
             task, env_kwargs, _ = env_id_of(env, saved_task if saved_task.startswith(PYTHON_ENV_PREFIX) else None)
             changes = {"task": task, **({} if isinstance(env, str) else {"env_kwargs": env_kwargs})}
         elif saved_task.startswith(PYTHON_ENV_PREFIX) and saved_task not in gym.registry:
-            raise ConfigError(f"{path}: trained on a Python env object ({saved_task}); give it again: "
-                              "DQfD.load(path, env=...)")
+            raise ConfigError(
+                f"{path}: trained on a Python env object ({saved_task}); give it again: DQfD.load(path, env=...)"
+            )
         config = dataclasses.replace(saved_config(path), **changes)
         given = path / "checkpoints" / "demos_given.npz"
         dataset = demo_io.load(given) if given.is_file() else None

@@ -1,13 +1,14 @@
 """Fixtures shared by the learning tests: the strong CartPole expert's demonstrations and one
 fitted BC model per kind of fit (fitted once per session: each fit takes a few seconds)."""
 
-import dqfd_bc_keras  # noqa: F401  (first: TF settings; custom objects, Gymnasium ids)
 import keras
 import pytest
-from dqfd_bc_keras.bc import build_bc_model
-from dqfd_bc_keras.config import Config
+
+import dqfd_bc_keras  # noqa: F401  (first: TF settings; custom objects, Gymnasium ids)
+from dqfd_bc_keras.core.bc import build_bc_model
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.demos import DemoDataset, record
-from dqfd_bc_keras.methods import METHODS
 
 
 @pytest.fixture(scope="session")

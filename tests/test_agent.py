@@ -9,11 +9,10 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401
-from dqfd_bc_keras.agent import DQfDAgent, make_agent
-from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.errors import ConfigError
-
-from dqfd_bc_keras.methods import METHODS
 
 EXPERT_LOSSES = tuple(name for name, method in METHODS.items() if method.term is not None)
 """Every registered method with a J_E term."""
@@ -90,8 +89,9 @@ def test_train_step_assembles_the_total_loss_as_written(loss, target, demos, bc_
         j_e = np.mean(w * -(pi * np.log(p_q)).sum(1))
     elif loss == "bayes":
         n = len(demos)
-        j_e = (np.mean(w * ((p_q - pi) ** 2).sum(1) / (2 * sigma_sq))
-               + sum(((t - p) ** 2).sum() for t, p in zip(theta, prior)) / (2 * 1.0**2 * n))
+        j_e = np.mean(w * ((p_q - pi) ** 2).sum(1) / (2 * sigma_sq)) + sum(
+            ((t - p) ** 2).sum() for t, p in zip(theta, prior, strict=True)
+        ) / (2 * 1.0**2 * n)
     elif METHODS[loss].term is None:
         j_e = 0.0
     else:
@@ -112,9 +112,13 @@ def test_train_step_assembles_the_total_loss_as_written(loss, target, demos, bc_
 
 def test_target_network_is_refreshed_every_period(demos, bc_models):
     agent = agent_for("ce", demos, bc_models, target_update_period=4)
+
     def same():
-        return all(np.array_equal(t.numpy(), o.numpy())
-                   for t, o in zip(agent.target_network.weights, agent.q_network.weights))
+        return all(
+            np.array_equal(t.numpy(), o.numpy())
+            for t, o in zip(agent.target_network.weights, agent.q_network.weights, strict=True)
+        )
+
     assert same()
     agent.learn(tf.constant(3))
     assert not same()
@@ -127,7 +131,7 @@ def test_prior_center_is_captured_after_pretraining(center, demos, bc_models):
     agent = agent_for("bayes", demos, bc_models, prior_center=center)
     assert all(not p.numpy().any() for p in agent.prior_weights)  # zero during pre-training
     agent.pretrain(10, steps_per_call=10)
-    for prior, weight in zip(agent.prior_weights, agent.q_network.trainable_weights):
+    for prior, weight in zip(agent.prior_weights, agent.q_network.trainable_weights, strict=True):
         expected = weight.numpy() if center == "pretrained" else 0.0
         np.testing.assert_array_equal(prior.numpy(), np.broadcast_to(expected, prior.shape))
 
@@ -146,8 +150,14 @@ def test_store_in_a_graph_adds_agent_rows_with_the_bc_view(demos, bc_models):
     store = tf.function(agent.store)
     obs, next_obs = demos.obs[0], demos.next_obs[0]
     for _ in range(3):
-        store(tf.constant(obs), tf.constant(1), tf.constant(1.0), tf.constant(next_obs),
-              tf.constant(False), tf.constant(True))
+        store(
+            tf.constant(obs),
+            tf.constant(1),
+            tf.constant(1.0),
+            tf.constant(next_obs),
+            tf.constant(False),
+            tf.constant(True),
+        )
     replay = agent.replay
     assert int(replay.agent_size.numpy()) == 3
     row = replay.table[replay.demo_capacity].numpy()
@@ -174,8 +184,11 @@ def test_checkpoint_restores_optimizer_and_replay_for_an_identical_continuation(
     second.checkpoint().read(saved).assert_consumed()
     assert int(second.optimizer.iterations.numpy()) == 20
     second.learn(tf.constant(10))
-    for a, b in zip(first.q_network.weights + first.optimizer.variables,
-                    second.q_network.weights + second.optimizer.variables):
+    for a, b in zip(
+        first.q_network.weights + first.optimizer.variables,
+        second.q_network.weights + second.optimizer.variables,
+        strict=True,
+    ):
         np.testing.assert_array_equal(a.numpy(), b.numpy())
 
 
@@ -189,22 +202,28 @@ def test_fused_learning_equals_one_graph_call_per_update(demos, bc_models, tmp_p
     fused_losses = fused.learn(tf.constant(steps))
     for _ in range(steps):
         single_losses = single.learn(tf.constant(1))
-    for a, b in zip(fused.q_network.weights + fused.target_network.weights + fused.optimizer.variables,
-                    single.q_network.weights + single.target_network.weights + single.optimizer.variables):
+    for a, b in zip(
+        fused.q_network.weights + fused.target_network.weights + fused.optimizer.variables,
+        single.q_network.weights + single.target_network.weights + single.optimizer.variables,
+        strict=True,
+    ):
         np.testing.assert_array_equal(a.numpy(), b.numpy())
     np.testing.assert_array_equal(fused.replay.tree.leaf.numpy(), single.replay.tree.leaf.numpy())
     assert {k: float(v) for k, v in fused_losses.items()} == {k: float(v) for k, v in single_losses.items()}
 
 
-@pytest.mark.parametrize("change, match", [
-    ({"expert_loss": "kl"}, "expert_loss='kl' is not one of"),
-    ({"n_step": 0}, "n_step must be ≥ 1, got 0"),
-    ({"gamma": 1.5}, r"gamma must be in \[0, 1\], got 1.5"),
-    ({"target": "triple"}, "target='triple' is not one of"),
-    ({"td_loss": "l1"}, "td_loss='l1' is not one of"),
-    ({"sigma0_sq": 0.0}, "sigma0_sq must be > 0, got 0.0"),
-    ({"task": "pong"}, "unknown task 'pong'"),
-])
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"expert_loss": "kl"}, "expert_loss='kl' is not one of"),
+        ({"n_step": 0}, "n_step must be ≥ 1, got 0"),
+        ({"gamma": 1.5}, r"gamma must be in \[0, 1\], got 1.5"),
+        ({"target": "triple"}, "target='triple' is not one of"),
+        ({"td_loss": "l1"}, "td_loss='l1' is not one of"),
+        ({"sigma0_sq": 0.0}, "sigma0_sq must be > 0, got 0.0"),
+        ({"task": "pong"}, "unknown task 'pong'"),
+    ],
+)
 def test_incompatible_settings_fail_early_naming_the_value(change, match):
     with pytest.raises(ConfigError, match=match):
         dataclasses.replace(Config.for_task("cartpole"), **change)
@@ -234,8 +253,14 @@ def test_sqil_rewards_demonstrations_1_and_its_own_data_0_in_balanced_batches(de
     early = replay.sample_balanced(64)  # D_replay empty: every row a demonstration
     assert np.all(early.is_demo.numpy() == 1.0) and np.all(early.weights.numpy() == 1.0)
     for t in range(100):
-        agent.store(tf.constant(demos.obs[t]), tf.constant(1), tf.constant(1.0), tf.constant(demos.next_obs[t]),
-                    tf.constant(False), tf.constant(False))
+        agent.store(
+            tf.constant(demos.obs[t]),
+            tf.constant(1),
+            tf.constant(1.0),
+            tf.constant(demos.next_obs[t]),
+            tf.constant(False),
+            tf.constant(False),
+        )
     agent_rows = replay.demo_capacity + np.arange(100)
     assert np.all(tf.gather(replay.table, agent_rows)[:, replay.REWARD].numpy() == 0.0)
     batch = replay.sample_balanced(64)

@@ -11,9 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dqfd_bc_keras import cli, demos
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.envs import get_task, make_plain_env, make_task, task_slug, task_spaces
+
+from dqfd_bc_keras import demos
+from dqfd_bc_keras.commands import cli
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, DqfdError
 from dqfd_bc_keras.evaluation import evaluate, load_policy
 from dqfd_bc_keras.experiments.suites import SUITES, arm, on_task
@@ -28,8 +30,9 @@ IMAGES = "observes images (part pixels): Box(84, 84, 3) uint8 inside a Dict or T
 
 
 def run(*args, timeout=300):
-    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout,
-                          cwd=REPO, env=ENV)
+    return subprocess.run(
+        [sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=REPO, env=ENV
+    )
 
 
 def one_line_error(done, message):
@@ -60,8 +63,14 @@ def test_the_generic_preset_is_written_to_config_json_and_overridable():
     assert config.with_overrides(["eval_every=7"]).eval_every == 7
 
 
-@pytest.mark.parametrize("env_id, message", [("toy_envs:ToyImage-v0", IMAGES), ("Pendulum-v1", SUPPORTED),
-                                               ("toy_envs:ToyTextOnly-v0", "which has no numeric part")])
+@pytest.mark.parametrize(
+    "env_id, message",
+    [
+        ("toy_envs:ToyImage-v0", IMAGES),
+        ("Pendulum-v1", SUPPORTED),
+        ("toy_envs:ToyTextOnly-v0", "which has no numeric part"),
+    ],
+)
 def test_unsupported_spaces_are_refused_by_name(env_id, message):
     with pytest.raises(ConfigError, match=re.escape(message)):
         task_spaces(env_id)
@@ -83,17 +92,31 @@ def test_rule_demonstrator_records_on_any_env():
     assert set(noisy.actions) == {0, 1}
 
 
-@pytest.mark.parametrize("spec, message", [
-    ("imperfect", "has no scripted imperfect expert"),
-    ("toy_envs:nothing", "demonstrator toy_envs:nothing: toy_envs (tests/toy_envs.py) has no function 'nothing'; "
-                         "it has Chain, Unsupported, breakout_rule, dies, go_left, go_right, out_of_range"),
-    ("no_such_module:rule", "demonstrator no_such_module:rule: no module named 'no_such_module' (is its directory "
-                            "on PYTHONPATH?)"),
-    ("toy_envs:NOT_CALLABLE", "demonstrator toy_envs:NOT_CALLABLE: NOT_CALLABLE is not a function (it is of type int)"),
-    ("toy_envs:out_of_range", "toy_envs:out_of_range returned 7 (int); a demonstrator returns an int action in "
-                              "[0, 2) (tests/toy_envs.py:78)"),
-    ("best", "expert='best' is none of strong, imperfect, module:function or a .keras model file"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("imperfect", "has no scripted imperfect expert"),
+        (
+            "toy_envs:nothing",
+            "demonstrator toy_envs:nothing: toy_envs (tests/toy_envs.py) has no function 'nothing'; "
+            "it has Chain, Unsupported, breakout_rule, dies, go_left, go_right, out_of_range",
+        ),
+        (
+            "no_such_module:rule",
+            "demonstrator no_such_module:rule: no module named 'no_such_module' (is its directory on PYTHONPATH?)",
+        ),
+        (
+            "toy_envs:NOT_CALLABLE",
+            "demonstrator toy_envs:NOT_CALLABLE: NOT_CALLABLE is not a function (it is of type int)",
+        ),
+        (
+            "toy_envs:out_of_range",
+            "toy_envs:out_of_range returned 7 (int); a demonstrator returns an int action in "
+            "[0, 2) (tests/toy_envs.py:78)",
+        ),
+        ("best", "expert='best' is none of strong, imperfect, module:function or a .keras model file"),
+    ],
+)
 def test_bad_demonstrators_are_named(spec, message):
     with pytest.raises(ConfigError) as error:
         demos.record(CHAIN, spec, episodes=1)
@@ -120,32 +143,41 @@ def test_suites_move_to_any_env_with_their_settings():
     assert "/" not in task_slug("ALE/Pong-v5") and ":" not in task_slug(CHAIN)
     with pytest.raises(ConfigError, match="expert_loss is an arm's own"):
         on_task(SUITES["quick"], CHAIN, ["expert_loss=ce"])
-    assert on_task([arm("cartpole", "bootstrap", "ce"), arm("cartpole-200", "bootstrap", "ce")], "acrobot") == \
-        [arm("acrobot", "bootstrap", "ce")]
+    assert on_task([arm("cartpole", "bootstrap", "ce"), arm("cartpole-200", "bootstrap", "ce")], "acrobot") == [
+        arm("acrobot", "bootstrap", "ce")
+    ]
 
 
-@pytest.mark.parametrize("args, message", [
-    (["train.py", "--env", "toy_envs:ToyImage-v0"], IMAGES),
-    (["train.py", "--env", "Pendulum-v1"], SUPPORTED),
-    (["train.py", "--env", "toy_envs:ToyTextOnly-v0"], "which has no numeric part"),
-    (["train.py", "--env", "NoSuchEnv-v0"], "unknown task 'NoSuchEnv-v0'"),
-    (["train.py", "--env", CHAIN, "--task", "cartpole"], "not allowed with argument"),
-    (["train.py", "--env", CHAIN], "has no scripted imperfect expert"),
-    (["-m", "dqfd_bc_keras.demos", "record", "--env", "Pendulum-v1", "--expert", "strong", "--out", "x.npz"],
-     SUPPORTED),
-    (["evaluate.py", "models/cartpole", "--env", "Pendulum-v1"], SUPPORTED),
-    (["-m", "dqfd_bc_keras.experiments", "run", "quick", "--env", "Pendulum-v1", "--out", "x"], SUPPORTED),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["train.py", "--env", "toy_envs:ToyImage-v0"], IMAGES),
+        (["train.py", "--env", "Pendulum-v1"], SUPPORTED),
+        (["train.py", "--env", "toy_envs:ToyTextOnly-v0"], "which has no numeric part"),
+        (["train.py", "--env", "NoSuchEnv-v0"], "unknown task 'NoSuchEnv-v0'"),
+        (["train.py", "--env", CHAIN, "--task", "cartpole"], "not allowed with argument"),
+        (["train.py", "--env", CHAIN], "has no scripted imperfect expert"),
+        (
+            ["-m", "dqfd_bc_keras.demos", "record", "--env", "Pendulum-v1", "--expert", "strong", "--out", "x.npz"],
+            SUPPORTED,
+        ),
+        (["evaluate.py", "models/cartpole", "--env", "Pendulum-v1"], SUPPORTED),
+        (["-m", "dqfd_bc_keras.experiments", "run", "quick", "--env", "Pendulum-v1", "--out", "x"], SUPPORTED),
+    ],
+)
 def test_unsupported_envs_are_refused_in_one_line_with_exit_2(args, message, tmp_path):
-    one_line_error(run(*args[:1], *args[1:], *(["--quick", "--out", tmp_path / "r"] if args[0] == "train.py" else [])),
-                   message)
+    one_line_error(
+        run(*args[:1], *args[1:], *(["--quick", "--out", tmp_path / "r"] if args[0] == "train.py" else [])), message
+    )
 
 
 # --- an env without a time limit, env kwargs, observations to flatten: all through the commands ------------
 
 DICT_NO_LIMIT = "toy_envs:ToyDictChainNoLimit-v0"
-DROPPED = ("warning: toy_envs:ToyDictChainNoLimit-v0: dropping non-numeric observation part(s) mission "
-           "(of Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7)))")
+DROPPED = (
+    "warning: toy_envs:ToyDictChainNoLimit-v0: dropping non-numeric observation part(s) mission "
+    "(of Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7)))"
+)
 
 
 def warnings_of(done):
@@ -159,29 +191,79 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
     one_line_error(refused, "has no time limit of its own: set one with --max-steps N (or --set max_steps=N)")
 
     demos_file = tmp_path / "seven.npz"
-    done = run("-m", "dqfd_bc_keras.demos", "record", "--env", DICT_NO_LIMIT, "--env-kwargs", "size=7",
-               "--max-steps", 12, "--policy", "toy_envs:go_right", "--episodes", 20, "--out", demos_file)
+    done = run(
+        "-m",
+        "dqfd_bc_keras.demos",
+        "record",
+        "--env",
+        DICT_NO_LIMIT,
+        "--env-kwargs",
+        "size=7",
+        "--max-steps",
+        12,
+        "--policy",
+        "toy_envs:go_right",
+        "--episodes",
+        20,
+        "--out",
+        demos_file,
+    )
     assert done.returncode == 0, done.stderr
     assert warnings_of(done) == [DROPPED]
     assert 'env kwargs   {"size": 7}' in done.stdout
-    assert ("observation  Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7)) flattened to 14 features; "
-            "dropped mission") in done.stdout
+    assert (
+        "observation  Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7)) flattened to 14 features; "
+        "dropped mission"
+    ) in done.stdout
     data = demos.load(demos_file)
     np.testing.assert_array_equal(data.obs[1], [0, 1, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0])  # cell 1, visits 0 and 1
 
-    one_line_error(run("train.py", "--env", DICT_NO_LIMIT, "--demos", demos_file, "--set", "max_steps=12", "--quick",
-                       "--out", tmp_path / "y"), 'was recorded with env kwargs {"size": 7}, not the requested {}')
+    one_line_error(
+        run(
+            "train.py",
+            "--env",
+            DICT_NO_LIMIT,
+            "--demos",
+            demos_file,
+            "--set",
+            "max_steps=12",
+            "--quick",
+            "--out",
+            tmp_path / "y",
+        ),
+        'was recorded with env kwargs {"size": 7}, not the requested {}',
+    )
 
     out = tmp_path / "run"
-    done = run("train.py", "--env", DICT_NO_LIMIT, "--env-kwargs", "size=7", "--set", "max_steps=12", "--demos",
-               demos_file, "--quick", "--quiet", "--set", "checkpoint_every=50", "--out", out)
+    done = run(
+        "train.py",
+        "--env",
+        DICT_NO_LIMIT,
+        "--env-kwargs",
+        "size=7",
+        "--set",
+        "max_steps=12",
+        "--demos",
+        demos_file,
+        "--quick",
+        "--quiet",
+        "--set",
+        "checkpoint_every=50",
+        "--out",
+        out,
+    )
     assert done.returncode == 0, done.stderr
     assert warnings_of(done) == [DROPPED]  # once, however many envs the run makes
     config = json.loads((out / "config.json").read_text())
     assert (config["env_kwargs"], config["max_steps"]) == ({"size": 7}, 12)
-    assert config["observation"] == {"space": "Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7))",
-                                     "shape": None, "features": 14, "flattened": True, "dropped": ["mission"],
-                                     "frames": None}
+    assert config["observation"] == {
+        "space": "Dict(cell: Discrete(7), mission: Text, visits: MultiBinary(7))",
+        "shape": None,
+        "features": 14,
+        "flattened": True,
+        "dropped": ["mission"],
+        "frames": None,
+    }
     result = json.loads((out / "eval.json").read_text())
     assert (result["env_kwargs"], result["lengths"], result["mean_return"]) == ({"size": 7}, [6, 6], 1.0)
 
@@ -192,8 +274,19 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
         load_policy(out, env_kwargs={"size": 5})
     bare = tmp_path / "model.keras"
     bare.write_bytes((out / "q_network.keras").read_bytes())  # no config.json beside it: everything is given
-    evaluated = run("evaluate.py", bare, "--env", DICT_NO_LIMIT, "--env-kwargs", "size=7", "--max-steps", 3,
-                    "--episodes", 1, "--json")
+    evaluated = run(
+        "evaluate.py",
+        bare,
+        "--env",
+        DICT_NO_LIMIT,
+        "--env-kwargs",
+        "size=7",
+        "--max-steps",
+        3,
+        "--episodes",
+        1,
+        "--json",
+    )
     assert evaluated.returncode == 0, evaluated.stderr
     assert json.loads(evaluated.stdout)["lengths"] == [3]  # the given limit cuts the 6-step walk
 
@@ -202,9 +295,27 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
     assert json.loads((out / "config.json").read_text())["env_kwargs"] == {"size": 7}
 
     sweep = tmp_path / "sweep"
-    done = run("-m", "dqfd_bc_keras.experiments", "run", "quick", "--env", DICT_NO_LIMIT, "--max-steps", 9,
-               "--env-kwargs", "size=6", "--seeds", 1, "--workers", 2, "--set", "expert=toy_envs:go_right",
-               "--out", sweep, timeout=600)
+    done = run(
+        "-m",
+        "dqfd_bc_keras.experiments",
+        "run",
+        "quick",
+        "--env",
+        DICT_NO_LIMIT,
+        "--max-steps",
+        9,
+        "--env-kwargs",
+        "size=6",
+        "--seeds",
+        1,
+        "--workers",
+        2,
+        "--set",
+        "expert=toy_envs:go_right",
+        "--out",
+        sweep,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     runs = sorted(sweep.glob("*/seed0"))
     assert len(runs) == 2 and all(r.parent.name.endswith("-size=6-toy_envs-go_right") for r in runs), runs
@@ -216,12 +327,28 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
 
 def test_a_grid_observation_is_flattened_in_c_order(tmp_path):
     out = tmp_path / "grid"
-    done = run("train.py", "--env", "toy_envs:ToyGridChain-v0", "--expert", "toy_envs:go_right", "--demo-episodes", 20,
-               "--quick", "--quiet", "--out", out)
+    done = run(
+        "train.py",
+        "--env",
+        "toy_envs:ToyGridChain-v0",
+        "--expert",
+        "toy_envs:go_right",
+        "--demo-episodes",
+        20,
+        "--quick",
+        "--quiet",
+        "--out",
+        out,
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "config.json").read_text())["observation"] == {
-        "space": "Box(5, 2) float32", "shape": [5, 2], "features": 10, "flattened": True, "dropped": [],
-        "frames": None}
+        "space": "Box(5, 2) float32",
+        "shape": [5, 2],
+        "features": 10,
+        "flattened": True,
+        "dropped": [],
+        "frames": None,
+    }
     assert json.loads((out / "eval.json").read_text())["mean_return"] == 1.0
     data = demos.load(out / "demos.npz")
     assert data.meta.observation == "Box(5, 2) float32 flattened to 10 features"
@@ -230,9 +357,11 @@ def test_a_grid_observation_is_flattened_in_c_order(tmp_path):
 
 def test_a_bad_env_kwarg_is_one_line_naming_it_and_the_env(tmp_path, capsys):
     out = tmp_path / "r"
-    one_line_error(run("train.py", "--env", CHAIN, "--env-kwargs", "sise=7", "--quick", "--out", out),
-                   "--env-kwargs sise: toy_envs:ToyChain-v0 takes no keyword argument 'sise' (did you mean 'size'? "
-                   "it takes: size, observe)")
+    one_line_error(
+        run("train.py", "--env", CHAIN, "--env-kwargs", "sise=7", "--quick", "--out", out),
+        "--env-kwargs sise: toy_envs:ToyChain-v0 takes no keyword argument 'sise' (did you mean 'size'? "
+        "it takes: size, observe)",
+    )
     assert not out.exists()
     import train  # the same command in this process: the other refusals
 
@@ -273,7 +402,7 @@ def test_old_demonstration_files_without_kwargs_still_load(tmp_path):
     np.savez(tmp_path / "old.npz", **{**arrays, "meta": np.array(json.dumps(meta))})
     old = demos.load(tmp_path / "old.npz", task=CHAIN, timeout="bootstrap")
     assert (old.meta.env_kwargs, old.meta.observation) == ({}, "")
-    with pytest.raises(DqfdError, match=re.escape("was recorded with env kwargs {}, not the requested {\"size\": 7}")):
+    with pytest.raises(DqfdError, match=re.escape('was recorded with env kwargs {}, not the requested {"size": 7}')):
         demos.load(tmp_path / "old.npz", task=CHAIN, env_kwargs={"size": 7})
 
 
@@ -291,13 +420,23 @@ def test_the_readme_third_party_env_commands_train_and_evaluate(tmp_path):
     block = readme_any_env_block()
     rules = block.split("<<'EOF'\n", 1)[1].split("\nEOF\n", 1)[0]
     (tmp_path / "my_rules.py").write_text(rules + "\n")
-    commands = [line.split("train.py", 1)[1] for line in block.splitlines() if line.startswith(".venv/bin/python train.py")]
+    commands = [
+        line.split("train.py", 1)[1] for line in block.splitlines() if line.startswith(".venv/bin/python train.py")
+    ]
     assert len(commands) == 3
     env = {**ENV, "PYTHONPATH": os.pathsep.join([str(REPO), str(tmp_path)])}
     quick = ["--quick", "--quiet", "--set", "total_steps=200", "--set", "eval_every=200"]
-    processes = [subprocess.Popen([sys.executable, str(REPO / "train.py"), *shlex.split(args), *quick, "--out",
-                                   str(tmp_path / f"run{i}")], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True) for i, args in enumerate(commands)]
+    processes = [
+        subprocess.Popen(
+            [sys.executable, str(REPO / "train.py"), *shlex.split(args), *quick, "--out", str(tmp_path / f"run{i}")],
+            cwd=tmp_path,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i, args in enumerate(commands)
+    ]
     for i, process in enumerate(processes):
         _, err = process.communicate(timeout=600)
         assert process.returncode == 0, f"{commands[i]}\n{err}"

@@ -6,11 +6,11 @@ The toy game's frames, rewards and lives are written out per frame, so each expe
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
-import gymnasium as gym
 
-from dqfd_bc_keras.atari import (
+from dqfd_bc_keras.envs.atari import (
     ATARI_OPTIONS,
     AtariFrames,
     AtariOptions,
@@ -60,6 +60,7 @@ def toy_env(rewards: list[float], lives: list[int] | None = None, learning: bool
 
 
 # ---- the parts by hand -------------------------------------------------------------------------
+
 
 def test_area_weights_average_each_cell_by_overlap():
     # 3 pixels to 2 cells of width 1.5: cell 0 = pixel 0 + half of pixel 1, over 1.5
@@ -183,6 +184,7 @@ def test_the_stack_shifts_by_one_frame_newest_last_and_a_reset_stack_is_one_fram
 
 # ---- options -----------------------------------------------------------------------------------
 
+
 def test_split_kwargs_takes_the_options_out_and_turns_the_ale_skip_off():
     options, make_kwargs = split_kwargs({"frame_stack": 2, "clip_rewards": False, "repeat_action_probability": 0.0})
     assert options == AtariOptions(frame_stack=2, clip_rewards=False)
@@ -190,16 +192,19 @@ def test_split_kwargs_takes_the_options_out_and_turns_the_ale_skip_off():
     assert split_kwargs(None)[0] == ATARI_OPTIONS == AtariOptions(30, 4, 84, 4, True, True)
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    ({"frame_skp": 2}, "did you mean 'frame_skip'?"),
-    ({"frame_skip": 0}, "frame_skip: expected an integer >= 1, got 0"),
-    ({"noop_max": -1}, "noop_max: expected an integer >= 0, got -1"),
-    ({"frame_stack": 2.5}, "frame_stack: expected an integer >= 1, got 2.5"),
-    ({"screen_size": True}, "screen_size: expected an integer >= 1, got True"),
-    ({"clip_rewards": 1}, "clip_rewards: expected true or false, got 1"),
-    ({"frameskip": 4}, "use frame_skip"),
-    ({"obs_type": "rgb"}, "obs_type"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        ({"frame_skp": 2}, "did you mean 'frame_skip'?"),
+        ({"frame_skip": 0}, "frame_skip: expected an integer >= 1, got 0"),
+        ({"noop_max": -1}, "noop_max: expected an integer >= 0, got -1"),
+        ({"frame_stack": 2.5}, "frame_stack: expected an integer >= 1, got 2.5"),
+        ({"screen_size": True}, "screen_size: expected an integer >= 1, got True"),
+        ({"clip_rewards": 1}, "clip_rewards: expected true or false, got 1"),
+        ({"frameskip": 4}, "use frame_skip"),
+        ({"obs_type": "rgb"}, "obs_type"),
+    ],
+)
 def test_a_bad_option_is_one_line(kwargs, says):
     with pytest.raises(ConfigError) as caught:
         split_kwargs(kwargs)
@@ -212,6 +217,7 @@ def test_is_atari():
 
 
 # ---- ALE/Breakout-v5 ---------------------------------------------------------------------------
+
 
 def play(env: gym.Env, seed: int, steps: int):
     """Random play from reset(seed): every (obs, reward, terminated, truncated, info)."""
@@ -266,14 +272,22 @@ def test_breakout_same_seed_same_observations():
     (obs_a, _), steps_a = play(make_atari(BREAKOUT), 4, 150)
     (obs_b, _), steps_b = play(make_atari(BREAKOUT), 4, 150)
     np.testing.assert_array_equal(obs_a, obs_b)
-    for a, b in zip(steps_a, steps_b):
+    for a, b in zip(steps_a, steps_b, strict=True):
         np.testing.assert_array_equal(a[0], b[0])
         assert a[1:4] == b[1:4]
 
 
 def test_breakout_options_and_ale_kwargs_from_env_kwargs():
-    env = make_atari(BREAKOUT, {"frame_stack": 2, "screen_size": 42, "noop_max": 0,
-                                "repeat_action_probability": 0.0, "full_action_space": True})
+    env = make_atari(
+        BREAKOUT,
+        {
+            "frame_stack": 2,
+            "screen_size": 42,
+            "noop_max": 0,
+            "repeat_action_probability": 0.0,
+            "full_action_space": True,
+        },
+    )
     obs, info = env.reset(seed=0)
     assert obs.shape == (42, 42, 2) and info["noops"] == 0 and info["episode_frame_number"] == 0
     assert env.unwrapped.ale.getFloat("repeat_action_probability") == 0.0 and env.action_space.n == 18

@@ -6,8 +6,8 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401  (registers the custom objects)
-from dqfd_bc_keras.bc import BCModel, build_bc_model
-from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.core.bc import BCModel, build_bc_model
+from dqfd_bc_keras.core.config import Config
 
 
 def test_map_model_has_dropout_and_prior_mle_has_neither(bc_models):

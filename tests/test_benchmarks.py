@@ -13,8 +13,13 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def bench(name, *args):
-    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / name), *map(str, args)],
-                          capture_output=True, text=True, timeout=600, cwd=REPO)
+    done = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / name), *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -40,33 +45,62 @@ def check_interleaved(report, sides):
     assert 0 < ratio["min"] <= ratio["median"] <= ratio["max"]
     assert ratio["median"] == pytest.approx(statistics.median(ratio["per_round"]), abs=1e-4)
     ours_figure, sb3_figure = sides[0][1], sides[-1][1]
-    per_round = [a / b for a, b in zip(report["sides"]["ours"][ours_figure]["per_round"],
-                                       report["sides"]["sb3"][sb3_figure]["per_round"])]
+    per_round = [
+        a / b
+        for a, b in zip(
+            report["sides"]["ours"][ours_figure]["per_round"],
+            report["sides"]["sb3"][sb3_figure]["per_round"],
+            strict=True,
+        )
+    ]
     assert ratio["per_round"] == pytest.approx(per_round, rel=1e-3)  # paired by round, not medians divided
 
 
 def test_bench_updates_reports_rates_and_ratios():
     report = bench("bench_updates.py", "--quick", "--json")
     ours = report["sides"]["ours"]
-    assert set(ours) == {"bayes/fused", "bayes/per_call", "bayes/ratio", "bayes/train_step_only",
-                         "bayes/sample_and_priorities_only"}
-    for (fused, per_call, ratio) in zip(*(ours[f"bayes/{k}"]["per_round"] for k in ("fused", "per_call", "ratio"))):
+    assert set(ours) == {
+        "bayes/fused",
+        "bayes/per_call",
+        "bayes/ratio",
+        "bayes/train_step_only",
+        "bayes/sample_and_priorities_only",
+    }
+    for fused, per_call, ratio in zip(
+        *(ours[f"bayes/{k}"]["per_round"] for k in ("fused", "per_call", "ratio")), strict=True
+    ):
         assert ratio == pytest.approx(fused / per_call, rel=1e-3)
-    check_interleaved(report, [("ours", "bayes/fused"), ("sb3", "train")] if report["sides"]["sb3"] else
-                      [("ours", "bayes/fused")])
+    check_interleaved(
+        report, [("ours", "bayes/fused"), ("sb3", "train")] if report["sides"]["sb3"] else [("ours", "bayes/fused")]
+    )
     assert report["ratio"] is None or report["ratio"]["of"] == "ours bayes/fused / sb3 train"
 
 
 def test_bench_online_reports_steps_per_second():
     report = bench("bench_online.py", "--quick", "--json")
-    check_interleaved(report, [("ours", "steps_per_s"), ("sb3", "steps_per_s")] if report["sides"]["sb3"] else
-                      [("ours", "steps_per_s")])
+    check_interleaved(
+        report,
+        [("ours", "steps_per_s"), ("sb3", "steps_per_s")] if report["sides"]["sb3"] else [("ours", "steps_per_s")],
+    )
     assert report["settings"]["steps"] == 300
 
 
 def test_a_failing_side_fails_the_benchmark_in_one_line():
-    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_online.py"), "--rounds", "1",
-                           "--expert-loss", "nope", "--json"], capture_output=True, text=True, timeout=600, cwd=REPO)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "benchmarks" / "bench_online.py"),
+            "--rounds",
+            "1",
+            "--expert-loss",
+            "nope",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
     assert done.returncode != 0
     [line] = done.stderr.strip().splitlines()
     assert "the ours side failed in round 1" in line and "expert_loss='nope'" in line
@@ -79,13 +113,19 @@ def test_interleave_alternates_first_place_and_pairs_ratios_by_round():
     ours = [{"rate": 10.0}, {"rate": 30.0}, {"rate": 20.0}]
     sb3 = [{"rate": 10.0}, {"rate": 10.0}, {"rate": 40.0}]
     summary = interleave.summarise({"ours": ours, "sb3": sb3}, {"rate": ("rate", "rate")})
-    assert summary["sides"]["ours"]["rate"] == {"median": 20.0, "min": 10.0, "max": 30.0,
-                                                "per_round": [10.0, 30.0, 20.0]}
+    assert summary["sides"]["ours"]["rate"] == {
+        "median": 20.0,
+        "min": 10.0,
+        "max": 30.0,
+        "per_round": [10.0, 30.0, 20.0],
+    }
     ratio = summary["ratios"]["rate"]
     assert ratio["per_round"] == [1.0, 3.0, 0.5]  # round by round, not median ÷ median (20 / 10 = 2)
     assert (ratio["median"], ratio["min"], ratio["max"]) == (1.0, 0.5, 3.0)
-    assert interleave.summarise({"ours": ours[:2], "sb3": sb3[:2]}, {"rate": ("rate", "rate")})["ratios"]["rate"][
-        "median"] == 2.0  # an even count: the mean of the middle two
+    assert (
+        interleave.summarise({"ours": ours[:2], "sb3": sb3[:2]}, {"rate": ("rate", "rate")})["ratios"]["rate"]["median"]
+        == 2.0
+    )  # an even count: the mean of the middle two
     absent = interleave.summarise({"ours": ours, "sb3": None}, {"rate": ("rate", "rate")})
     assert absent["sides"]["sb3"] is None and absent["ratios"]["rate"] is None
 
@@ -139,30 +179,53 @@ def test_sb3_part_alone_reuses_its_runs_and_keeps_our_arms(tmp_path, capsys):
     from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, ArmSteps, load, save
 
     module = load_bench("bench_sample_efficiency.py")
-    for task, seed, first in (("cartpole", 0, 20_000), ("cartpole", 1, 30_000), ("mountaincar", 0, None),
-                              ("mountaincar", 1, None)):
+    for task, seed, first in (
+        ("cartpole", 0, 20_000),
+        ("cartpole", 1, 30_000),
+        ("mountaincar", 0, None),
+        ("mountaincar", 1, None),
+    ):
         budget = module.ZOO[task]["n_timesteps"]
         evals = [(step, 500.0 if first and step >= first else -200.0) for step in range(0, budget + 1, 1000)]
         (tmp_path / "sb3-dqn" / task).mkdir(parents=True, exist_ok=True)
         (tmp_path / "sb3-dqn" / task / f"seed{seed}.json").write_text(
-            json.dumps({**module.sb3_settings(task, seed, budget, 1000), "evals": evals}))
+            json.dumps({**module.sb3_settings(task, seed, budget, 1000), "evals": evals})
+        )
     ours = ArmSteps("cartpole", "bayes", [2500.0, 2500.0], [500.0, 500.0], 475.0)
     save(tmp_path / EFFICIENCY_FILE, module.PROTOCOL, [ours])
-    assert module.main(["--parts", "sb3", "--seeds", "2", "--tasks", "cartpole,mountaincar", "--out", str(tmp_path)]) == 0
+    assert (
+        module.main(["--parts", "sb3", "--seeds", "2", "--tasks", "cartpole,mountaincar", "--out", str(tmp_path)]) == 0
+    )
     printed = capsys.readouterr().out
     assert "0 to run" in printed and "25,000; independent check ≈ 28,000" in printed
     assert "| cartpole bayes | 2,500 | [2,500, 2,500] | 2/2 | 2/2 (500.0) | 10.0× [8.0×, 12.0×] | 10×: met |" in printed
     _, arms = load(tmp_path / EFFICIENCY_FILE)
-    assert [a.label for a in arms] == ["cartpole bayes", f"cartpole {module.SB3_METHOD}",
-                                       f"mountaincar {module.SB3_METHOD}"]
+    assert [a.label for a in arms] == [
+        "cartpole bayes",
+        f"cartpole {module.SB3_METHOD}",
+        f"mountaincar {module.SB3_METHOD}",
+    ]
     assert arms[1].first == [20_000.0, 30_000.0] and arms[2].first == [None, None]
 
 
 def test_memory_long_run_quick_samples_the_curve(tmp_path):
-    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "memory_long_run.py"), "--quick", "--json",
-                           str(tmp_path / "rss.json")], capture_output=True, text=True, timeout=600, cwd=REPO)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "benchmarks" / "memory_long_run.py"),
+            "--quick",
+            "--json",
+            str(tmp_path / "rss.json"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
     assert done.returncode == 0, done.stderr
-    assert "MountainCar, 5,000 env steps" in done.stdout and "RSS over the last tenth ÷ RSS over 500–1,000" in done.stdout
+    assert (
+        "MountainCar, 5,000 env steps" in done.stdout and "RSS over the last tenth ÷ RSS over 500–1,000" in done.stdout
+    )
     samples = json.loads((tmp_path / "rss.json").read_text())["samples"]
     assert max(step for step, _ in samples) >= 4_000 and samples[-1][1] > 100  # TensorFlow alone is more
 
@@ -199,13 +262,19 @@ def test_bench_pixels_quick_reports_both_sides_on_minatar():
 
 
 def test_memory_frames_quick_states_the_pool_and_the_alternatives():
-    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "memory_frames.py"), "--quick"],
-                          capture_output=True, text=True, timeout=600, cwd=REPO)
+    done = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "memory_frames.py"), "--quick"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
     assert done.returncode == 0, done.stderr
     rows = {line[:30].strip(): line[30:].split() for line in done.stdout.splitlines()[2:]}
     # Atari at 1,000 transitions, scaled to 100k: 2 slots × 7,056 bytes × (1,000 + 10 + 4) rows ÷ 1,000 × 100k.
     assert float(rows["Atari (84×84, 4 stacked)"][1].replace(",", "")) == pytest.approx(
-        2 * 84 * 84 * 1014 * 100 / 1e6, abs=0.1)
+        2 * 84 * 84 * 1014 * 100 / 1e6, abs=0.1
+    )
     assert float(rows["cartpole (4 floats)"][1]) == 0.0  # no pool for vectors
 
 
@@ -214,4 +283,5 @@ def test_bench_sweep_quick_times_both_sides_and_finds_the_same_results():
     assert report["same_results"] and set(report["seconds"]) == {"fresh", "reused"}
     fresh, reused = report["seconds"]["fresh"]["per_round"], report["seconds"]["reused"]["per_round"]
     assert report["ratio_fresh_over_reused"]["per_round"] == pytest.approx(
-        [f / r for f, r in zip(fresh, reused)], rel=1e-2)
+        [f / r for f, r in zip(fresh, reused, strict=True)], rel=1e-2
+    )

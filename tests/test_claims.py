@@ -8,19 +8,29 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy import stats as sps
-from dqfd_bc_keras.experiments import arms as grouping, claims as analysis, metrics, plans as planning, report as results
+
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments import arms as grouping
+from dqfd_bc_keras.experiments import claims as analysis
+from dqfd_bc_keras.experiments import metrics
+from dqfd_bc_keras.experiments import plans as planning
+from dqfd_bc_keras.experiments import report as results
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
 from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
 from dqfd_bc_keras.experiments.efficiency import ArmSteps
-from dqfd_bc_keras.experiments.lab_settings import (LAB_SETTINGS, NO_SETTINGS, LabSettings, lab_settings,
-                                                    register_lab_settings)
+from dqfd_bc_keras.experiments.lab_settings import (
+    LAB_SETTINGS,
+    NO_SETTINGS,
+    LabSettings,
+    lab_settings,
+    register_lab_settings,
+)
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
 from dqfd_bc_keras.experiments.summary import summary
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.runs import EVAL_FIELDS
+from dqfd_bc_keras.runs.directory import EVAL_FIELDS
 from dqfd_bc_keras.tasks import TASKS
-from dqfd_bc_keras.training import METRIC_FIELDS
+from dqfd_bc_keras.training.loop import METRIC_FIELDS
 
 # cartpole-200 naive: an episode of length L < 200 is a fall, task return L − 1 − 100, plain L
 SOLVER = [50] * 5 + [200] + [80] + [200] * 10  # peak at 6, collapse at 7, rule fires at 17
@@ -29,13 +39,16 @@ SOLVER_MEAN = (5 * 50 + 200 + 80 + 10 * 200) / 17
 
 
 def cartpole_rows(lengths: list[int]) -> list[dict]:
-    return [{"return": 200.0 if n >= 200 else n - 101.0, "plain_return": float(n), "length": n, "goals": 0}
-            for n in lengths]
+    return [
+        {"return": 200.0 if n >= 200 else n - 101.0, "plain_return": float(n), "length": n, "goals": 0} for n in lengths
+    ]
 
 
 def goal_rows(goals: list[int]) -> list[dict]:
-    return [{"return": 100.0 * g - (200 - g), "plain_return": -150.0 if g else -200.0, "length": 200, "goals": g}
-            for g in goals]
+    return [
+        {"return": 100.0 * g - (200 - g), "plain_return": -150.0 if g else -200.0, "length": 200, "goals": g}
+        for g in goals
+    ]
 
 
 def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: float = 0.0, **fields) -> FinishedRun:
@@ -43,11 +56,28 @@ def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: f
     (at 4k loop steps each: roll-outs played the rest)."""
     config = Config.for_task(**fields)
     steps = np.cumsum([r["length"] for r in rows])
-    metrics = [{**{f: 0.0 for f in METRIC_FIELDS}, **r, "episode": i + 1, "env_step": int(steps[i]),
-                "interactions": int(steps[i]),
-                "wall_time": 60.0 * (i + 1) / len(rows)} for i, r in enumerate(rows)]
-    evaluations = [{"env_step": 4000 * i, "interactions": 5000 * i, "episode": 0, "mean_return": m, "std_return": 0.0, "mean_goals": None}
-                   for i, m in enumerate(evals)]
+    metrics = [
+        {
+            **{f: 0.0 for f in METRIC_FIELDS},
+            **r,
+            "episode": i + 1,
+            "env_step": int(steps[i]),
+            "interactions": int(steps[i]),
+            "wall_time": 60.0 * (i + 1) / len(rows),
+        }
+        for i, r in enumerate(rows)
+    ]
+    evaluations = [
+        {
+            "env_step": 4000 * i,
+            "interactions": 5000 * i,
+            "episode": 0,
+            "mean_return": m,
+            "std_return": 0.0,
+            "mean_goals": None,
+        }
+        for i, m in enumerate(evals)
+    ]
     return FinishedRun(path, config, metrics, evaluations, {"task": config.task, "mean_return": final})
 
 
@@ -79,16 +109,23 @@ def suite(tmp_path_factory) -> Path:
     runs = []
     for loss in ("bayes", "ce"):
         for seed, lengths in enumerate((SOLVER, UNFINISHED, SOLVER)):
-            runs.append((cartpole_rows(lengths), [20.0, 300.0, 480.0, 500.0], 500.0,
-                         {**CP, "expert_loss": loss, "seed": seed}))
+            runs.append(
+                (cartpole_rows(lengths), [20.0, 300.0, 480.0, 500.0], 500.0, {**CP, "expert_loss": loss, "seed": seed})
+            )
     runs += [(cartpole_rows([30] * 20), [20.0], 25.0, {**CP, "expert_loss": "none", "seed": s}) for s in (0, 1)]
     for loss, sigma, base in (("bayes", 0.5, 2), ("ce", 0.5, 1), ("bayes", 0.05, 0)):
         for seed in range(4):
             goals = [base + 1] * seed + [base] * (30 - seed) + [3] * 10  # goals_first30 = base + seed/30
-            runs.append((goal_rows(goals), [-200.0, -120.0], -130.0,
-                         {**MC, "expert_loss": loss, "sigma0_sq": sigma, "seed": seed}))
+            runs.append(
+                (
+                    goal_rows(goals),
+                    [-200.0, -120.0],
+                    -130.0,
+                    {**MC, "expert_loss": loss, "sigma0_sq": sigma, "seed": seed},
+                )
+            )
     order = np.random.default_rng(0).permutation(len(runs))
-    for i, (rows, evals, final, fields) in zip(order, runs):
+    for i, (rows, evals, final, fields) in zip(order, runs, strict=True):
         write_run(make_run(root / f"x{i:02d}" / "run", rows, evals, final, **fields))
     (root / "incomplete").mkdir()
     (root / "incomplete" / "config.json").write_text(json.dumps(Config.for_task("cartpole").to_dict()))
@@ -122,8 +159,12 @@ def test_a_censored_run_ranks_after_every_finished_run(tmp_path):
     values = [metrics.PER_RUN["episodes_to_solve"](r) for r in (censored, slow)]
     assert values == [np.inf, 30.0] and list(sps.rankdata(values)) == [2.0, 1.0]
     never = arm([make_run(tmp_path, cartpole_rows(UNFINISHED), expert_loss="bayes", seed=s, **CP) for s in range(3)])
-    slower = arm([make_run(tmp_path, cartpole_rows([50] * (20 + s) + [200] * 10), expert_loss="ce", seed=s, **CP)
-                  for s in range(3)])
+    slower = arm(
+        [
+            make_run(tmp_path, cartpole_rows([50] * (20 + s) + [200] * 10), expert_loss="ce", seed=s, **CP)
+            for s in range(3)
+        ]
+    )
     comparison = analysis.compare("episodes_to_solve", never, slower)
     assert comparison.diff is None and comparison.tost is None and comparison.interval() == "—"  # no mean over inf
     assert (comparison.bayes.median, comparison.bayes.censored, comparison.ce.median) == (np.inf, 3, 31.0)
@@ -134,8 +175,14 @@ def test_a_censored_run_ranks_after_every_finished_run(tmp_path):
 def test_early_stop_rule_follows_the_config(tmp_path):
     run = make_run(tmp_path, cartpole_rows([200] * 3 + [150] + [200] * 3), early_stop_window=3, **CP)
     assert metrics.episodes_to_solve(run) == 3
-    run = make_run(tmp_path, cartpole_rows([200] * 3 + [150] + [200] * 3), early_stop_window=3,
-                   early_stop_fraction=0.5, max_steps=400, **CP)  # limit 400: 200 ≥ 0.5 × 400
+    run = make_run(
+        tmp_path,
+        cartpole_rows([200] * 3 + [150] + [200] * 3),
+        early_stop_window=3,
+        early_stop_fraction=0.5,
+        max_steps=400,
+        **CP,
+    )  # limit 400: 200 ≥ 0.5 × 400
     assert metrics.episodes_to_solve(run) == 3
     assert metrics.collapses(run) == 0  # never ≥ 0.98 × 400
 
@@ -145,9 +192,13 @@ def test_runs_are_grouped_into_arms_by_config(suite):
     assert len(runs) == 20  # the run without eval.json is left out
     arms = grouping.group_arms(runs)
     assert [(a.label, len(a.runs)) for a in arms] == [
-        ("cartpole-200/naive · bayes", 3), ("cartpole-200/naive · ce", 3), ("cartpole-200/naive · none", 2),
+        ("cartpole-200/naive · bayes", 3),
+        ("cartpole-200/naive · ce", 3),
+        ("cartpole-200/naive · none", 2),
         ("mountaincar-goals/bootstrap · bayes sigma0_sq=0.05", 4),
-        ("mountaincar-goals/bootstrap · bayes sigma0_sq=0.5", 4), ("mountaincar-goals/bootstrap · ce", 4)]
+        ("mountaincar-goals/bootstrap · bayes sigma0_sq=0.5", 4),
+        ("mountaincar-goals/bootstrap · ce", 4),
+    ]
     assert sorted(r.config.seed for r in arms[0].runs) == [0, 1, 2]
     pairs = grouping.bayes_ce_pairs(arms, "mountaincar-goals", None)
     assert [(b.name, c.name) for b, c in pairs] == [("bayes sigma0_sq=0.5", "ce"), ("bayes sigma0_sq=0.05", "ce")]
@@ -159,27 +210,44 @@ def cartpole_arm(tmp_path, loss: str, lengths: list[list[int]]) -> ArmRuns:
 
 def return_arm(tmp_path, loss: str, returns, **fields) -> ArmRuns:
     """One single-episode run per seed whose mean training return is the given value."""
-    return arm([make_run(tmp_path, [{"return": r, "plain_return": r, "length": 1, "goals": 0}], expert_loss=loss,
-                         seed=s, **fields) for s, r in enumerate(returns)])
+    return arm(
+        [
+            make_run(
+                tmp_path,
+                [{"return": r, "plain_return": r, "length": 1, "goals": 0}],
+                expert_loss=loss,
+                seed=s,
+                **fields,
+            )
+            for s, r in enumerate(returns)
+        ]
+    )
 
 
 SPREAD = np.arange(1.0, 11.0)
 """10 seeds 1..10: for k · SPREAD against itself the bootstrap puts Δ's 90% CI at ±2.1 k, its 95% CI at ±2.5 k."""
 
 
-@pytest.mark.parametrize("judge, fields, margin", [
-    (analysis.judge_c1, CP, 10.0), (analysis.judge_c3, {"task": "cartpole", "timeout": "bootstrap"}, 25.0)])
-@pytest.mark.parametrize("spread, shift, expected", [
-    (0.005, 0.5, "holds"),  # half a margin apart, seeds wholly separated: significant, yet inside the margin
-    (0.44, 1.0, "inconclusive"),  # Δ = margin: the CI straddles it
-    (0.005, 2.0, "does not hold"),  # twice the margin apart: wholly outside it
-    (1.0, 0.0, "inconclusive"),  # equal means and Mann–Whitney p = 1, but too spread to show sameness
-])
+@pytest.mark.parametrize(
+    "judge, fields, margin",
+    [(analysis.judge_c1, CP, 10.0), (analysis.judge_c3, {"task": "cartpole", "timeout": "bootstrap"}, 25.0)],
+)
+@pytest.mark.parametrize(
+    "spread, shift, expected",
+    [
+        (0.005, 0.5, "holds"),  # half a margin apart, seeds wholly separated: significant, yet inside the margin
+        (0.44, 1.0, "inconclusive"),  # Δ = margin: the CI straddles it
+        (0.005, 2.0, "does not hold"),  # twice the margin apart: wholly outside it
+        (1.0, 0.0, "inconclusive"),  # equal means and Mann–Whitney p = 1, but too spread to show sameness
+    ],
+)
 def test_no_difference_is_judged_by_tost(tmp_path, judge, fields, margin, spread, shift, expected):
     """Spread and shift in units of the margin (±5% of the limit)."""
     ce = 100.0 + spread * margin * SPREAD
-    result = judge(return_arm(tmp_path / "b", "bayes", ce + shift * margin, **fields),
-                   return_arm(tmp_path / "c", "ce", ce, **fields))
+    result = judge(
+        return_arm(tmp_path / "b", "bayes", ce + shift * margin, **fields),
+        return_arm(tmp_path / "c", "ce", ce, **fields),
+    )
     assert result.verdict == expected
     returns = result.comparisons[0]
     assert returns.metric == "mean_train_return"
@@ -189,8 +257,10 @@ def test_no_difference_is_judged_by_tost(tmp_path, judge, fields, margin, spread
     assert result.power == pytest.approx(analysis.rule_power(result.sd, margin, 10))
 
 
-@pytest.mark.parametrize("judge, fields, margin", [
-    (analysis.judge_c1, CP, 10.0), (analysis.judge_c3, {"task": "cartpole", "timeout": "bootstrap"}, 25.0)])
+@pytest.mark.parametrize(
+    "judge, fields, margin",
+    [(analysis.judge_c1, CP, 10.0), (analysis.judge_c3, {"task": "cartpole", "timeout": "bootstrap"}, 25.0)],
+)
 def test_tost_reads_the_90_not_the_95_percent_ci(tmp_path, judge, fields, margin):
     """At 0.44 margins of spread Δ's 95% CI reaches ±1.1 margins, its 90% CI ±0.92: equivalent."""
     ce = 100.0 + 0.44 * margin * SPREAD
@@ -218,17 +288,19 @@ def test_c1_reports_episodes_to_solve_beside_the_returns(tmp_path):
 
 
 def goals_arm(tmp_path, loss: str, first30) -> ArmRuns:
-    return arm([make_run(tmp_path, goal_rows([g] * 30), expert_loss=loss, seed=s, **MC)
-                for s, g in enumerate(first30)])
+    return arm([make_run(tmp_path, goal_rows([g] * 30), expert_loss=loss, seed=s, **MC) for s, g in enumerate(first30)])
 
 
-@pytest.mark.parametrize("bayes, ce, significant, expected", [
-    (1.5 + 0.01 * SPREAD, 1.0 + 0.01 * SPREAD, True, "holds"),  # Δ = 0.5: its 90% CI wholly above +0.25
-    (1.06 + 0.005 * SPREAD, 1.0 + 0.005 * SPREAD, True, "does not hold"),  # +0.06: significant, shown < +0.25
-    (1.0 + 0.1 * SPREAD, 0.75 + 0.1 * SPREAD, False, "inconclusive"),  # Δ = 0.25: the CI straddles the margin
-    (1.0 + 0.01 * SPREAD, 1.5 + 0.01 * SPREAD, True, "does not hold"),  # ce reaches the flag more often
-    (np.full(4, 2.0), np.full(4, 2.0), False, "does not hold"),
-])
+@pytest.mark.parametrize(
+    "bayes, ce, significant, expected",
+    [
+        (1.5 + 0.01 * SPREAD, 1.0 + 0.01 * SPREAD, True, "holds"),  # Δ = 0.5: its 90% CI wholly above +0.25
+        (1.06 + 0.005 * SPREAD, 1.0 + 0.005 * SPREAD, True, "does not hold"),  # +0.06: significant, shown < +0.25
+        (1.0 + 0.1 * SPREAD, 0.75 + 0.1 * SPREAD, False, "inconclusive"),  # Δ = 0.25: the CI straddles the margin
+        (1.0 + 0.01 * SPREAD, 1.5 + 0.01 * SPREAD, True, "does not hold"),  # ce reaches the flag more often
+        (np.full(4, 2.0), np.full(4, 2.0), False, "does not hold"),
+    ],
+)
 def test_markedly_more_has_to_clear_the_margin(tmp_path, bayes, ce, significant, expected):
     result = analysis.judge_c4(goals_arm(tmp_path / "b", "bayes", bayes), goals_arm(tmp_path / "c", "ce", ce))
     assert result.verdict == expected
@@ -242,8 +314,12 @@ PAPER_FIELDS = {**CP, "early_stop_window": 0, "total_steps": analysis.PAPER_READ
 
 
 def c2_arm(tmp_path, loss: str, lengths: list[list[int]], **fields) -> ArmRuns:
-    return arm([make_run(tmp_path / f"{loss}{s}", cartpole_rows(n), expert_loss=loss, seed=s, **{**CP, **fields})
-                for s, n in enumerate(lengths)])
+    return arm(
+        [
+            make_run(tmp_path / f"{loss}{s}", cartpole_rows(n), expert_loss=loss, seed=s, **{**CP, **fields})
+            for s, n in enumerate(lengths)
+        ]
+    )
 
 
 @pytest.mark.parametrize("fields", [{}, PAPER_FIELDS], ids=["today", "paper"])
@@ -265,10 +341,16 @@ def test_c2_today_holds_on_equal_unfinished_shares_with_collapses_in_both(tmp_pa
 def test_c2_paper_reading_is_selected_and_judged_on_collapses(tmp_path):
     """Without early stop every run is unfinished: C2 compares the share of runs with a collapse."""
     falling, steady = [[200] * 5 + [60] + [200] * 300] * 4, [[200] * 306] * 4
-    runs = [r for a in (c2_arm(tmp_path / "p", "bayes", falling, **PAPER_FIELDS),
-                        c2_arm(tmp_path / "p", "ce", falling, **PAPER_FIELDS),
-                        c2_arm(tmp_path / "t", "bayes", [SOLVER] * 2), c2_arm(tmp_path / "t", "ce", [SOLVER] * 2))
-            for r in a.runs]
+    runs = [
+        r
+        for a in (
+            c2_arm(tmp_path / "p", "bayes", falling, **PAPER_FIELDS),
+            c2_arm(tmp_path / "p", "ce", falling, **PAPER_FIELDS),
+            c2_arm(tmp_path / "t", "bayes", [SOLVER] * 2),
+            c2_arm(tmp_path / "t", "ce", [SOLVER] * 2),
+        )
+        for r in a.runs
+    ]
     arms = grouping.group_arms(runs)
     c1_200, today, paper = analysis.CLAIMS[0].settings[1], *analysis.CLAIMS[1].settings
     assert paper.reading.startswith("the paper's reading") and today.reading.startswith("today's reading")
@@ -285,8 +367,10 @@ def test_c2_paper_reading_is_selected_and_judged_on_collapses(tmp_path):
     assert falls.bayes.mean == 1.0
     never = c2_arm(tmp_path / "n", "ce", steady, **PAPER_FIELDS)
     assert analysis.judge_c2(bayes, never).verdict == "does not hold"  # shares 1 against 0
-    assert analysis.judge_c2(c2_arm(tmp_path / "m", "bayes", falling[:2] + steady[:2], **PAPER_FIELDS),
-                             never).verdict == "inconclusive"  # one arm never collapses, shares ½ and 0
+    assert (
+        analysis.judge_c2(c2_arm(tmp_path / "m", "bayes", falling[:2] + steady[:2], **PAPER_FIELDS), never).verdict
+        == "inconclusive"
+    )  # one arm never collapses, shares ½ and 0
 
 
 def test_c2_and_n_below_two(suite):
@@ -340,19 +424,31 @@ def test_report_writes_markdown_and_figures(suite, tmp_path):
     assert out.read_text() == text
     claims = claim_rows(text)
     assert [(r[0], r[1].split("<br>")[0]) for r in claims] == [
-        ("C1", "cartpole/naive"), ("C1", "cartpole-200/naive"), ("C2", "cartpole-200/naive early_stop_window=10"),
-        ("C2", "cartpole-200/naive early_stop_window=0 total_steps=60000"), ("C3", "cartpole/bootstrap"),
-        ("C4", "mountaincar-goals/*")]
-    assert [r[-1] for r in claims] == ["not run", "**inconclusive**", "**inconclusive**", "not run", "not run",
-                                       "**holds**"]
+        ("C1", "cartpole/naive"),
+        ("C1", "cartpole-200/naive"),
+        ("C2", "cartpole-200/naive early_stop_window=10"),
+        ("C2", "cartpole-200/naive early_stop_window=0 total_steps=60000"),
+        ("C3", "cartpole/bootstrap"),
+        ("C4", "mountaincar-goals/*"),
+    ]
+    assert [r[-1] for r in claims] == [
+        "not run",
+        "**inconclusive**",
+        "**inconclusive**",
+        "not run",
+        "not run",
+        "**holds**",
+    ]
     assert "today's reading" in claims[2][1] and "the paper's reading" in claims[3][1]
     assert "Fisher exact p = 1" in claims[2][5] and claims[2][6].startswith("3, 3 · sd ")
     assert "p = 0.0286" in claims[5][5]  # 4 vs 4 separated: exact p = 2/70
     assert "(90%: " in claims[5][4] and claims[5][6].startswith("4, 4 · sd ") and "power 1.00" in claims[5][6]
     assert "episodes_to_solve: bayes median 17.00 [17.00, ∞] (1 of 3 censored)" in claims[1][3]
     assert "Seeds planned for C1 on cartpole/naive: sd 36.1 of `mean_train_return`" in text
-    assert ("- C2 (cartpole-200/naive early_stop_window=10; cartpole-200/naive early_stop_window=0 "
-            f"total_steps=60000): {analysis.CLAIMS[1].rule}") in text
+    assert (
+        "- C2 (cartpole-200/naive early_stop_window=10; cartpole-200/naive early_stop_window=0 "
+        f"total_steps=60000): {analysis.CLAIMS[1].rule}"
+    ) in text
     rows = [line for line in text.splitlines() if line.startswith("| C")]
     sensitivity = [r for r in rows if "sigma0_sq=0.05" in r]
     assert len(sensitivity) == 1 and sensitivity[0].endswith("| does not hold | yes |")
@@ -396,8 +492,10 @@ def test_the_reference_pair_is_the_one_at_the_preset(tmp_path):
     runs = []
     for loss in ("bayes", "ce"):
         runs.append(make_run(tmp_path / loss, goal_rows([1]), expert_loss=loss, **MC))
-        runs += [make_run(tmp_path / f"{loss}{s}", goal_rows([1]), expert_loss=loss, total_steps=20_000, seed=s, **MC)
-                 for s in range(3)]
+        runs += [
+            make_run(tmp_path / f"{loss}{s}", goal_rows([1]), expert_loss=loss, total_steps=20_000, seed=s, **MC)
+            for s in range(3)
+        ]
     arms = grouping.group_arms(runs)
     assert sorted(grouping.preset_distance(a) for a in arms) == [0, 0, 1, 1]
     bayes, ce = grouping.bayes_ce_pairs(arms, "mountaincar-goals", "bootstrap")[0]
@@ -405,9 +503,23 @@ def test_the_reference_pair_is_the_one_at_the_preset(tmp_path):
 
 
 def test_report_quotes_the_sweep_log(tmp_path):
-    (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(
-        {"suite": suite, "seeds": 10, "runs": runs, "workers": 2, "backend": "local", "seconds": seconds,
-         "ended": "2026-11-26 08:00:00"}) + "\n" for suite, runs, seconds in (("paper", 80, 600.0), ("baselines", 9, 300.0))))
+    (tmp_path / "sweeps.jsonl").write_text(
+        "".join(
+            json.dumps(
+                {
+                    "suite": suite,
+                    "seeds": 10,
+                    "runs": runs,
+                    "workers": 2,
+                    "backend": "local",
+                    "seconds": seconds,
+                    "ended": "2026-11-26 08:00:00",
+                }
+            )
+            + "\n"
+            for suite, runs, seconds in (("paper", 80, 600.0), ("baselines", 9, 300.0))
+        )
+    )
     text = results.report(tmp_path, tmp_path / "RESULTS.md", tmp_path / "figures")
     assert "| paper | 10 | 80 | 2 × local | 10.0 min | 2026-11-26 08:00:00 |" in text
     assert "| baselines | 10 | 9 | 2 × local | 5.0 min |" in text and "Sum: 15.0 min" in text
@@ -432,8 +544,10 @@ def test_trailing_mean_by_hand():
 
 def _arm_of(tmp_path, name: str, values: list[list[int]], **fields) -> ArmRuns:
     """cartpole/bootstrap runs whose plain returns per episode are `values` (one list per seed)."""
-    runs = [make_run(tmp_path / name / str(seed), cartpole_rows(lengths), seed=seed, task="cartpole", **fields)
-            for seed, lengths in enumerate(values)]
+    runs = [
+        make_run(tmp_path / name / str(seed), cartpole_rows(lengths), seed=seed, task="cartpole", **fields)
+        for seed, lengths in enumerate(values)
+    ]
     return ArmRuns(runs[0].config.to_dict(), runs, name)
 
 
@@ -448,7 +562,10 @@ def test_ablations_pair_with_the_full_arm_and_are_judged_against_the_margin(tmp_
     rollouts = _arm_of(tmp_path, "roll", [[420] * 5] * 4, dynamic_demos="rollouts")  # not the preset's mode
     pairs = analysis.ablation_pairs([full, prior, dynamic, dropout, rollouts])
     assert sorted((key, a.name, f.name) for key, a, f in pairs) == [
-        ("bayes_prior", "prior", "full"), ("dynamic_demos", "dyn", "full"), ("mc_dropout", "mc", "full")]
+        ("bayes_prior", "prior", "full"),
+        ("dynamic_demos", "dyn", "full"),
+        ("mc_dropout", "mc", "full"),
+    ]
     verdicts = {a.name: analysis.judge_ablation(a, f).verdict for _, a, f in pairs}
     assert verdicts == {"prior": "no measurable contribution", "dyn": "contributes", "mc": "hurts"}
     line = "- Ablations (one part of the Bayesian machinery off, against the full arm): contributes in 1, hurts in 1, "
@@ -481,9 +598,13 @@ def test_a_task_has_the_lab_settings_registered_under_its_name_else_none(users_t
     assert lab_settings(users_task) == LabSettings(target_ratio=3.0, ablation_metric="mean_train_return")
     assert ArmSteps(users_task, "bayes", [None], [0.0], 55.0).target == 3.0
     assert lab_settings("cartpole-200") is NO_SETTINGS and lab_settings("Acrobot-v1") is NO_SETTINGS
-    full, prior = (ArmRuns(run.config.to_dict(), [run], name) for name, run in (
-        ("full", make_run(tmp_path / "full", cartpole_rows([100] * 5), task="cartpole-200")),
-        ("prior", make_run(tmp_path / "prior", cartpole_rows([100] * 5), task="cartpole-200", bayes_prior=False))))
+    full, prior = (
+        ArmRuns(run.config.to_dict(), [run], name)
+        for name, run in (
+            ("full", make_run(tmp_path / "full", cartpole_rows([100] * 5), task="cartpole-200")),
+            ("prior", make_run(tmp_path / "prior", cartpole_rows([100] * 5), task="cartpole-200", bayes_prior=False)),
+        )
+    )
     assert analysis.ablation_pairs([full, prior]) == []
     with pytest.raises(ConfigError, match="register_lab_settings\\(\\) takes LabSettings, got dict"):
         register_lab_settings("lab-pole", {"target_ratio": 3.0})
@@ -495,29 +616,51 @@ def test_the_summary_counts_how_sensitivity_arms_move_the_verdict(tmp_path):
     σ0² = 0.1 equal to ce (holds: the same verdict)."""
     c3 = {"task": "cartpole", "timeout": "bootstrap"}
     ce = 100.0 + 0.005 * 25.0 * SPREAD
-    arms = [return_arm(tmp_path / "c", "ce", ce, **c3), return_arm(tmp_path / "b", "bayes", ce, **c3),
-            return_arm(tmp_path / "s1", "bayes", ce + 50.0, sigma0_sq=0.05, **c3),
-            return_arm(tmp_path / "s2", "bayes", ce + 25.0 * (SPREAD - SPREAD.mean()), sigma0_sq=2.0, **c3),
-            return_arm(tmp_path / "s3", "bayes", ce, sigma0_sq=0.1, **c3)]
+    arms = [
+        return_arm(tmp_path / "c", "ce", ce, **c3),
+        return_arm(tmp_path / "b", "bayes", ce, **c3),
+        return_arm(tmp_path / "s1", "bayes", ce + 50.0, sigma0_sq=0.05, **c3),
+        return_arm(tmp_path / "s2", "bayes", ce + 25.0 * (SPREAD - SPREAD.mean()), sigma0_sq=2.0, **c3),
+        return_arm(tmp_path / "s3", "bayes", ce, sigma0_sq=0.1, **c3),
+    ]
     assert [analysis.flips(v, "holds") for v in ("does not hold", "inconclusive", "holds")] == ["yes", "unclear", "no"]
-    line = ("- Sensitivity (each further bayes arm of a claim's setting against its ce arm): the verdict flips between "
-            "holds and does not hold in 1 of 3, moves to or from inconclusive in 1, stays in 1.")
+    line = (
+        "- Sensitivity (each further bayes arm of a claim's setting against its ce arm): the verdict flips between "
+        "holds and does not hold in 1 of 3, moves to or from inconclusive in 1, stays in 1."
+    )
     assert line in summary(arms, tmp_path)
 
 
 def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_path):
     """Evaluations every 5k interactions: a seed reaching 500 at the second evaluation solves at 5,000,
     one never reaching it at ∞."""
+
     def arm(name, mode, loss, evals):
-        runs = [make_run(tmp_path / name / str(seed), cartpole_rows([500] * 3), e, seed=seed, task="cartpole",
-                         expert_loss=loss, dynamic_demos=mode, max_steps=400 + i)
-                for seed, e in enumerate(evals) for i in [int(name[-1])]]
+        runs = [
+            make_run(
+                tmp_path / name / str(seed),
+                cartpole_rows([500] * 3),
+                e,
+                seed=seed,
+                task="cartpole",
+                expert_loss=loss,
+                dynamic_demos=mode,
+                max_steps=400 + i,
+            )
+            for seed, e in enumerate(evals)
+            for i in [int(name[-1])]
+        ]
         return ArmRuns(runs[0].config.to_dict(), runs, name)
 
     fast, slow = [[0.0, 500.0]] * 3, [[0.0, 0.0, 500.0]] * 3
-    arms = [arm("e1", "episodes", "bayes", slow), arm("r1", "rollouts", "bayes", fast),
-            arm("e2", "episodes", "ce", slow), arm("r2", "rollouts", "ce", fast),
-            arm("e3", "episodes", "bayes", fast), arm("r3", "rollouts", "bayes", slow)]
+    arms = [
+        arm("e1", "episodes", "bayes", slow),
+        arm("r1", "rollouts", "bayes", fast),
+        arm("e2", "episodes", "ce", slow),
+        arm("r2", "rollouts", "ce", fast),
+        arm("e3", "episodes", "bayes", fast),
+        arm("r3", "rollouts", "bayes", slow),
+    ]
     assert analysis.dynamic_default(arms)[0] is None  # 3 of the 4 pairs have run
     four = arms + [arm("e4", "episodes", "ce", slow), arm("r4", "rollouts", "ce", fast)]
     choice, pairs = analysis.dynamic_default(four)
@@ -533,8 +676,10 @@ def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_p
 
 def test_fields_a_loss_does_not_read_do_not_name_its_arm(tmp_path):
     """dynamic_demos varies between the bayes arms of the setting, but margin has no BC model."""
-    runs = [make_run(tmp_path / name, cartpole_rows([500] * 3), task="cartpole", expert_loss=loss, dynamic_demos=mode)
-            for name, loss, mode in (("a", "bayes", "episodes"), ("b", "bayes", "rollouts"), ("c", "margin", "episodes"))]
+    runs = [
+        make_run(tmp_path / name, cartpole_rows([500] * 3), task="cartpole", expert_loss=loss, dynamic_demos=mode)
+        for name, loss, mode in (("a", "bayes", "episodes"), ("b", "bayes", "rollouts"), ("c", "margin", "episodes"))
+    ]
     names = sorted(a.name for a in grouping.group_arms(runs))
     assert names == ["bayes dynamic_demos=episodes", "bayes dynamic_demos=rollouts", "margin"]
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import dqfd_bc_keras
-from dqfd_bc_keras.methods import METHODS
+from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.errors import ModelFileError
 from dqfd_bc_keras.experiments.__main__ import BACKENDS
 
@@ -23,8 +23,14 @@ class Done:
     the chain of modules whose import brought TensorFlow in (empty: TensorFlow was not imported)."""
 
     def __init__(self, *args: object, cwd: Path = REPO, env: dict[str, str] = ENV) -> None:
-        done = subprocess.run([sys.executable, "-X", "importtime", *map(str, args)], capture_output=True, text=True,
-                              cwd=cwd, env=env, timeout=300)
+        done = subprocess.run(
+            [sys.executable, "-X", "importtime", *map(str, args)],
+            capture_output=True,
+            text=True,
+            cwd=cwd,
+            env=env,
+            timeout=300,
+        )
         self.code, self.stdout = done.returncode, done.stdout
         timings = [line.split("|")[-1] for line in done.stderr.splitlines() if line.startswith("import time:")]
         self.stderr = [line for line in done.stderr.splitlines() if not line.startswith("import time:")]
@@ -39,7 +45,7 @@ def importers(timings: list[str], module: str) -> list[str]:
     if first is None:
         return []
     chain, depth = [], names[first][0]
-    for indent, name in names[first + 1:]:
+    for indent, name in names[first + 1 :]:
         if indent < depth:
             chain.append(name)
             depth = indent
@@ -51,36 +57,52 @@ def assert_answered_without_tensorflow(done: Done) -> None:
 
 
 def test_importers_reads_the_import_tree():
-    timings = ["    tensorflow", "  keras", "  numpy", "dqfd_bc_keras.bc", "other"]
-    assert importers(timings, "tensorflow") == ["keras", "dqfd_bc_keras.bc"]
-    assert importers(timings, "numpy") == ["dqfd_bc_keras.bc"] and importers(timings, "scipy") == []
+    timings = ["    tensorflow", "  keras", "  numpy", "dqfd_bc_keras.core.bc", "other"]
+    assert importers(timings, "tensorflow") == ["keras", "dqfd_bc_keras.core.bc"]
+    assert importers(timings, "numpy") == ["dqfd_bc_keras.core.bc"] and importers(timings, "scipy") == []
 
 
-@pytest.mark.parametrize("args, expected", [
-    (("evaluate.py", "--help"), "--policy {bc,q}"),
-    (("train.py", "--help"), "--expert-loss METHOD"),
-    ((*LAB, "--help"), "efficiency"),
-    ((*LAB, "run", "--help"), "--backend {local,ray}"),
-])
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (("evaluate.py", "--help"), "--policy {bc,q}"),
+        (("train.py", "--help"), "--expert-loss METHOD"),
+        ((*LAB, "--help"), "efficiency"),
+        ((*LAB, "run", "--help"), "--backend {local,ray}"),
+    ],
+)
 def test_help_answers_before_tensorflow_is_imported(args, expected):
     done = Done(*args)
     assert done.code == 0 and expected in done.stdout, done.stderr
     assert_answered_without_tensorflow(done)
 
 
-@pytest.mark.parametrize("args, message", [
-    (("evaluate.py", "models/cartpole", "--task", "CartPole-v1"),
-     "argument --task: 'CartPole-v1' is a Gymnasium env id, not a task preset: did you mean --env CartPole-v1?"),
-    (("evaluate.py", "models/cartpole", "--episodes", "0"), "argument --episodes: must be a positive integer, got 0"),
-    (("evaluate.py", "models/cartpole", "--policy", "p"), "argument --policy: invalid choice: 'p'"),
-    (("train.py", "--task", "CartPole-v1"), "did you mean --env CartPole-v1?"),
-    (("train.py", "--task", "cartpol"), "argument --task: invalid choice: 'cartpol'; did you mean cartpole?"),
-    (("train.py", "--env", "cartpol"), "Environment `cartpol` doesn't exist. Did you mean: `CartPole`?); did you mean "
-                                       "--task cartpole?"),
-    (("train.py", "--steps", "0"), "argument --steps: must be a positive integer, got 0"),
-    ((*LAB, "run", "nope", "--out", "x"), "argument suite: invalid choice: 'nope'"),
-    ((*LAB, "efficiency", "--tasks", "cartpole,pong"), "argument --tasks: unknown task(s) ['pong']; expected among"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ("evaluate.py", "models/cartpole", "--task", "CartPole-v1"),
+            "argument --task: 'CartPole-v1' is a Gymnasium env id, not a task preset: did you mean --env CartPole-v1?",
+        ),
+        (
+            ("evaluate.py", "models/cartpole", "--episodes", "0"),
+            "argument --episodes: must be a positive integer, got 0",
+        ),
+        (("evaluate.py", "models/cartpole", "--policy", "p"), "argument --policy: invalid choice: 'p'"),
+        (("train.py", "--task", "CartPole-v1"), "did you mean --env CartPole-v1?"),
+        (("train.py", "--task", "cartpol"), "argument --task: invalid choice: 'cartpol'; did you mean cartpole?"),
+        (
+            ("train.py", "--env", "cartpol"),
+            "Environment `cartpol` doesn't exist. Did you mean: `CartPole`?); did you mean --task cartpole?",
+        ),
+        (("train.py", "--steps", "0"), "argument --steps: must be a positive integer, got 0"),
+        ((*LAB, "run", "nope", "--out", "x"), "argument suite: invalid choice: 'nope'"),
+        (
+            (*LAB, "efficiency", "--tasks", "cartpole,pong"),
+            "argument --tasks: unknown task(s) ['pong']; expected among",
+        ),
+    ],
+)
 def test_argument_errors_are_one_line_before_tensorflow(args, message):
     done = Done(*args)
     assert done.code == 2 and done.stdout == "" and len(done.stderr) == 1, done.stderr
@@ -93,13 +115,20 @@ def test_a_task_name_not_a_preset_lists_the_presets():
     assert done.code == 2 and done.stderr == [
         "evaluate.py: error: argument --task: invalid choice: 'pong' (choose from 'acrobot', 'cartpole', "
         "'cartpole-200', 'lunarlander', 'minatar-breakout', 'minatar-freeway', 'mountaincar', 'mountaincar-goals'; "
-        "any Gymnasium env: --env ID)"]
+        "any Gymnasium env: --env ID)"
+    ]
 
 
-@pytest.mark.parametrize("assignment, message", [
-    ("sigma0=1", "error: --set 'sigma0=1': unknown Config field 'sigma0'; did you mean sigma0_sq?"),
-    ("zzz=1", "error: --set 'zzz=1': unknown Config field 'zzz'; Config's fields are listed in dqfd_bc_keras/config.py"),
-])
+@pytest.mark.parametrize(
+    "assignment, message",
+    [
+        ("sigma0=1", "error: --set 'sigma0=1': unknown Config field 'sigma0'; did you mean sigma0_sq?"),
+        (
+            "zzz=1",
+            "error: --set 'zzz=1': unknown Config field 'zzz'; Config's fields are listed in dqfd_bc_keras/core/config.py",
+        ),
+    ],
+)
 def test_an_unknown_set_field_names_its_nearest_field(assignment, message):
     """From config.parse_assignments: TensorFlow-free once config.py no longer imports it."""
     done = Done("train.py", "--set", assignment, "--quick")
@@ -126,10 +155,12 @@ def test_the_labs_light_choices_are_its_modules_names():
 
 
 def test_the_package_imports_without_tensorflow_and_sets_its_threads_when_it_loads():
-    code = ("import sys, dqfd_bc_keras; light = 'tensorflow' not in sys.modules and 'keras' not in sys.modules; "
-            "from dqfd_bc_keras.networks import dense_stack; import tensorflow as tf; tf.reduce_sum(tf.ones(3)); "
-            "print(light, tf.config.threading.get_intra_op_parallelism_threads(), "
-            "tf.config.threading.get_inter_op_parallelism_threads(), dqfd_bc_keras.BCModel.__name__)")
+    code = (
+        "import sys, dqfd_bc_keras; light = 'tensorflow' not in sys.modules and 'keras' not in sys.modules; "
+        "from dqfd_bc_keras.core.networks import dense_stack; import tensorflow as tf; tf.reduce_sum(tf.ones(3)); "
+        "print(light, tf.config.threading.get_intra_op_parallelism_threads(), "
+        "tf.config.threading.get_inter_op_parallelism_threads(), dqfd_bc_keras.BCModel.__name__)"
+    )
     env = {k: v for k, v in ENV.items() if not k.startswith(("TF_", "DQFD_"))}
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
     assert done.returncode == 0, done.stderr

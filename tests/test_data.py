@@ -8,7 +8,8 @@ import tarfile
 from pathlib import Path
 
 import pytest
-from dqfd_bc_keras.cli import run
+
+from dqfd_bc_keras.commands.cli import run
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.data import export_archive, lab_files, load_runs, open_suite
@@ -43,8 +44,10 @@ def test_runs_carry_their_demonstrations_updates_and_provenance(suite):
     assert bayes.demonstrations.source == "recorded" and bayes.demonstrations.episodes == 5
     assert bayes.demo_transitions == bayes.demonstrations.transitions == sum(bayes.demonstrations.plain_returns)
     assert bayes.demonstrator_return == pytest.approx(bayes.demo_transitions / 5)  # a CartPole return is its length
-    assert [(u.episode, u.new_transitions, u.mode) for u in bayes.dynamic_demos] == [(12, 1500, "episodes"),
-                                                                                      (20, 2500, "episodes")]
+    assert [(u.episode, u.new_transitions, u.mode) for u in bayes.dynamic_demos] == [
+        (12, 1500, "episodes"),
+        (20, 2500, "episodes"),
+    ]
     assert bayes.provenance.code_commit.startswith("1f0c2a9") and not bayes.provenance.dirty
     assert runs["cartpole", "ce", 2].provenance.dirty
     plain = runs["cartpole", "none", 1]
@@ -64,9 +67,21 @@ def test_older_run_files_still_load(suite):
     metrics.write_text("".join(",".join(line[:2] + line[3:]) + "\n" for line in lines))
     demos = json.loads((run_dir / "demonstrations.json").read_text())
     (run_dir / "demonstrations.json").write_text(json.dumps({k: v for k, v in demos.items() if k != "source"}))
-    (run_dir / "dynamic_demos.json").write_text(json.dumps([{
-        "episode": 12, "env_step": 900, "moving_average": 30.5, "new_returns": [40.0], "demo_transitions": 140,
-        "demo_episodes": 6, "bc_accuracy": 0.75}]))
+    (run_dir / "dynamic_demos.json").write_text(
+        json.dumps(
+            [
+                {
+                    "episode": 12,
+                    "env_step": 900,
+                    "moving_average": 30.5,
+                    "new_returns": [40.0],
+                    "demo_transitions": 140,
+                    "demo_episodes": 6,
+                    "bc_accuracy": 0.75,
+                }
+            ]
+        )
+    )
     [run] = [r for r in load_runs(suite) if r.path == run_dir]
     assert [row.interactions for row in run.metrics] == [None] * len(lines[1:])
     assert [row.env_step for row in run.metrics] == [int(line[1]) for line in lines[1:]]
@@ -88,9 +103,16 @@ def test_an_archive_reads_as_its_directory(suite, tmp_path):
     export_archive(suite, archive)
     from_dir, from_archive = load_runs(suite), load_runs(archive)
     assert [r.path.relative_to(suite) for r in from_dir] == [r.path.relative_to(archive) for r in from_archive]
-    for a, b in zip(from_dir, from_archive):
+    for a, b in zip(from_dir, from_archive, strict=True):
         assert (a.config, a.metrics, a.evals, a.final, a.demonstrations, a.dynamic_demos, a.provenance) == (
-            b.config, b.metrics, b.evals, b.final, b.demonstrations, b.dynamic_demos, b.provenance)
+            b.config,
+            b.metrics,
+            b.evals,
+            b.final,
+            b.demonstrations,
+            b.dynamic_demos,
+            b.provenance,
+        )
 
 
 def test_the_archive_holds_exactly_what_the_report_reads_and_is_deterministic(suite, tmp_path):
@@ -102,8 +124,15 @@ def test_the_archive_holds_exactly_what_the_report_reads_and_is_deterministic(su
     assert names == sorted(names) == lab_files(suite)
     assert {"sweeps.jsonl", "efficiency.json", "sb3-dqn/cartpole/seed0.json"} <= set(names)
     run_files = {n.rsplit("/", 1)[1] for n in names if n.count("/") == 2 and not n.startswith("sb3-dqn")}
-    assert run_files == {"config.json", "metrics.csv", "evals.csv", "eval.json", "demonstrations.json",
-                         "dynamic_demos.json", "provenance.json"}
+    assert run_files == {
+        "config.json",
+        "metrics.csv",
+        "evals.csv",
+        "eval.json",
+        "demonstrations.json",
+        "dynamic_demos.json",
+        "provenance.json",
+    }
     assert not any("seed9" in n or "tb/" in n or "checkpoints" in n or n.endswith((".keras", ".npz")) for n in names)
     with tarfile.open(first) as tar:
         members = tar.getmembers()
@@ -116,8 +145,9 @@ def test_export_on_the_command_line(suite, tmp_path, capsys):
     assert capsys.readouterr().out == f"wrote {tmp_path / 'out.tar.xz'}: {len(lab_files(suite))} files\n"
     (suite / "cartpole-naive-ce" / "seed1" / "evals.csv").unlink()
     assert run(main, ["export", str(suite), "--out", str(tmp_path / "bad.tar.xz")]) == 2
-    assert capsys.readouterr().err == (f"error: {suite}/cartpole-naive-ce/seed1/evals.csv: missing (the run has "
-                                       "eval.json, so it should be complete)\n")
+    assert capsys.readouterr().err == (
+        f"error: {suite}/cartpole-naive-ce/seed1/evals.csv: missing (the run has eval.json, so it should be complete)\n"
+    )
     assert not (tmp_path / "bad.tar.xz").exists()
     assert run(main, ["export", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.tar.xz")]) == 2
     assert "nothing: no such suite directory or archive" in capsys.readouterr().err
@@ -127,15 +157,21 @@ def truncate(path: Path, keep: int) -> None:
     path.write_bytes(path.read_bytes()[:keep])
 
 
-@pytest.mark.parametrize("damage, problem", [
-    (lambda p: truncate(p, len(p.read_bytes()) - 7), r"ends in the middle of a line \(truncated\?\)"),
-    (lambda p: p.write_text(p.read_text().rsplit(",", 3)[0] + "\n"), r"line 46 has 12 of 15 fields \(truncated\?\)"),
-    (lambda p: p.write_text(p.read_text().replace("\n2,", "\n2x,", 1)), "line 3: could not convert string .* '2x'"),
-    (lambda p: p.write_text("episode,return\n1,2\n"), r"no column\(s\) \['env_step', 'plain_return'"),
-    (lambda p: p.write_text(""), r"no column\(s\)"),
-    (lambda p: p.write_text(p.read_text().splitlines()[0] + "\n"), "no episodes"),
-    (lambda p: p.write_bytes(b"\xff\xfe\x00garbage"), "not UTF-8 text"),
-])
+@pytest.mark.parametrize(
+    "damage, problem",
+    [
+        (lambda p: truncate(p, len(p.read_bytes()) - 7), r"ends in the middle of a line \(truncated\?\)"),
+        (
+            lambda p: p.write_text(p.read_text().rsplit(",", 3)[0] + "\n"),
+            r"line 46 has 12 of 15 fields \(truncated\?\)",
+        ),
+        (lambda p: p.write_text(p.read_text().replace("\n2,", "\n2x,", 1)), "line 3: could not convert string .* '2x'"),
+        (lambda p: p.write_text("episode,return\n1,2\n"), r"no column\(s\) \['env_step', 'plain_return'"),
+        (lambda p: p.write_text(""), r"no column\(s\)"),
+        (lambda p: p.write_text(p.read_text().splitlines()[0] + "\n"), "no episodes"),
+        (lambda p: p.write_bytes(b"\xff\xfe\x00garbage"), "not UTF-8 text"),
+    ],
+)
 def test_a_damaged_metrics_csv_is_named(suite, damage, problem):
     metrics = suite / "cartpole-naive-ce" / "seed1" / "metrics.csv"
     damage(metrics)
@@ -146,14 +182,17 @@ def test_a_damaged_metrics_csv_is_named(suite, damage, problem):
     assert [str(e.file) for e in skipped] == ["cartpole-naive-ce/seed1/metrics.csv"]
 
 
-@pytest.mark.parametrize("name, content, problem", [
-    ("config.json", '{"task": "cartpole", "colour": "red"}', r"unknown config field\(s\) \['colour'\]"),
-    ("config.json", "[1, 2]", "expected a JSON object"),
-    ("eval.json", '{"task": "cartpole"', "not valid JSON"),
-    ("eval.json", '{"task": "cartpole"}', "no mean_return"),
-    ("demonstrations.json", '{"episodes": 5}', "no 'transitions'"),
-    ("dynamic_demos.json", "{}", "expected a JSON array"),
-])
+@pytest.mark.parametrize(
+    "name, content, problem",
+    [
+        ("config.json", '{"task": "cartpole", "colour": "red"}', r"unknown config field\(s\) \['colour'\]"),
+        ("config.json", "[1, 2]", "expected a JSON object"),
+        ("eval.json", '{"task": "cartpole"', "not valid JSON"),
+        ("eval.json", '{"task": "cartpole"}', "no mean_return"),
+        ("demonstrations.json", '{"episodes": 5}', "no 'transitions'"),
+        ("dynamic_demos.json", "{}", "expected a JSON array"),
+    ],
+)
 def test_a_damaged_json_file_is_named(suite, name, content, problem):
     (suite / "cartpole-naive-ce" / "seed1" / name).write_text(content)
     with pytest.raises(ConfigError, match=rf"cartpole-naive-ce/seed1/{name}: {problem}"):

@@ -39,7 +39,13 @@ def test_recorded_dataset_matches_the_format(dataset):
     assert list(np.unique(dataset.episode_ids)) == [0, 1, 2]
     m = dataset.meta
     assert (m.task, m.env_id, m.expert, m.seed, m.obs_dim, m.n_actions) == (
-        "cartpole-200", "CartPole-v1", "imperfect", 7, 4, 2)
+        "cartpole-200",
+        "CartPole-v1",
+        "imperfect",
+        7,
+        4,
+        2,
+    )
     # Returns in meta are the sums of the stored rewards, episode by episode.
     sums = [dataset.rewards[dataset.episode_ids == e].sum() for e in range(3)]
     np.testing.assert_allclose(m.episode_returns, sums)
@@ -100,21 +106,24 @@ def test_rejects_pickled_objects(dataset, tmp_path):
         load(path)
 
 
-@pytest.mark.parametrize("change, match", [
-    ({"rewards": None}, r"missing key\(s\) \['rewards'\]"),
-    ({"actions": "float"}, "actions must be int64 with 1 dimension"),
-    ({"obs": "3d"}, r"obs must be float32 with 2 dimension\(s\)"),
-    ({"next_obs": "short"}, "next_obs has .* rows, actions has"),
-    ({"obs": "nan"}, "obs holds non-finite values"),
-    ({"rewards": "inf"}, "rewards holds non-finite values"),
-    ({"actions": "out of range"}, r"actions must lie in \[0, 2\), got values in \[0, 5\]"),
-    ({"obs": "wide"}, "obs has 5 features, meta says obs_dim=4"),
-    ({"truncated": "cut"}, "an episode does not end with terminated or truncated"),
-    ({"next_obs": "shuffled"}, "next_obs does not match the following obs"),
-    ({"episode_ids": "reversed"}, "episode_ids must count 0, 1, 2"),
-])
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"rewards": None}, r"missing key\(s\) \['rewards'\]"),
+        ({"actions": "float"}, "actions must be int64 with 1 dimension"),
+        ({"obs": "3d"}, r"obs must be float32 with 2 dimension\(s\)"),
+        ({"next_obs": "short"}, "next_obs has .* rows, actions has"),
+        ({"obs": "nan"}, "obs holds non-finite values"),
+        ({"rewards": "inf"}, "rewards holds non-finite values"),
+        ({"actions": "out of range"}, r"actions must lie in \[0, 2\), got values in \[0, 5\]"),
+        ({"obs": "wide"}, "obs has 5 features, meta says obs_dim=4"),
+        ({"truncated": "cut"}, "an episode does not end with terminated or truncated"),
+        ({"next_obs": "shuffled"}, "next_obs does not match the following obs"),
+        ({"episode_ids": "reversed"}, "episode_ids must count 0, 1, 2"),
+    ],
+)
 def test_rejects_bad_arrays_with_the_problem_named(dataset, tmp_path, change, match):
-    (key, how), = change.items()
+    ((key, how),) = change.items()
     value = getattr(dataset, key).copy() if how is not None else None
     n = len(dataset)
     if how == "float":
@@ -131,20 +140,21 @@ def test_rejects_bad_arrays_with_the_problem_named(dataset, tmp_path, change, ma
         value = np.hstack([value, value[:, :1]])
     elif how == "cut":
         value[:] = False
-    elif how == "shuffled":
-        value = value[::-1].copy()
-    elif how == "reversed":
+    elif how == "shuffled" or how == "reversed":
         value = value[::-1].copy()
     assert value is None or len(value) in (n, n - 1)
     with pytest.raises(DemoFileError, match=match):
         load(write(tmp_path / "bad.npz", dataset, **{key: value}))
 
 
-@pytest.mark.parametrize("meta, match", [
-    ("not json", "meta is not valid JSON"),
-    ({"format_version": 99}, "format_version 99 is not 1"),
-    ({"format_version": 1, "task": "cartpole"}, "meta lacks"),
-])
+@pytest.mark.parametrize(
+    "meta, match",
+    [
+        ("not json", "meta is not valid JSON"),
+        ({"format_version": 99}, "format_version 99 is not 1"),
+        ({"format_version": 1, "task": "cartpole"}, "meta lacks"),
+    ],
+)
 def test_rejects_bad_meta(dataset, tmp_path, meta, match):
     raw = np.array(meta) if isinstance(meta, str) else meta
     with pytest.raises(DemoFileError, match=match):
@@ -180,14 +190,21 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def cli(*args, cwd=REPO):
-    return subprocess.run([sys.executable, "-m", "dqfd_bc_keras.demos", *args], capture_output=True,
-                          text=True, timeout=120, cwd=cwd, env={**os.environ, "PYTHONPATH": str(REPO)})
+    return subprocess.run(
+        [sys.executable, "-m", "dqfd_bc_keras.demos", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
 
 
 def test_cli_record_and_inspect(tmp_path):
     out = tmp_path / "d.npz"
-    done = cli("record", "--task", "mountaincar", "--expert", "imperfect", "--episodes", "2",
-               "--seed", "1", "--out", str(out))
+    done = cli(
+        "record", "--task", "mountaincar", "--expert", "imperfect", "--episodes", "2", "--seed", "1", "--out", str(out)
+    )
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""  # no TensorFlow log lines
     shown = cli("inspect", str(out))
@@ -197,14 +214,19 @@ def test_cli_record_and_inspect(tmp_path):
     assert load(out).meta.seed == 1
 
 
-@pytest.mark.parametrize("args, message", [
-    (["record", "--task", "pong", "--expert", "strong", "--out", "x.npz"], "invalid choice: 'pong'"),
-    (["record", "--task", "cartpole", "--expert", "median", "--out", "x.npz"], "expert='median' is none of"),
-    (["record", "--task", "cartpole", "--expert", "strong", "--episodes", "0", "--out", "x.npz"],
-     "must be a positive integer, got 0"),
-    (["record", "--task", "cartpole", "--expert", "strong", "--out", "x.txt"], "--out must end in .npz"),
-    (["inspect", "missing.npz"], "missing.npz: no such file"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["record", "--task", "pong", "--expert", "strong", "--out", "x.npz"], "invalid choice: 'pong'"),
+        (["record", "--task", "cartpole", "--expert", "median", "--out", "x.npz"], "expert='median' is none of"),
+        (
+            ["record", "--task", "cartpole", "--expert", "strong", "--episodes", "0", "--out", "x.npz"],
+            "must be a positive integer, got 0",
+        ),
+        (["record", "--task", "cartpole", "--expert", "strong", "--out", "x.txt"], "--out must end in .npz"),
+        (["inspect", "missing.npz"], "missing.npz: no such file"),
+    ],
+)
 def test_cli_errors_are_one_line_and_exit_2(tmp_path, args, message):
     done = cli(*args, cwd=tmp_path)
     assert done.returncode == 2

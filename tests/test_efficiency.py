@@ -5,14 +5,28 @@ import json
 
 import numpy as np
 import pytest
-from dqfd_bc_keras.training import METRIC_FIELDS
-from dqfd_bc_keras.config import Config
+
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.demos.experts import expert_returns
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.data import load_runs
-from dqfd_bc_keras.experiments.efficiency import (EFFICIENCY_FILE, SB3_METHOD, TEACHER, ArmSteps,
-                                                  efficiency_section, interaction_evals, load, ratio_ci, rows, save,
-                                                  summarise, table, teacher_table, teacher_verdict)
-from dqfd_bc_keras.experts import expert_returns
+from dqfd_bc_keras.experiments.efficiency import (
+    EFFICIENCY_FILE,
+    SB3_METHOD,
+    TEACHER,
+    ArmSteps,
+    efficiency_section,
+    interaction_evals,
+    load,
+    ratio_ci,
+    rows,
+    save,
+    summarise,
+    table,
+    teacher_table,
+    teacher_verdict,
+)
+from dqfd_bc_keras.training.loop import METRIC_FIELDS
 
 INF = np.inf
 
@@ -31,8 +45,13 @@ def write_run(path, evals: list[dict], final: float = 500.0) -> None:
 
 def test_our_steps_are_interactions_not_env_steps(tmp_path):
     """Dynamic-demonstration roll-outs make `interactions` run ahead of `env_step`: only it counts."""
-    write_run(tmp_path / "run", [{"env_step": s, "interactions": i, "mean_return": m}
-                                 for s, i, m in ((0, 0, 9.0), (800, 1000, 300.0), (1500, 2000, 480.0))])
+    write_run(
+        tmp_path / "run",
+        [
+            {"env_step": s, "interactions": i, "mean_return": m}
+            for s, i, m in ((0, 0, 9.0), (800, 1000, 300.0), (1500, 2000, 480.0))
+        ],
+    )
     [run] = load_runs(tmp_path)
     assert interaction_evals(run) == [(0.0, 9.0), (1000.0, 300.0), (2000.0, 480.0)]
     arm = ArmSteps.of("cartpole", "bayes", [interaction_evals(run)], [run.final["mean_return"]], 475.0)
@@ -56,11 +75,14 @@ def test_median_counts_never_reached_as_infinite():
     assert summarise(half_never)["median_steps"] == INF
 
 
-@pytest.mark.parametrize("theirs, ours, expected", [
-    ([20_000.0] * 3, [2_000.0] * 5, (10.0, 10.0, 10.0)),  # constant samples: a point interval at the ratio
-    ([INF] * 3, [2_000.0] * 2, (INF, INF, INF)),  # SB3 never reaches it: ∞ ÷ finite
-    ([30_000.0], [INF, INF], (0.0, 0.0, 0.0)),  # ours never does: finite ÷ ∞
-])
+@pytest.mark.parametrize(
+    "theirs, ours, expected",
+    [
+        ([20_000.0] * 3, [2_000.0] * 5, (10.0, 10.0, 10.0)),  # constant samples: a point interval at the ratio
+        ([INF] * 3, [2_000.0] * 2, (INF, INF, INF)),  # SB3 never reaches it: ∞ ÷ finite
+        ([30_000.0], [INF, INF], (0.0, 0.0, 0.0)),  # ours never does: finite ÷ ∞
+    ],
+)
 def test_ratio_of_constant_samples(theirs, ours, expected):
     assert ratio_ci(np.array(theirs), np.array(ours)) == expected
 
@@ -84,10 +106,12 @@ def test_ratio_interval_by_hand():
 
 
 def arms() -> list[ArmSteps]:
-    return [ArmSteps("cartpole", "bayes", [2000.0] * 3, [500.0, 500.0, 400.0], 475.0),
-            ArmSteps("cartpole", "none", [None, None, 30_000.0], [0.0] * 3, 475.0),
-            ArmSteps("cartpole", SB3_METHOD, [28_000.0, 22_000.0, None], [500.0] * 3, 475.0, anchor=28_000),
-            ArmSteps("mountaincar", "bayes", [5000.0], [-100.0], -110.0)]
+    return [
+        ArmSteps("cartpole", "bayes", [2000.0] * 3, [500.0, 500.0, 400.0], 475.0),
+        ArmSteps("cartpole", "none", [None, None, 30_000.0], [0.0] * 3, 475.0),
+        ArmSteps("cartpole", SB3_METHOD, [28_000.0, 22_000.0, None], [500.0] * 3, 475.0, anchor=28_000),
+        ArmSteps("mountaincar", "bayes", [5000.0], [-100.0], -110.0),
+    ]
 
 
 def test_table_marks_the_goal_on_the_point_estimate_and_states_the_anchor():
@@ -106,8 +130,10 @@ def test_table_marks_the_goal_on_the_point_estimate_and_states_the_anchor():
 
 def test_new_tasks_have_the_5x_goal_and_their_published_anchor():
     """The goal on Acrobot is 5×; SB3's row shows rl-zoo3's published final return beside its median."""
-    acrobot = [ArmSteps("acrobot", "bayes", [4000.0] * 3, [-80.0, -90.0, -85.0], -100.0),
-               ArmSteps("acrobot", SB3_METHOD, [24_000.0] * 3, [-75.0, -77.0, -90.0], -100.0, anchor_final=-76.6)]
+    acrobot = [
+        ArmSteps("acrobot", "bayes", [4000.0] * 3, [-80.0, -90.0, -85.0], -100.0),
+        ArmSteps("acrobot", SB3_METHOD, [24_000.0] * 3, [-75.0, -77.0, -90.0], -100.0, anchor_final=-76.6),
+    ]
     ours, sb3 = table(acrobot)[2:4]
     assert ours.endswith("| 3/3 (-85.0) | 6.0× [6.0×, 6.0×] | 5×: met |")
     assert "| 3/3 (-77.0; published ≈ -76.6) |" in sb3
@@ -119,8 +145,12 @@ def test_teacher_rule_reads_the_ci_of_the_median():
     assert teacher_verdict([-150.0] * 5, -112.68)[3] == "does not"
     # median −100, but resampled medians reach −500 (3 of 5 draws at −500 happen): inconclusive
     assert teacher_verdict([-500.0, -500.0, -100.0, -90.0, -80.0], -112.68)[3] == "inconclusive"
-    lines = teacher_table([ArmSteps("acrobot", "bayes", [1000.0], [-80.0], -100.0),
-                           ArmSteps("acrobot", SB3_METHOD, [1000.0], [-90.0], -100.0)])
+    lines = teacher_table(
+        [
+            ArmSteps("acrobot", "bayes", [1000.0], [-80.0], -100.0),
+            ArmSteps("acrobot", SB3_METHOD, [1000.0], [-90.0], -100.0),
+        ]
+    )
     assert lines[2] == "| acrobot bayes | -112.68 | -80.0 [-80.0, -80.0] | beats its teacher |" and len(lines) == 3
     assert teacher_table(arms()) == []  # no teacher rule on the paper's tasks
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import dqfd_bc_keras  # noqa: F401  (registers the ids)
+import dqfd_bc_keras
 from dqfd_bc_keras.choices import TIMEOUT_MODES
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.envs import TASKS, checked_spaces, make_plain_env, make_task
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.make import TASKS, checked_spaces, make_plain_env, make_task
 from dqfd_bc_keras.errors import ConfigError
 
 RIGHT, LEFT = 1, 0
@@ -44,16 +44,18 @@ def test_fall_penalty_lands_on_the_falling_step_only(mode):
 
 
 def test_fall_penalty_is_configurable_and_truncation_never_pays_it():
-    env = dqfd_bc_keras.wrappers.TimeLimitMode(
-        dqfd_bc_keras.wrappers.FallPenalty(gym.make("CartPole-v1", max_episode_steps=-1), penalty=-7.0), 30)
+    env = dqfd_bc_keras.envs.wrappers.TimeLimitMode(
+        dqfd_bc_keras.envs.wrappers.FallPenalty(gym.make("CartPole-v1", max_episode_steps=-1), penalty=-7.0), 30
+    )
     assert run_episode(env, lambda obs: RIGHT)[-1][0] == -7.0
     steps = run_episode(env, balance)
     assert len(steps) == 30 and steps[-1][2] is True
     assert [r for r, *_ in steps] == [1.0] * 30
 
 
-@pytest.mark.parametrize("mode, terminated, truncated", [
-    ("bootstrap", False, True), ("naive", True, False), ("time-aware", True, False)])
+@pytest.mark.parametrize(
+    "mode, terminated, truncated", [("bootstrap", False, True), ("naive", True, False), ("time-aware", True, False)]
+)
 def test_time_limit_flags(mode, terminated, truncated):
     steps = run_episode(make_task("cartpole-200", timeout=mode), balance)
     assert len(steps) == 200
@@ -144,8 +146,8 @@ def test_the_minatar_presets_are_seeded_frames_with_their_limit(task):
 
     first, again, other = play(3), play(3), play(4)
     assert all(f.dtype == np.uint8 and env.observation_space.contains(f) for f in first)
-    assert len(first) == len(again) and all(np.array_equal(a, b) for a, b in zip(first, again))
-    assert len(first) != len(other) or any(not np.array_equal(a, b) for a, b in zip(first, other))
+    assert len(first) == len(again) and all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+    assert len(first) != len(other) or any(not np.array_equal(a, b) for a, b in zip(first, other, strict=False))
     limited = make_task(task, max_steps=5)
     limited.reset(seed=0)
     flags = [limited.step(0)[2:4] for _ in range(5)]
@@ -168,21 +170,27 @@ def test_plain_env_is_unmodified():
     assert steps[-1][0] == 1.0  # no fall penalty
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"name": "pong"}, "unknown task 'pong'"),
-    ({"name": "cartpole", "timeout": "lazy"}, "unknown timeout mode 'lazy'"),
-    ({"name": "cartpole", "max_steps": 0}, "max_steps must be ≥ 1, got 0"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"name": "pong"}, "unknown task 'pong'"),
+        ({"name": "cartpole", "timeout": "lazy"}, "unknown timeout mode 'lazy'"),
+        ({"name": "cartpole", "max_steps": 0}, "max_steps must be ≥ 1, got 0"),
+    ],
+)
 def test_bad_task_settings_are_rejected_by_name(kwargs, match):
     with pytest.raises(ConfigError, match=match):
         make_task(**kwargs)
 
 
-@pytest.mark.parametrize("task, fields, match", [
-    ("cartpole", {"torso": "minatar"}, "torso='minatar' needs frames"),
-    ("cartpole", {"torso": "nature"}, "torso='nature' needs frames"),
-    ("CartPole-v1", {"env_kwargs": {"bad": 1}}, "CartPole-v1 takes no keyword argument 'bad'"),
-])
+@pytest.mark.parametrize(
+    "task, fields, match",
+    [
+        ("cartpole", {"torso": "minatar"}, "torso='minatar' needs frames"),
+        ("cartpole", {"torso": "nature"}, "torso='nature' needs frames"),
+        ("CartPole-v1", {"env_kwargs": {"bad": 1}}, "CartPole-v1 takes no keyword argument 'bad'"),
+    ],
+)
 def test_the_env_is_checked_against_a_config_where_envs_are_made(task, fields, match):
     """`Config.validate` checks values alone; whether the env takes them is `checked_spaces`'s to say."""
     config = Config.for_task(task, **fields)

@@ -1,11 +1,11 @@
-"""Tests for the scripted demonstrators in dqfd_bc_keras.experts."""
+"""Tests for the scripted demonstrators in dqfd_bc_keras.demos.experts."""
 
 import numpy as np
 import pytest
 
 from dqfd_bc_keras.commands.experts import main
-from dqfd_bc_keras.envs import task_spaces
-from dqfd_bc_keras.experts import EXPERT_NAMES, expert_returns, make_expert
+from dqfd_bc_keras.demos.experts import EXPERT_NAMES, expert_returns, make_expert
+from dqfd_bc_keras.envs.make import task_spaces
 from dqfd_bc_keras.tasks import TASKS, families, family_preset
 
 FAMILIES = families()
@@ -29,10 +29,13 @@ def test_mountaincar_strong_solves_and_imperfect_is_worse() -> None:
     assert imperfect.mean() < -110.0
 
 
-@pytest.mark.parametrize(("family", "solved", "strong_band", "imperfect_band"), [
-    ("acrobot", -100.0, (-90.0, -70.0), (-130.0, -100.0)),
-    ("lunarlander", 200.0, (200.0, 280.0), (50.0, 200.0)),
-])
+@pytest.mark.parametrize(
+    ("family", "solved", "strong_band", "imperfect_band"),
+    [
+        ("acrobot", -100.0, (-90.0, -70.0), (-130.0, -100.0)),
+        ("lunarlander", 200.0, (200.0, 280.0), (50.0, 200.0)),
+    ],
+)
 def test_new_experts_quality_bands_over_100_episodes(family, solved, strong_band, imperfect_band) -> None:
     """The bands around the figures in the rules' docstrings (100 episodes, seeds 0–99): the strong
     expert solves the env on average, the imperfect one does not."""
@@ -56,8 +59,9 @@ def test_lunarlander_strong_is_gymnasiums_heuristic() -> None:
         assert TASKS["lunarlander"].experts["strong"](obs) == heuristic(env, obs)
 
 
-OBS_DIM = {family: spaces.obs_dim for family in FAMILIES
-           if (spaces := task_spaces(family_preset(family).name)).layout.flat}
+OBS_DIM = {
+    family: spaces.obs_dim for family in FAMILIES if (spaces := task_spaces(family_preset(family).name)).layout.flat
+}
 """The families observed as vectors, by width, read from their envs; the frame families' experts
 (MinAtar's) are tested in test_minatar_tasks.py."""
 
@@ -68,7 +72,11 @@ def test_every_family_has_the_package_experts() -> None:
 
 def test_the_vector_families_are_told_from_the_frame_ones_by_their_observations() -> None:
     assert {family: OBS_DIM.get(family) for family in ("cartpole", "mountaincar", "acrobot", "lunarlander")} == {
-        "cartpole": 4, "mountaincar": 2, "acrobot": 6, "lunarlander": 8}
+        "cartpole": 4,
+        "mountaincar": 2,
+        "acrobot": 6,
+        "lunarlander": 8,
+    }
     assert {"minatar-breakout", "minatar-freeway"} <= set(FAMILIES) - set(OBS_DIM)
 
 

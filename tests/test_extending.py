@@ -24,19 +24,33 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from dqfd_bc_keras import expert_terms
-from dqfd_bc_keras.agent import make_agent
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.methods import METHODS
+from dqfd_bc_keras.core import expert_terms
+from dqfd_bc_keras.core.agent import make_agent
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import METHODS
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "EXTENDING.md"
-PROGRAMS = {"dqfd-train": [sys.executable, str(REPO / "train.py")],
-            "dqfd-evaluate": [sys.executable, str(REPO / "evaluate.py")], "python": [sys.executable]}
+PROGRAMS = {
+    "dqfd-train": [sys.executable, str(REPO / "train.py")],
+    "dqfd-evaluate": [sys.executable, str(REPO / "evaluate.py")],
+    "python": [sys.executable],
+}
 """The doc's programs as this checkout runs them."""
-TINY_RUN = [arg for setting in ("total_steps=100", "pretrain_steps=10", "eval_every=50", "checkpoint_every=50",
-                                "demo_episodes=1", "eval_episodes=1", "final_eval_episodes=1", "bc_epochs=1")
-            for arg in ("--set", setting)]
+TINY_RUN = [
+    arg
+    for setting in (
+        "total_steps=100",
+        "pretrain_steps=10",
+        "eval_every=50",
+        "checkpoint_every=50",
+        "demo_episodes=1",
+        "eval_episodes=1",
+        "final_eval_episodes=1",
+        "bc_epochs=1",
+    )
+    for arg in ("--set", setting)
+]
 """A run of seconds: what the suite recipe needs is its runs, not learning."""
 
 
@@ -59,8 +73,15 @@ def run(line: str, *extra: str, cwd: Path) -> subprocess.CompletedProcess:
     while "=" in words[0]:
         name, _, value = words.pop(0).partition("=")
         env[name] = os.pathsep.join([str(cwd / value), str(REPO)]) if name == "PYTHONPATH" else value
-    return subprocess.run([*PROGRAMS[words[0]], *words[1:], *extra], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=900, check=False)
+    return subprocess.run(
+        [*PROGRAMS[words[0]], *words[1:], *extra],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
 
 
 def write(modules: dict[str, str], where: Path) -> None:

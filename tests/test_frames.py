@@ -11,13 +11,14 @@ import keras
 import numpy as np
 import pytest
 import tensorflow as tf
-from dqfd_bc_keras.bc import BCModel
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.envs import checked_spaces
+
+from dqfd_bc_keras.core.bc import BCModel
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.networks import NetworkInput, build_q_network, resolve_torso
+from dqfd_bc_keras.core.replay import PrioritizedReplay
+from dqfd_bc_keras.envs.make import checked_spaces
+from dqfd_bc_keras.envs.observations import Frames
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.networks import NetworkInput, build_q_network, resolve_torso
-from dqfd_bc_keras.observations import Frames
-from dqfd_bc_keras.replay import PrioritizedReplay
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "tests")])}
@@ -25,11 +26,13 @@ BREAKOUT = "ale_py:ALE/Breakout-v5"
 
 
 def run(*args, timeout=600):
-    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout,
-                          cwd=REPO, env=ENV)
+    return subprocess.run(
+        [sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=REPO, env=ENV
+    )
 
 
 # --- the frame pool -----------------------------------------------------------------------------
+
 
 def episodes_of_frames(rng, lengths, shape, stack):
     """Transitions (obs, next_obs, terminated) of episodes of these lengths: random frames, a
@@ -48,8 +51,18 @@ def episodes_of_frames(rng, lengths, shape, stack):
 def store(replay, transitions):
     for obs, nxt, terminated in transitions:
         obs_index, next_index = replay.store_frames(tf.constant(obs), tf.constant(nxt))
-        replay.store(replay.rows(obs_index[None], 0, 1.0, next_index[None], terminated, False,
-                                 tf.fill([1, replay.n_actions], 1.0 / replay.n_actions), 0.5)[0])
+        replay.store(
+            replay.rows(
+                obs_index[None],
+                0,
+                1.0,
+                next_index[None],
+                terminated,
+                False,
+                tf.fill([1, replay.n_actions], 1.0 / replay.n_actions),
+                0.5,
+            )[0]
+        )
 
 
 def set_demos(replay, transitions):
@@ -58,15 +71,26 @@ def set_demos(replay, transitions):
     ends = np.array([t[2] for t in transitions])
     obs_index, next_index = replay.demo_frames(obs, nxt, ends)
     n = len(transitions)
-    replay.set_demos(replay.rows(obs_index, np.zeros(n), np.ones(n), next_index, ends, np.zeros(n),
-                                 np.full((n, replay.n_actions), 1.0 / replay.n_actions), np.full(n, 0.5)))
+    replay.set_demos(
+        replay.rows(
+            obs_index,
+            np.zeros(n),
+            np.ones(n),
+            next_index,
+            ends,
+            np.zeros(n),
+            np.full((n, replay.n_actions), 1.0 / replay.n_actions),
+            np.full(n, 0.5),
+        )
+    )
 
 
 @pytest.mark.parametrize("shape, stack", [((5, 5, 2), 1), ((6, 7), 4)])
 def test_frames_read_back_exactly_from_the_pool_after_the_buffer_wraps(shape, stack):
     frames = Frames((*shape, stack) if stack > 1 else shape, 1 / 255, stack)
-    replay = PrioritizedReplay(NetworkInput(int(np.prod(frames.shape)), frames), 3, capacity=8, demo_capacity=20,
-                               n_step=3)
+    replay = PrioritizedReplay(
+        NetworkInput(int(np.prod(frames.shape)), frames), 3, capacity=8, demo_capacity=20, n_step=3
+    )
     rng = np.random.default_rng(0)
     demos = episodes_of_frames(rng, [4, 3], shape, stack)
     set_demos(replay, demos)
@@ -115,10 +139,16 @@ def test_a_frame_is_stored_once_not_once_per_stack():
 MINATAR = NetworkInput(400, Frames((10, 10, 4), 1.0), "minatar")
 
 
-@pytest.mark.parametrize("spec, sizes", [(MINATAR, [(3, 3, 4, 16), (16,), (1024, 128), (128,), (128, 3), (3,)]),
-                                         (NetworkInput(84 * 84 * 4, Frames((84, 84, 4), 1 / 255, 4), "nature"),
-                                          [(8, 8, 4, 32), (32,), (4, 4, 32, 64), (64,), (3, 3, 64, 64), (64,),
-                                           (3136, 128), (128,), (128, 3), (3,)])])
+@pytest.mark.parametrize(
+    "spec, sizes",
+    [
+        (MINATAR, [(3, 3, 4, 16), (16,), (1024, 128), (128,), (128, 3), (3,)]),
+        (
+            NetworkInput(84 * 84 * 4, Frames((84, 84, 4), 1 / 255, 4), "nature"),
+            [(8, 8, 4, 32), (32,), (4, 4, 32, 64), (64,), (3, 3, 64, 64), (64,), (3136, 128), (128,), (128, 3), (3,)],
+        ),
+    ],
+)
 def test_conv_q_networks_round_trip_through_keras_in_safe_mode(tmp_path, spec, sizes):
     model = build_q_network(spec, 3, (128,))
     assert [tuple(w.shape) for w in model.weights] == sizes  # MinAtar's 3×3×16; Nature's 8/4, 4/2, 3/1
@@ -135,8 +165,17 @@ def test_bc_models_on_frames_fit_predict_and_round_trip(tmp_path, uncertainty):
     rng = np.random.default_rng(1)
     obs = rng.integers(0, 2, (40, 10, 10, 4), np.uint8)
     actions = (obs[:, 0, 0, 0] + obs[:, 1, 1, 1]).astype(np.int64) % 3
-    model = BCModel(400, 3, hidden=(32,), dropout=0.0 if uncertainty == "ensemble" else 0.2, prior_scale=1.0,
-                    uncertainty=uncertainty, members=3, frames={"shape": [10, 10, 4], "scale": 1.0}, torso="minatar")
+    model = BCModel(
+        400,
+        3,
+        hidden=(32,),
+        dropout=0.0 if uncertainty == "ensemble" else 0.2,
+        prior_scale=1.0,
+        uncertainty=uncertainty,
+        members=3,
+        frames={"shape": [10, 10, 4], "scale": 1.0},
+        torso="minatar",
+    )
     model.compile(optimizer=keras.optimizers.Adam(1e-3))
     model.fit_demos(obs, actions, epochs=2, batch_size=8)
     pi, sigma_sq = model.predictive(tf.constant(obs[:6]))
@@ -170,10 +209,21 @@ def test_the_torso_is_chosen_by_the_observation_and_refused_where_it_cannot_read
 
 # --- end to end -----------------------------------------------------------------------------------
 
+
 def test_a_minatar_run_trains_and_evaluates_end_to_end(tmp_path):
     out = tmp_path / "run"
-    done = run("train.py", "--task", "minatar-breakout", "--quick", "--set", "total_steps=300", "--set", "eval_every=150",
-               "--out", out)
+    done = run(
+        "train.py",
+        "--task",
+        "minatar-breakout",
+        "--quick",
+        "--set",
+        "total_steps=300",
+        "--set",
+        "eval_every=150",
+        "--out",
+        out,
+    )
     assert done.returncode == 0, done.stderr
     config = json.loads((out / "config.json").read_text())
     assert config["observation"]["frames"] == {"shape": [10, 10, 4], "scale": 1.0, "stack": 1}
@@ -189,8 +239,23 @@ def test_a_minatar_run_trains_and_evaluates_end_to_end(tmp_path):
 
 
 def test_an_atari_run_trains_from_a_rule_and_a_saved_model_demonstrates(tmp_path):
-    tiny = ["--quick", "--max-steps", "40", "--set", "total_steps=80", "--set", "pretrain_steps=4",
-            "--set", "batch_size=4", "--set", "bc_epochs=1", "--set", "demo_episodes=1", "--set", "eval_every=40"]
+    tiny = [
+        "--quick",
+        "--max-steps",
+        "40",
+        "--set",
+        "total_steps=80",
+        "--set",
+        "pretrain_steps=4",
+        "--set",
+        "batch_size=4",
+        "--set",
+        "bc_epochs=1",
+        "--set",
+        "demo_episodes=1",
+        "--set",
+        "eval_every=40",
+    ]
     done = run("train.py", "--env", BREAKOUT, "--expert", "toy_envs:breakout_rule", *tiny, "--out", tmp_path / "a")
     assert done.returncode == 0, done.stderr
     config = json.loads((tmp_path / "a" / "config.json").read_text())
@@ -198,8 +263,21 @@ def test_an_atari_run_trains_from_a_rule_and_a_saved_model_demonstrates(tmp_path
     done = run("evaluate.py", tmp_path / "a", "--episodes", "1")
     assert done.returncode == 0 and "1 greedy episodes" in done.stdout, done.stderr
     # The saved Q-network demonstrates: demonstrations recorded from the model file.
-    done = run("-m", "dqfd_bc_keras.demos", "record", "--env", BREAKOUT, "--expert", tmp_path / "a" / "q_network.keras",
-               "--episodes", "1", "--max-steps", "40", "--out", tmp_path / "d.npz")
+    done = run(
+        "-m",
+        "dqfd_bc_keras.demos",
+        "record",
+        "--env",
+        BREAKOUT,
+        "--expert",
+        tmp_path / "a" / "q_network.keras",
+        "--episodes",
+        "1",
+        "--max-steps",
+        "40",
+        "--out",
+        tmp_path / "d.npz",
+    )
     assert done.returncode == 0, done.stderr
     with np.load(tmp_path / "d.npz") as demos:
         assert demos["obs"].shape[1:] == (84, 84, 4) and demos["obs"].dtype == np.uint8
@@ -207,8 +285,18 @@ def test_an_atari_run_trains_from_a_rule_and_a_saved_model_demonstrates(tmp_path
 
 
 def test_an_unknown_atari_option_is_one_line(tmp_path):
-    done = run("train.py", "--env", BREAKOUT, "--expert", "toy_envs:breakout_rule", "--quick",
-               "--env-kwargs", "frame_skp=2", "--out", tmp_path / "x")
+    done = run(
+        "train.py",
+        "--env",
+        BREAKOUT,
+        "--expert",
+        "toy_envs:breakout_rule",
+        "--quick",
+        "--env-kwargs",
+        "frame_skp=2",
+        "--out",
+        tmp_path / "x",
+    )
     assert done.returncode == 2 and "did you mean 'frame_skip'?" in done.stderr
     assert len([line for line in done.stderr.strip().splitlines() if "A.L.E" not in line and "Stella" not in line]) == 1
     assert not (tmp_path / "x").exists()
@@ -216,8 +304,19 @@ def test_an_unknown_atari_option_is_one_line(tmp_path):
 
 def test_what_frames_do_not_support_yet_is_refused_in_one_line(tmp_path):
     demos_file = tmp_path / "d.npz"
-    done = run("-m", "dqfd_bc_keras.demos", "record", "--task", "minatar-breakout", "--expert", "imperfect",
-               "--episodes", "1", "--out", demos_file)
+    done = run(
+        "-m",
+        "dqfd_bc_keras.demos",
+        "record",
+        "--task",
+        "minatar-breakout",
+        "--expert",
+        "imperfect",
+        "--episodes",
+        "1",
+        "--out",
+        demos_file,
+    )
     assert done.returncode == 0, done.stderr
     done = run("-m", "dqfd_bc_keras.demos", "export", demos_file, "--minari", "breakout/frames-v0")
     assert done.returncode == 2 and "writing Minari datasets of frames is not supported yet" in done.stderr

@@ -1,4 +1,4 @@
-"""Tests for the pure loss functions in dqfd_bc_keras.losses (ALGORITHM.md §2–§3).
+"""Tests for the pure loss functions in dqfd_bc_keras.core.losses (ALGORITHM.md §2–§3).
 
 Every expected value is worked out by hand (the arithmetic is in the comments / literals);
 none is computed by calling the function under test.
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from dqfd_bc_keras import losses
 from dqfd_bc_keras.choices import TARGETS, TD_LOSSES
-from dqfd_bc_keras.losses import (
+from dqfd_bc_keras.core import losses
+from dqfd_bc_keras.core.losses import (
     bayes_likelihood_loss,
     bayes_prior_loss,
     bootstrap_value,
@@ -85,6 +85,7 @@ def test_the_loss_module_imports_tensorflow_alone() -> None:
 
 
 # ---------------------------------------------------------------- 2. td_target / td_error
+
 
 def test_one_step_target_terminated_does_not_bootstrap_truncated_does() -> None:
     gamma = 0.9
@@ -168,6 +169,7 @@ def test_td_loss_unknown_kind_raises() -> None:
 
 
 # ---------------------------------------------------------------- 4. margin_loss
+
 
 def test_margin_loss_zero_when_expert_leads_by_more_than_margin_positive_otherwise() -> None:
     q = f32(
@@ -316,6 +318,7 @@ def test_bayes_prior_loss_with_nonzero_center_and_its_gradient() -> None:
 
 # ---------------------------------------------------------------- 9. l2_loss
 
+
 def test_l2_loss_is_sum_of_squares_of_kernels() -> None:
     kernels = [tf.Variable([[1.0, -2.0], [0.0, 3.0]]), tf.Variable([[0.5], [-0.5]])]
     # 1 + 4 + 0 + 9 + 0.25 + 0.25 = 14.5
@@ -323,6 +326,7 @@ def test_l2_loss_is_sum_of_squares_of_kernels() -> None:
 
 
 # ---------------------------------------------------------------- 10. weighted_mean
+
 
 def test_weighted_mean_by_hand() -> None:
     # (1*1 + 0.5*2 + 0*3) / 3 = 2/3

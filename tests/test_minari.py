@@ -13,10 +13,10 @@ import pytest
 
 minari = pytest.importorskip("minari")
 
-from dqfd_bc_keras import envs  # noqa: E402
 from dqfd_bc_keras.demos import ARRAYS, DemoDataset, record, rollout  # noqa: E402
+from dqfd_bc_keras.demos.minari import _check_spaces, from_minari, to_minari  # noqa: E402
+from dqfd_bc_keras.envs import make as envs  # noqa: E402
 from dqfd_bc_keras.errors import ConfigError, DemoFileError  # noqa: E402
-from dqfd_bc_keras.minari_io import _check_spaces, from_minari, to_minari  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -58,18 +58,32 @@ def assert_same(got: DemoDataset, want: DemoDataset) -> None:
 
 def write_minari(dataset_id, episodes, env="CartPole-v1", observation_space=None, action_space=None):
     """A Minari dataset made directly from (observations, actions, rewards, terminations, truncations)."""
-    buffers = [minari.data_collector.EpisodeBuffer(observations=o, actions=a, rewards=r, terminations=te,
-                                                   truncations=tr) for o, a, r, te, tr in episodes]
+    buffers = [
+        minari.data_collector.EpisodeBuffer(observations=o, actions=a, rewards=r, terminations=te, truncations=tr)
+        for o, a, r, te, tr in episodes
+    ]
     with pytest.warns(UserWarning):  # minari's nags about the author and so on
-        minari.create_dataset_from_buffers(dataset_id, buffers, env=env, observation_space=observation_space,
-                                           action_space=action_space, algorithm_name="test", description="test")
+        minari.create_dataset_from_buffers(
+            dataset_id,
+            buffers,
+            env=env,
+            observation_space=observation_space,
+            action_space=action_space,
+            algorithm_name="test",
+            description="test",
+        )
 
 
 def episode(steps, obs_dim=4, terminated=True, truncated=False):
     terminations, truncations = np.zeros(steps, bool), np.zeros(steps, bool)
     terminations[-1], truncations[-1] = terminated, truncated
-    return (np.arange((steps + 1) * obs_dim, dtype=np.float32).reshape(steps + 1, obs_dim) / 100,
-            np.zeros(steps, np.int64), np.ones(steps, np.float32), terminations, truncations)
+    return (
+        np.arange((steps + 1) * obs_dim, dtype=np.float32).reshape(steps + 1, obs_dim) / 100,
+        np.zeros(steps, np.int64),
+        np.ones(steps, np.float32),
+        terminations,
+        truncations,
+    )
 
 
 def test_round_trip_preset(mountaincar, cache):
@@ -114,8 +128,11 @@ def test_both_flags_count_as_terminated():
 
 def test_refuses_another_env(mountaincar):
     to_minari(mountaincar, "mountaincar/imperfect-v0")
-    with pytest.raises(DemoFileError, match=r"minari:mountaincar/imperfect-v0: was recorded on MountainCar-v0, "
-                                            r"but task 'acrobot' is Acrobot-v1"):
+    with pytest.raises(
+        DemoFileError,
+        match=r"minari:mountaincar/imperfect-v0: was recorded on MountainCar-v0, "
+        r"but task 'acrobot' is Acrobot-v1",
+    ):
         from_minari("mountaincar/imperfect-v0", "acrobot")
 
 
@@ -148,8 +165,11 @@ def test_existing_id_needs_force(mountaincar, cache):
 
 def test_refuses_a_missing_dataset(cache):
     looked = re.escape(str(cache / "nowhere" / "none-v0"))
-    with pytest.raises(DemoFileError, match=rf"minari:nowhere/none-v0: not in the local Minari cache "
-                                            rf"\(looked in {looked}\)"):
+    with pytest.raises(
+        DemoFileError,
+        match=rf"minari:nowhere/none-v0: not in the local Minari cache "
+        rf"\(looked in {looked}\)",
+    ):
         from_minari("nowhere/none-v0", "mountaincar")
 
 
@@ -166,12 +186,18 @@ def test_refuses_time_aware(mountaincar):
 
 def test_refuses_mismatched_spaces():
     box3 = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
-    write_minari("cartpole/three-v0", [episode(5, obs_dim=3)], observation_space=box3,
-                 action_space=gym.spaces.Discrete(2))
+    write_minari(
+        "cartpole/three-v0", [episode(5, obs_dim=3)], observation_space=box3, action_space=gym.spaces.Discrete(2)
+    )
     assert minari.load_dataset("cartpole/three-v0").env_spec.id == "CartPole-v1"
-    with pytest.raises(DemoFileError, match=re.escape("minari:cartpole/three-v0: mismatched spaces: dataset has "
-                                                      "Box(3,) float32/Discrete(2), task CartPole-v1 has "
-                                                      "Box(4,) float32/Discrete(2)")):
+    with pytest.raises(
+        DemoFileError,
+        match=re.escape(
+            "minari:cartpole/three-v0: mismatched spaces: dataset has "
+            "Box(3,) float32/Discrete(2), task CartPole-v1 has "
+            "Box(4,) float32/Discrete(2)"
+        ),
+    ):
         from_minari("cartpole/three-v0", "CartPole-v1")
     box4 = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
     with pytest.raises(DemoFileError, match=r"mismatched spaces: dataset has .*/Discrete\(3\)"):
@@ -188,9 +214,13 @@ def test_refuses_incomplete_episodes():
 
 
 def test_refuses_a_dataset_without_env():
-    write_minari("noenv-v0", [episode(3)], env=None,
-                 observation_space=gym.spaces.Box(-np.inf, np.inf, (4,), np.float32),
-                 action_space=gym.spaces.Discrete(2))
+    write_minari(
+        "noenv-v0",
+        [episode(3)],
+        env=None,
+        observation_space=gym.spaces.Box(-np.inf, np.inf, (4,), np.float32),
+        action_space=gym.spaces.Discrete(2),
+    )
     with pytest.raises(DemoFileError, match="minari:noenv-v0: names no env"):
         from_minari("noenv-v0", "CartPole-v1")
 
@@ -212,23 +242,50 @@ def test_cli_export_then_train_from_the_minari_dataset(cache, tmp_path):
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    env = {**os.environ, "MINARI_DATASETS_PATH": str(cache),
-           "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")])}
+    env = {
+        **os.environ,
+        "MINARI_DATASETS_PATH": str(cache),
+        "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")]),
+    }
 
     def run(*args):
-        return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, cwd=repo, env=env,
-                              timeout=300)
+        return subprocess.run(
+            [sys.executable, *map(str, args)], capture_output=True, text=True, cwd=repo, env=env, timeout=300
+        )
 
     demos = tmp_path / "chain.npz"
-    assert run("-m", "dqfd_bc_keras.demos", "record", "--env", "toy_envs:ToyChain-v0", "--policy",
-               "toy_envs:go_right", "--episodes", "20", "--out", demos).returncode == 0
+    assert (
+        run(
+            "-m",
+            "dqfd_bc_keras.demos",
+            "record",
+            "--env",
+            "toy_envs:ToyChain-v0",
+            "--policy",
+            "toy_envs:go_right",
+            "--episodes",
+            "20",
+            "--out",
+            demos,
+        ).returncode
+        == 0
+    )
     done = run("-m", "dqfd_bc_keras.demos", "export", demos, "--minari", "toy/chain-v0")
     assert done.returncode == 0 and "wrote Minari dataset toy/chain-v0" in done.stdout, done.stderr
     again = run("-m", "dqfd_bc_keras.demos", "export", demos, "--minari", "toy/chain-v0")
     assert again.returncode == 2 and "pass --force to replace it" in again.stderr
     out = tmp_path / "run"
-    done = run("train.py", "--env", "toy_envs:ToyChain-v0", "--demos", "minari:toy/chain-v0", "--quick", "--quiet",
-               "--out", out)
+    done = run(
+        "train.py",
+        "--env",
+        "toy_envs:ToyChain-v0",
+        "--demos",
+        "minari:toy/chain-v0",
+        "--quick",
+        "--quiet",
+        "--out",
+        out,
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "demonstrations.json").read_text())["expert"] == "minari:toy/chain-v0"
     assert json.loads((out / "eval.json").read_text())["mean_return"] == 1.0
@@ -260,24 +317,57 @@ def test_env_kwargs_are_compared_with_the_datasets_env_spec(cache, tmp_path):
     import toy_envs  # noqa: F401  (registers ToyChain-v0)
 
     spec = dataclasses.replace(gym.spec("ToyChain-v0"), kwargs={"size": 7})
-    walks = [(np.eye(7, dtype=np.float32)[:7], np.ones(6, np.int64), np.r_[np.zeros(5), 1.0].astype(np.float32),
-              np.r_[np.zeros(5, bool), True], np.zeros(6, bool)) for _ in range(20)]
+    walks = [
+        (
+            np.eye(7, dtype=np.float32)[:7],
+            np.ones(6, np.int64),
+            np.r_[np.zeros(5), 1.0].astype(np.float32),
+            np.r_[np.zeros(5, bool), True],
+            np.zeros(6, bool),
+        )
+        for _ in range(20)
+    ]
     write_minari("toy/chain7-v0", walks, env=spec)
     assert minari.load_dataset("toy/chain7-v0").env_spec.kwargs == {"size": 7}
-    with pytest.raises(DemoFileError, match=re.escape(
-            'minari:toy/chain7-v0: was recorded with env kwargs {"size": 7}, but the task is made with {"size": 6}')):
+    with pytest.raises(
+        DemoFileError,
+        match=re.escape(
+            'minari:toy/chain7-v0: was recorded with env kwargs {"size": 7}, but the task is made with {"size": 6}'
+        ),
+    ):
         from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0", env_kwargs={"size": 6})
-    with pytest.raises(DemoFileError, match=re.escape("but the task is made with {\"size\": 5}")):  # the default
+    with pytest.raises(DemoFileError, match=re.escape('but the task is made with {"size": 5}')):  # the default
         from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0")
     data = from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0", env_kwargs={"size": 7, "observe": "flat"})
     assert data.meta.env_kwargs == {"size": 7, "observe": "flat"} and data.obs.shape == (120, 7)
 
     repo = Path(__file__).resolve().parents[1]
-    env = {**os.environ, "MINARI_DATASETS_PATH": str(cache),
-           "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")])}
+    env = {
+        **os.environ,
+        "MINARI_DATASETS_PATH": str(cache),
+        "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")]),
+    }
     out = tmp_path / "run"
-    done = subprocess.run([sys.executable, "train.py", "--env", "toy_envs:ToyChain-v0", "--env-kwargs", "size=7",
-                           "--demos", "minari:toy/chain7-v0", "--quick", "--quiet", "--out", str(out)],
-                          capture_output=True, text=True, cwd=repo, env=env, timeout=300)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "train.py",
+            "--env",
+            "toy_envs:ToyChain-v0",
+            "--env-kwargs",
+            "size=7",
+            "--demos",
+            "minari:toy/chain7-v0",
+            "--quick",
+            "--quiet",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=repo,
+        env=env,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "eval.json").read_text())["lengths"] == [6, 6]

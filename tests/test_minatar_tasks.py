@@ -21,8 +21,12 @@ REPO = Path(__file__).resolve().parents[1]
 PRESETS = ("minatar-breakout", "minatar-freeway")
 
 # The 100-episode measurement (seeds 0–99, one env, `TimeLimit(max_steps)`): mean, std.
-MEASURED = {("minatar-breakout", "strong"): (79.93, 14.36), ("minatar-breakout", "imperfect"): (8.58, 9.21),
-            ("minatar-freeway", "strong"): (65.85, 1.93), ("minatar-freeway", "imperfect"): (15.72, 12.65)}
+MEASURED = {
+    ("minatar-breakout", "strong"): (79.93, 14.36),
+    ("minatar-breakout", "imperfect"): (8.58, 9.21),
+    ("minatar-freeway", "strong"): (65.85, 1.93),
+    ("minatar-freeway", "imperfect"): (15.72, 12.65),
+}
 EPISODES = {"minatar-breakout": 20, "minatar-freeway": 8}
 """Few enough that the band test takes seconds (Freeway's episodes are 2500 steps)."""
 BAND_SE = 4.0
@@ -87,18 +91,22 @@ def test_without_minatar_making_an_env_is_one_line_saying_how_to_install_it(monk
 
 
 def test_the_package_imports_without_minatar_and_registers_no_ids() -> None:
-    code = ("import sys; sys.modules['minatar'] = None; import gymnasium, dqfd_bc_keras.tasks.minatar; "
-            "from dqfd_bc_keras.tasks import TASKS; "
-            "print('minatar-breakout' in TASKS, any(i.startswith('MinAtar/') for i in gymnasium.registry))")
+    code = (
+        "import sys; sys.modules['minatar'] = None; import gymnasium, dqfd_bc_keras.tasks.minatar; "
+        "from dqfd_bc_keras.tasks import TASKS; "
+        "print('minatar-breakout' in TASKS, any(i.startswith('MinAtar/') for i in gymnasium.registry))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["True", "False"]
 
 
 def test_require_minatar_without_seaborn_logs_nothing_and_leaves_logging_unconfigured() -> None:
-    code = ("import sys, logging; sys.modules['seaborn'] = None; import dqfd_bc_keras.tasks.minatar as m; "
-            "m.require_minatar(); import minatar.gym; root = logging.getLogger(); "
-            "print(root.handlers, logging.getLevelName(root.level))")
+    code = (
+        "import sys, logging; sys.modules['seaborn'] = None; import dqfd_bc_keras.tasks.minatar as m; "
+        "m.require_minatar(); import minatar.gym; root = logging.getLogger(); "
+        "print(root.handlers, logging.getLevelName(root.level))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stderr == "" and done.stdout.split() == ["[]", "WARNING"]

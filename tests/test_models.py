@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import dqfd_bc_keras  # noqa: F401  (registers BCModel)
-from dqfd_bc_keras.bc import BCModel
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.envs import get_task
+from dqfd_bc_keras.core.bc import BCModel
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.evaluation import GreedyPolicy, evaluate
 
 MODELS = Path(__file__).resolve().parents[1] / "models"

@@ -17,10 +17,16 @@ def test_the_quickstart_notebook_runs_top_to_bottom(tmp_path, monkeypatch):
     monkeypatch.setenv("TMPDIR", str(tmp_path))  # the notebook writes only into a temporary directory
     notebook = nbformat.read(REPO / "docs" / "quickstart.ipynb", as_version=4)
     docs_before = sorted(p.name for p in (REPO / "docs").iterdir())
-    nbclient.NotebookClient(notebook, timeout=600, kernel_name="python3",
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
-    printed = "".join(output.get("text", "") for cell in notebook.cells if cell.cell_type == "code"
-                      for output in cell.outputs if output.get("name") == "stdout")
+    nbclient.NotebookClient(
+        notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
+    ).execute()
+    printed = "".join(
+        output.get("text", "")
+        for cell in notebook.cells
+        if cell.cell_type == "code"
+        for output in cell.outputs
+        if output.get("name") == "stdout"
+    )
     assert printed.count("greedy episodes") == 3  # CartPole, the user's env, CartPole loaded and trained more
     assert "python callable walk_right" in printed and "demonstrations from minari:cartpole/push-v0" in printed
     assert "episode 5: return" in printed and "episode 6:" not in printed  # the callback stopped training

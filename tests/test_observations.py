@@ -6,34 +6,68 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from dqfd_bc_keras.errors import ConfigError, DqfdWarning
-from dqfd_bc_keras.observations import (MAX_IMAGE_VALUES, FlattenObservation, FrameObservation, Frames, describe,
-                                        is_frames, is_image, observation_layout)
 
-Box, Discrete, MultiBinary, MultiDiscrete = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiBinary,
-                                             gym.spaces.MultiDiscrete)
+from dqfd_bc_keras.envs.observations import (
+    MAX_IMAGE_VALUES,
+    FlattenObservation,
+    FrameObservation,
+    Frames,
+    describe,
+    is_frames,
+    is_image,
+    observation_layout,
+)
+from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+
+Box, Discrete, MultiBinary, MultiDiscrete = (
+    gym.spaces.Box,
+    gym.spaces.Discrete,
+    gym.spaces.MultiBinary,
+    gym.spaces.MultiDiscrete,
+)
 
 
 def test_a_flat_box_passes_unchanged():
     layout = observation_layout(Box(-1.0, 1.0, (3,), np.float32))
     assert layout.flat and layout.dim == 3 and layout.dropped == ()
-    assert layout.to_dict() == {"space": "Box(3,) float32", "shape": [3], "features": 3, "flattened": False,
-                                "dropped": [], "frames": None}
+    assert layout.to_dict() == {
+        "space": "Box(3,) float32",
+        "shape": [3],
+        "features": 3,
+        "flattened": False,
+        "dropped": [],
+        "frames": None,
+    }
 
 
 def test_the_order_by_hand():
     """Dict keys sorted (Gymnasium sorts a plain dict), Box in C order, Discrete one-hot from its start,
     MultiDiscrete one one-hot per entry, MultiBinary as bits, Tuple by index."""
-    space = gym.spaces.Dict({
-        "z": Box(0, 9, (2, 2), np.float32),
-        "a": Discrete(3, start=1),
-        "m": gym.spaces.Tuple((MultiDiscrete([2, 3]), MultiBinary(2))),
-    })
+    space = gym.spaces.Dict(
+        {
+            "z": Box(0, 9, (2, 2), np.float32),
+            "a": Discrete(3, start=1),
+            "m": gym.spaces.Tuple((MultiDiscrete([2, 3]), MultiBinary(2))),
+        }
+    )
     layout = observation_layout(space)
     obs = {"z": np.array([[1, 2], [3, 4]], np.float32), "a": 2, "m": (np.array([1, 0]), np.array([0, 1], np.int8))}
-    want = [0, 1, 0,  # a = 2 with start 1: index 1 of 3
-            0, 1, 1, 0, 0, 0, 1,  # m: (1 of 2) (0 of 3), bits 0 1
-            1, 2, 3, 4]  # z row by row
+    want = [
+        0,
+        1,
+        0,  # a = 2 with start 1: index 1 of 3
+        0,
+        1,
+        1,
+        0,
+        0,
+        0,
+        1,  # m: (1 of 2) (0 of 3), bits 0 1
+        1,
+        2,
+        3,
+        4,
+    ]  # z row by row
     assert layout.dim == 14
     np.testing.assert_array_equal(layout.flatten(obs), want)
     np.testing.assert_array_equal(layout.flatten(obs), gym.spaces.flatten(space, obs).astype(np.float32))
@@ -53,14 +87,21 @@ def test_batches_flatten_as_single_observations_do(seed):
 
 
 def test_non_numeric_parts_are_dropped_with_one_warning_naming_them():
-    space = gym.spaces.Dict({"direction": Discrete(4), "image": Box(0, 255, (7, 7, 3), np.uint8),
-                             "mission": gym.spaces.Text(10), "extra": gym.spaces.Tuple((Discrete(2), gym.spaces.Text(3)))})
+    space = gym.spaces.Dict(
+        {
+            "direction": Discrete(4),
+            "image": Box(0, 255, (7, 7, 3), np.uint8),
+            "mission": gym.spaces.Text(10),
+            "extra": gym.spaces.Tuple((Discrete(2), gym.spaces.Text(3))),
+        }
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         layout = observation_layout(space, "minigrid-like")
     assert [str(w.message) for w in caught if w.category is DqfdWarning] == [
         "minigrid-like: dropping non-numeric observation part(s) extra.1, mission (of Dict(direction: Discrete(4), "
-        "extra: Tuple(Discrete(2), Text), image: Box(7, 7, 3) uint8, mission: Text))"]
+        "extra: Tuple(Discrete(2), Text), image: Box(7, 7, 3) uint8, mission: Text))"
+    ]
     assert layout.dropped == ("extra.1", "mission") and layout.dim == 4 + 2 + 147
     obs = {"direction": 1, "image": np.full((7, 7, 3), 5, np.uint8), "mission": "go", "extra": (1, "abc")}
     flat = layout.flatten(obs)
@@ -76,12 +117,17 @@ def test_frames_are_kept_in_their_shape_and_images_inside_a_dict_are_refused():
     pong = observation_layout(Box(0, 255, (210, 160, 3), np.uint8), "pong")
     assert pong.image and pong.frames == Frames((210, 160, 3), 1 / 255) and pong.dim == 210 * 160 * 3
     assert pong.text() == "Box(210, 160, 3) uint8 as uint8 frames" and pong.to_dict()["frames"] == {
-        "shape": [210, 160, 3], "scale": 1 / 255, "stack": 1}
+        "shape": [210, 160, 3],
+        "scale": 1 / 255,
+        "stack": 1,
+    }
     minatar = observation_layout(Box(0, 1, (10, 10, 4), np.bool_), stack=1)
     assert minatar.frames.scale == 1.0 and minatar.frames.frame_shape == (10, 10, 4)
     assert observation_layout(Box(0, 255, (84, 84, 4), np.uint8), stack=4).frames.frame_shape == (84, 84)
-    with pytest.raises(ConfigError, match=re.escape("observes images (part pixels): Box(64, 65, 1) uint8 inside "
-                                                    "a Dict or Tuple is not supported")):
+    with pytest.raises(
+        ConfigError,
+        match=re.escape("observes images (part pixels): Box(64, 65, 1) uint8 inside a Dict or Tuple is not supported"),
+    ):
         observation_layout(gym.spaces.Dict({"pixels": Box(0, 255, (64, 65, 1), np.uint8)}))
     assert not is_image(Box(0, 255, (7, 7, 3), np.uint8))  # a small grid inside a Dict is flattened
     assert observation_layout(gym.spaces.Dict({"board": Box(0, 1, (4, 4, 16), np.uint8)})).dim == 256

@@ -7,7 +7,7 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401
-from dqfd_bc_keras.optimizers import FusedAdam
+from dqfd_bc_keras.core.optimizers import FusedAdam
 
 SHAPES = [(4, 64), (64,), (64, 2), ()]
 
@@ -42,16 +42,22 @@ def test_500_steps_of_random_gradients_match_keras_adam(lr):
     rng = np.random.default_rng(1)
     for _ in range(500):
         # Gradients of all sizes, some exactly 0, as a ReLU network's are.
-        grads = [tf.constant((rng.normal(size=s) * 10.0 ** rng.uniform(-4, 1, size=s)
-                              * (rng.random(size=s) > 0.1)).astype(np.float32)) for s in SHAPES]
+        grads = [
+            tf.constant(
+                (rng.normal(size=s) * 10.0 ** rng.uniform(-4, 1, size=s) * (rng.random(size=s) > 0.1)).astype(
+                    np.float32
+                )
+            )
+            for s in SHAPES
+        ]
         fused.apply(grads, fused_theta)
         stock.apply(grads, keras_theta)
     assert int(fused.iterations.numpy()) == int(stock.iterations.numpy()) == 500
     # Each update agrees to ~1e-5 of its size (≤ a few lr) for the float32 1 − β2 below.
-    for a, b in zip(fused_theta, keras_theta):
+    for a, b in zip(fused_theta, keras_theta, strict=True):
         np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-5, atol=500 * lr * 1e-5)
     # Keras forms 1 − β2 in float64 (0.001), the kernel in float32: v differs by 1.3e-5 of itself.
-    for a, b in zip(fused.variables, stock.variables):
+    for a, b in zip(fused.variables, stock.variables, strict=True):
         np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=3e-5, atol=1e-12)
 
 
@@ -75,7 +81,7 @@ def test_training_a_small_model_matches_keras_adam():
         losses[name] = history.history["loss"]
     assert losses["fused"][-1] < 0.5 * losses["fused"][0]  # it learned
     np.testing.assert_allclose(losses["fused"], losses["keras"], rtol=1e-4)
-    for a, b in zip(fused.weights, stock.weights):
+    for a, b in zip(fused.weights, stock.weights, strict=True):
         np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-4, atol=1e-5)
 
 
@@ -86,5 +92,5 @@ def test_amsgrad_falls_back_to_keras_adam():
     for _ in range(3):
         fused.apply(grads, fused_theta)
         stock.apply(grads, keras_theta)
-    for a, b in zip(fused_theta, keras_theta):
+    for a, b in zip(fused_theta, keras_theta, strict=True):
         np.testing.assert_array_equal(a.numpy(), b.numpy())

@@ -32,11 +32,16 @@ def installed(tmp_path_factory):
     for name in ("pyproject.toml", "requirements.txt"):
         shutil.copy(REPO / name, source / name)
     pip = [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check"]
-    subprocess.run([*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", root / "dist", source],
-                   check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", root / "dist", source],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     [wheel] = (root / "dist").glob("*.whl")
-    subprocess.run([*pip, "install", "--no-deps", "--target", root / "site", wheel],
-                   check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [*pip, "install", "--no-deps", "--target", root / "site", wheel], check=True, capture_output=True, timeout=300
+    )
     assert build_debris() == built_before  # the build wrote nothing into the checkout
     elsewhere = root / "elsewhere"
     elsewhere.mkdir()
@@ -74,9 +79,15 @@ def test_installed_commands_train_and_evaluate_outside_the_repository(installed)
     assert "cartpole (CartPole-v1), q policy, 2 greedy episodes" in evaluated.stdout
 
 
-@pytest.mark.parametrize("script, args, code", [
-    ("dqfd-evaluate", ["--help"], 0), ("dqfd-evaluate", ["run", "--episodes", "0"], 2), ("dqfd-train", ["--help"], 0),
-    ("dqfd-train", ["--task", "CartPole-v1"], 2)])
+@pytest.mark.parametrize(
+    "script, args, code",
+    [
+        ("dqfd-evaluate", ["--help"], 0),
+        ("dqfd-evaluate", ["run", "--episodes", "0"], 2),
+        ("dqfd-train", ["--help"], 0),
+        ("dqfd-train", ["--task", "CartPole-v1"], 2),
+    ],
+)
 def test_installed_commands_answer_help_and_errors_before_tensorflow(installed, script, args, code):
     _, site, elsewhere, env = installed
     done = Done(site / "bin" / script, *args, cwd=elsewhere, env=env)

@@ -30,14 +30,15 @@ import keras
 import numpy as np
 import pytest
 import tensorflow as tf
-
-from dqfd_bc_keras import cli, runs
-from dqfd_bc_keras.cli import env_kwarg
-from dqfd_bc_keras.config import Config, machine_memory, memory_needed
-from dqfd_bc_keras.demos import record, save
-from dqfd_bc_keras.envs import make_task
 from test_cli import importers
 from test_reliability import ENV, REPO, evaluate_main, one_line, train_main, tree
+
+from dqfd_bc_keras.commands import cli
+from dqfd_bc_keras.commands.cli import env_kwarg
+from dqfd_bc_keras.core.config import Config, machine_memory, memory_needed
+from dqfd_bc_keras.demos import record, save
+from dqfd_bc_keras.envs.make import make_task
+from dqfd_bc_keras.runs import directory as runs
 
 NO_TENSORFLOW = 'raise ImportError("tensorflow is blocked by the test")\n'
 """A `tensorflow` package first on the path: a command that imports TensorFlow fails with this."""
@@ -54,8 +55,7 @@ class Answer:
     imports: list[str]
 
 
-def command(*args: object, cwd: Path = REPO, path: Sequence[str | Path] = (),
-            block_tensorflow: bool = False) -> Answer:
+def command(*args: object, cwd: Path = REPO, path: Sequence[str | Path] = (), block_tensorflow: bool = False) -> Answer:
     """`python -X importtime ARGS` run in `cwd` as a user types it: a first argument `NAME.py` is the
     repository's script; `path`, then the repository, on PYTHONPATH; with `block_tensorflow`, a
     `tensorflow` first on the path that cannot be imported (written to `cwd`/no_tensorflow)."""
@@ -66,12 +66,19 @@ def command(*args: object, cwd: Path = REPO, path: Sequence[str | Path] = (),
         path = [blocker, *path]
     first, *rest = map(str, args)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(map(str, [*path, REPO]))}
-    done = subprocess.run([sys.executable, "-X", "importtime", str(REPO / first) if first.endswith(".py") else first,
-                           *rest], capture_output=True, text=True, cwd=cwd, env=env, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", str(REPO / first) if first.endswith(".py") else first, *rest],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=600,
+    )
     lines = done.stderr.splitlines(keepends=True)
     timed = [line.split("|")[-1].rstrip("\n") for line in lines if line.startswith("import time:")]
-    own = [line for line in lines
-           if not line.startswith("import time:") and "A.L.E" not in line and "Stella" not in line]
+    own = [
+        line for line in lines if not line.startswith("import time:") and "A.L.E" not in line and "Stella" not in line
+    ]
     return Answer(done.returncode, done.stdout, "".join(own), timed[1:])  # timed[0] is importtime's header
 
 
@@ -84,7 +91,8 @@ def assert_without_tensorflow(done: Answer) -> None:
     """The command answered before TensorFlow: importtime timed its imports, and none was TensorFlow."""
     assert done.imports, "importtime timed no import"
     assert "tensorflow" not in [name.strip() for name in done.imports], (
-        f"TensorFlow imported by {importers(done.imports, 'tensorflow')}")
+        f"TensorFlow imported by {importers(done.imports, 'tensorflow')}"
+    )
 
 
 def left_in(directory: Path) -> list[str]:
@@ -113,6 +121,7 @@ def _checkpoint(run: Path) -> Path:
 
 # item 1: --force replaces only a run, and only what the run wrote
 
+
 @pytest.mark.parametrize("force", [True, False], ids=["force", "plain"])
 def test_force_refuses_a_directory_that_is_not_a_run(tmp_path, capsys, force):
     out = tmp_path / "x"
@@ -120,9 +129,12 @@ def test_force_refuses_a_directory_that_is_not_a_run(tmp_path, capsys, force):
     (out / "photos" / "a.jpg").write_bytes(b"jpeg")
     (out / "thesis.tex").write_text("t")
     before = tree(out)
-    err = one_line(capsys, cli.run(train_main, [*TINY_RUN, *(["--force"] if force else []), "--out", str(out)]),
-                   f"error: {out} is not a run directory (it holds photos, thesis.tex), and only a run is ever "
-                   "replaced; choose a new or empty --out")
+    err = one_line(
+        capsys,
+        cli.run(train_main, [*TINY_RUN, *(["--force"] if force else []), "--out", str(out)]),
+        f"error: {out} is not a run directory (it holds photos, thesis.tex), and only a run is ever "
+        "replaced; choose a new or empty --out",
+    )
     assert "--force" not in err
     assert tree(out) == before and left_in(out) == ["photos", "thesis.tex"]
 
@@ -132,8 +144,11 @@ def test_force_replaces_a_run_but_keeps_a_file_the_user_put_in_it(finished, tmp_
     shutil.copytree(finished, run)
     (run / "notes.txt").write_text("my notes")
     (run / ".eval.abcd1234.json").write_text("{")  # a temporary a killed run left
-    one_line(capsys, cli.run(train_main, [*TINY_RUN, "--out", str(run)]),
-             f"error: {run} already holds a run; pass --resume to continue it or --force to replace it")
+    one_line(
+        capsys,
+        cli.run(train_main, [*TINY_RUN, "--out", str(run)]),
+        f"error: {run} already holds a run; pass --resume to continue it or --force to replace it",
+    )
     old_metrics = (run / "metrics.csv").read_bytes()
     assert cli.run(train_main, [*TINY_RUN, "--set", "seed=1", "--force", "--out", str(run)]) == 0
     assert (run / "notes.txt").read_text() == "my notes"
@@ -167,8 +182,17 @@ def killed(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("killed")
     save(record("cartpole", "strong", 2), root / "demos.npz")
     out = root / "run"
-    done = command("-c", KILL_AT_FIRST_CHECKPOINT, *TINY_RUN, "--set", "learning_rate=0.002",
-                   "--demos", root / "demos.npz", "--out", out)
+    done = command(
+        "-c",
+        KILL_AT_FIRST_CHECKPOINT,
+        *TINY_RUN,
+        "--set",
+        "learning_rate=0.002",
+        "--demos",
+        root / "demos.npz",
+        "--out",
+        out,
+    )
     assert done.returncode == -signal.SIGKILL, done.stderr
     assert (out / "config.json").is_file() and not (out / "checkpoints" / "latest.json").exists()
     assert (out / "checkpoints" / runs.GIVEN_DEMOS).is_file()
@@ -184,7 +208,8 @@ def test_a_run_killed_before_its_first_checkpoint_is_started_over(killed, tmp_pa
     assert cli.run(train_main, [*args, "--out", str(run)]) == 0
     assert capsys.readouterr().err.splitlines() == [
         f"warning: {run}: taking over the lock left by process {pid}, which is no longer running",
-        f"warning: {run}: no checkpoint yet (the run was stopped before its first); starting it over"]
+        f"warning: {run}: no checkpoint yet (the run was stopped before its first); starting it over",
+    ]
     config = json.loads((run / "config.json").read_text())
     source = json.loads((run / "demonstrations.json").read_text())["source"]
     if resume:  # the run's own config and demonstrations
@@ -194,10 +219,12 @@ def test_a_run_killed_before_its_first_checkpoint_is_started_over(killed, tmp_pa
     assert (run / runs.COMPLETE).is_file()
 
 
-@pytest.mark.parametrize("interrupt, name, code", [(KeyboardInterrupt, "Ctrl-C", 130),
-                                                   (cli.Terminated, "SIGTERM", 143)])
-def test_an_interrupt_before_the_first_checkpoint_says_nothing_was_kept(tmp_path, capsys, monkeypatch, interrupt,
-                                                                         name, code):
+@pytest.mark.parametrize(
+    "interrupt, name, code", [(KeyboardInterrupt, "Ctrl-C", 130), (cli.Terminated, "SIGTERM", 143)]
+)
+def test_an_interrupt_before_the_first_checkpoint_says_nothing_was_kept(
+    tmp_path, capsys, monkeypatch, interrupt, name, code
+):
     def interrupted(self):
         raise interrupt
 
@@ -210,6 +237,7 @@ def test_an_interrupt_before_the_first_checkpoint_says_nothing_was_kept(tmp_path
 
 # item 5: a full disk while TensorBoard writes
 
+
 def test_a_full_disk_writing_tensorboard_events_is_one_line_and_the_run_resumes(tmp_path, capsys, monkeypatch):
     out = tmp_path / "run"
     events = out / "tb" / "events.out.tfevents.1.vm.1.0.v2"
@@ -218,14 +246,20 @@ def test_a_full_disk_writing_tensorboard_events_is_one_line_and_the_run_resumes(
     def full(name, data, step=None, description=None):
         if name.startswith("eval/"):  # the first evaluation, after the first checkpoint
             raise tf.errors.ResourceExhaustedError(
-                None, None, f"{{{{function_node __wrapped__FlushSummaryWriter}}}} {events}; No space left on device"
-                            "\n\tFailed to flush 1 events [Op:FlushSummaryWriter]")
+                None,
+                None,
+                f"{{{{function_node __wrapped__FlushSummaryWriter}}}} {events}; No space left on device"
+                "\n\tFailed to flush 1 events [Op:FlushSummaryWriter]",
+            )
         return real(name, data, step=step, description=description)
 
     monkeypatch.setattr(tf.summary, "scalar", full)
-    one_line(capsys, cli.run(train_main, [*TINY_RUN, "--out", str(out)]),
-             f"error: {out}/tb: cannot write the TensorBoard events (ResourceExhaustedError: {events}; No space left "
-             "on device)\n")
+    one_line(
+        capsys,
+        cli.run(train_main, [*TINY_RUN, "--out", str(out)]),
+        f"error: {out}/tb: cannot write the TensorBoard events (ResourceExhaustedError: {events}; No space left "
+        "on device)\n",
+    )
     monkeypatch.undo()
     assert (_checkpoint(out) / "state.json").is_file() and not (out / runs.COMPLETE).exists()
     assert cli.run(train_main, ["--quiet", "--resume", "--out", str(out)]) == 0
@@ -233,6 +267,7 @@ def test_a_full_disk_writing_tensorboard_events_is_one_line_and_the_run_resumes(
 
 
 # item 12: errors name the file the user knows
+
 
 @pytest.mark.parametrize("name", ["q_network.keras", "eval.json", "provenance.json", runs.COMPLETE])
 def test_a_full_disk_in_the_final_phase_names_the_file(finished, tmp_path, capsys, monkeypatch, name):
@@ -248,8 +283,11 @@ def test_a_full_disk_in_the_final_phase_names_the_file(finished, tmp_path, capsy
 
     monkeypatch.setattr(Path, "write_text", lambda self, *a, **k: full(self) or real_text(self, *a, **k))
     monkeypatch.setattr(keras.Model, "save", lambda self, path, *a, **k: full(path) or real_save(self, path, *a, **k))
-    one_line(capsys, cli.run(train_main, ["--quiet", "--resume", "--out", str(run)]),
-             f"error: {run / name}: No space left on device\n")
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quiet", "--resume", "--out", str(run)]),
+        f"error: {run / name}: No space left on device\n",
+    )
     assert not (run / runs.COMPLETE).exists()
     assert not [p for p in run.rglob(".*") if p.name != ".lock"]  # no temporary left
 
@@ -257,17 +295,23 @@ def test_a_full_disk_in_the_final_phase_names_the_file(finished, tmp_path, capsy
 def test_evaluate_out_on_a_read_only_place_names_the_file_asked_for(tmp_path, capsys, monkeypatch):
     place = tmp_path / "ro"
     place.mkdir()
-    mounted = not subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=100k", "tmpfs", str(place)],
-                                 capture_output=True).returncode
+    mounted = not subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "ro,size=100k", "tmpfs", str(place)], capture_output=True
+    ).returncode
     if not mounted:  # a real read-only mount needs root: what mkstemp raises there
+
         def read_only(prefix, suffix, dir):
             raise OSError(errno.EROFS, os.strerror(errno.EROFS), f"{dir}/{prefix}abcd1234{suffix}")
 
         monkeypatch.setattr(tempfile, "mkstemp", read_only)
     try:
-        one_line(capsys, cli.run(evaluate_main, [str(REPO / "models" / "cartpole"), "--episodes", "1", "--out",
-                                                 str(place / "eval.json")]),
-                 f"error: {place / 'eval.json'}: Read-only file system\n")
+        one_line(
+            capsys,
+            cli.run(
+                evaluate_main, [str(REPO / "models" / "cartpole"), "--episodes", "1", "--out", str(place / "eval.json")]
+            ),
+            f"error: {place / 'eval.json'}: Read-only file system\n",
+        )
     finally:
         if mounted:
             subprocess.run(["umount", str(place)], check=True)
@@ -275,12 +319,19 @@ def test_evaluate_out_on_a_read_only_place_names_the_file_asked_for(tmp_path, ca
 
 # item 11: --out values that cannot work, a checkpoint's state of the wrong type
 
-@pytest.mark.parametrize("script, args, message", [
-    ("train.py", ["--quick", "--out", ""], "error: --out must not be empty"),
-    ("train.py", ["--quick", "--out", os.fsdecode(b"run\xff")],
-     "error: --out b'run\\xff' is not a UTF-8 path, and TensorFlow writes only to those; choose another name"),
-    ("evaluate.py", ["models/cartpole", "--out", ""], "error: --out must not be empty"),
-])
+
+@pytest.mark.parametrize(
+    "script, args, message",
+    [
+        ("train.py", ["--quick", "--out", ""], "error: --out must not be empty"),
+        (
+            "train.py",
+            ["--quick", "--out", os.fsdecode(b"run\xff")],
+            "error: --out b'run\\xff' is not a UTF-8 path, and TensorFlow writes only to those; choose another name",
+        ),
+        ("evaluate.py", ["models/cartpole", "--out", ""], "error: --out must not be empty"),
+    ],
+)
 def test_an_out_that_cannot_work_is_refused_in_one_line_before_anything_is_written(tmp_path, script, args, message):
     work = tmp_path / "work"
     shutil.copytree(REPO / "models" / "cartpole", work / "models" / "cartpole")
@@ -294,9 +345,12 @@ def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_pa
     state = _checkpoint(run) / "state.json"
     state.write_text(json.dumps({**json.loads(state.read_text()), "episode": "x"}))
     before = tree(run)
-    one_line(capsys, cli.run(train_main, ["--quiet", "--resume", "--out", str(run)]),
-             f"error: {_checkpoint(run)}: the checkpoint cannot be resumed (TypeError: episode must be int, got 'x'); "
-             "start the run over with --force\n")
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quiet", "--resume", "--out", str(run)]),
+        f"error: {_checkpoint(run)}: the checkpoint cannot be resumed (TypeError: episode must be int, got 'x'); "
+        "start the run over with --force\n",
+    )
     assert tree(run) == before
 
 
@@ -305,9 +359,20 @@ def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_pa
 # seed, and a suite of one's own (`module:NAME`).
 
 LAB = ("-m", "dqfd_bc_keras.experiments")
-TINY_SWEEP = [arg for setting in ("total_steps=100", "pretrain_steps=10", "eval_every=50", "checkpoint_every=50",
-                                  "demo_episodes=1", "eval_episodes=1", "final_eval_episodes=1", "bc_epochs=1")
-              for arg in ("--set", setting)]
+TINY_SWEEP = [
+    arg
+    for setting in (
+        "total_steps=100",
+        "pretrain_steps=10",
+        "eval_every=50",
+        "checkpoint_every=50",
+        "demo_episodes=1",
+        "eval_episodes=1",
+        "final_eval_episodes=1",
+        "bc_epochs=1",
+    )
+    for arg in ("--set", setting)
+]
 """A run of seconds: what a test of the sweep needs is runs, not learning."""
 DONE = re.compile(r"\[\d+/\d+\] (\S+) seed0: \d+ episodes, \d+ steps, eval ")
 
@@ -319,14 +384,18 @@ def test_two_runners_on_one_out_finish_each_run_once(tmp_path):
     out = tmp_path / "suite"
     args = [sys.executable, *LAB, "run", "quick", "--seeds", "1", "--workers", "1", *TINY_SWEEP, "--out", str(out)]
     first = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    second = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              start_new_session=True)  # its own process group: its workers stop with it
+    second = subprocess.Popen(
+        args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )  # its own process group: its workers stop with it
     try:
         listed = second.stdout.readline()
         os.killpg(second.pid, signal.SIGSTOP)
         first_out, first_err = first.communicate(timeout=300)
-        written = {path: (path.read_bytes(), path.stat().st_ino) for path in out.glob("*/seed0/**/*")
-                   if path.is_file() and path.name != ".lock"}
+        written = {
+            path: (path.read_bytes(), path.stat().st_ino)
+            for path in out.glob("*/seed0/**/*")
+            if path.is_file() and path.name != ".lock"
+        }
     finally:
         os.killpg(second.pid, signal.SIGCONT)
     second_out, second_err = second.communicate(timeout=300)
@@ -335,15 +404,20 @@ def test_two_runners_on_one_out_finish_each_run_once(tmp_path):
     seeds = sorted(out.glob("*/seed0"))
     assert len(seeds) == 2 and all((run / "complete.json").is_file() for run in seeds)
     assert sorted(DONE.match(line)[1] for line in first_out.splitlines() if DONE.match(line)) == sorted(
-        run.parent.name for run in seeds)
+        run.parent.name for run in seeds
+    )
     skipped = [line for line in second_out.splitlines() if line.startswith("[")]
-    assert len(skipped) == 2 and all(line.split(": ", 1)[1].startswith("skipped: another runner completed it (")
-                                     for line in skipped), second_out
+    assert len(skipped) == 2 and all(
+        line.split(": ", 1)[1].startswith("skipped: another runner completed it (") for line in skipped
+    ), second_out
     for run in seeds:
         assert len([p for p in (run / "checkpoints").iterdir() if p.is_dir()]) == 1
         assert len(list((run / "tb").glob("events.out.tfevents.*"))) == 1
-    assert {path: (path.read_bytes(), path.stat().st_ino) for path in out.glob("*/seed0/**/*")
-            if path.is_file() and path.name != ".lock"} == written  # not a file rewritten, even to the same bytes
+    assert {
+        path: (path.read_bytes(), path.stat().st_ino)
+        for path in out.glob("*/seed0/**/*")
+        if path.is_file() and path.name != ".lock"
+    } == written  # not a file rewritten, even to the same bytes
     assert [json.loads(line)["runs"] for line in (out / "sweeps.jsonl").read_text().splitlines()] == [2, 2]
 
 
@@ -354,8 +428,9 @@ ONE_SEED = ("cartpole-bootstrap-bayes", "cartpole-bootstrap-ce", "cartpole-boots
 def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_path):
     suite = tmp_path / "suite"
     with tarfile.open(REPO / "docs" / "data" / "results.tar.xz") as archive:
-        archive.extractall(suite, [m for m in archive if m.name.split("/")[0] in ONE_SEED and "/seed0/" in m.name],
-                           filter="data")
+        archive.extractall(
+            suite, [m for m in archive if m.name.split("/")[0] in ONE_SEED and "/seed0/" in m.name], filter="data"
+        )
     before = tree(suite)
     results = tmp_path / "report" / "RESULTS.md"
     done = command(*LAB, "report", suite, "--results", results)
@@ -363,10 +438,14 @@ def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_
     assert done.stdout.startswith(f"wrote {results}, ")
     text = results.read_text()
     assert "- C3 on cartpole/bootstrap: **inconclusive**: n = 1: too few seeds for a comparison.\n" in text
-    assert ("| C3 | cartpole/bootstrap | with the time-limit bootstrap fix bayes and ce give the same average reward | "
-            "n = 1: too few seeds for a comparison | — | — | 1, 1 · — | **inconclusive (n < 2)** |") in text
-    assert ("| cartpole/bootstrap bayes | bayes_prior = False | 1, 1 | n = 1: too few seeds for a comparison | — | — | "
-            "— | **inconclusive (n < 2)** |") in text
+    assert (
+        "| C3 | cartpole/bootstrap | with the time-limit bootstrap fix bayes and ce give the same average reward | "
+        "n = 1: too few seeds for a comparison | — | — | 1, 1 · — | **inconclusive (n < 2)** |"
+    ) in text
+    assert (
+        "| cartpole/bootstrap bayes | bayes_prior = False | 1, 1 | n = 1: too few seeds for a comparison | — | — | "
+        "— | **inconclusive (n < 2)** |"
+    ) in text
     assert tree(suite) == before
 
 
@@ -378,24 +457,31 @@ def documented_suite() -> str:
 
 def test_the_documented_suite_recipe_runs_a_module_name_suite(tmp_path):
     (tmp_path / "my_suites.py").write_text(documented_suite())
-    done = command(*LAB, "run", "my_suites:SIGMAS", "--out", "results", "--seeds", "1", *TINY_SWEEP, cwd=tmp_path,
-                   path=["."])
+    done = command(
+        *LAB, "run", "my_suites:SIGMAS", "--out", "results", "--seeds", "1", *TINY_SWEEP, cwd=tmp_path, path=["."]
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0] == "my_suites:SIGMAS: 3 runs, 0 already complete, 3 to run on 2 local worker(s)"
     configs = [json.loads(p.read_text()) for p in (tmp_path / "results").glob("*/seed0/config.json")]
     assert len(list((tmp_path / "results").glob("*/seed0/complete.json"))) == 3
     assert sorted(c["sigma0_sq"] for c in configs) == [0.1, 0.5, 2.0]
     assert {(c["task"], c["timeout"], c["expert_loss"], c["total_steps"]) for c in configs} == {
-        ("cartpole", "bootstrap", "bayes", 100)}
+        ("cartpole", "bootstrap", "bayes", 100)
+    }
 
 
 def test_a_module_name_suite_that_is_not_there_is_refused_in_one_line(tmp_path):
     (tmp_path / "my_suites.py").write_text(documented_suite())
     for suite, message in (
-        ("my_suites:SIGMA", "error: suite 'my_suites:SIGMA': cannot import it (AttributeError: module 'my_suites' has "
-                            "no attribute 'SIGMA')"),
-        ("my_suite:SIGMAS", "error: suite 'my_suite:SIGMAS': cannot import it (ModuleNotFoundError: No module named "
-                            "'my_suite')"),
+        (
+            "my_suites:SIGMA",
+            "error: suite 'my_suites:SIGMA': cannot import it (AttributeError: module 'my_suites' has "
+            "no attribute 'SIGMA')",
+        ),
+        (
+            "my_suite:SIGMAS",
+            "error: suite 'my_suite:SIGMAS': cannot import it (ModuleNotFoundError: No module named 'my_suite')",
+        ),
     ):
         done = command(*LAB, "run", suite, "--out", "results", cwd=tmp_path, path=["."])
         assert_refused(done, message)
@@ -408,16 +494,44 @@ def test_a_module_name_suite_that_is_not_there_is_refused_in_one_line(tmp_path):
 # does, the RAM observation, plain DQN's missing D_demo, and `--env` given a class.
 
 PONG = "ale_py:ALE/Pong-v5"
-TINY_PONG = ["--quick", "--max-steps", "50", "--set", "total_steps=60", "--set", "eval_every=60", "--set",
-             "eval_episodes=1", "--set", "final_eval_episodes=1", "--set", "pretrain_steps=4", "--set", "batch_size=4",
-             "--set", "bc_epochs=1", "--set", "demo_episodes=1"]
+TINY_PONG = [
+    "--quick",
+    "--max-steps",
+    "50",
+    "--set",
+    "total_steps=60",
+    "--set",
+    "eval_every=60",
+    "--set",
+    "eval_episodes=1",
+    "--set",
+    "final_eval_episodes=1",
+    "--set",
+    "pretrain_steps=4",
+    "--set",
+    "batch_size=4",
+    "--set",
+    "bc_epochs=1",
+    "--set",
+    "demo_episodes=1",
+]
 """A run of a few seconds whose greedy episodes end at 50 agent steps: Pong cannot end a game in 50."""
 
 
 def test_atari_evaluation_plays_max_steps_agent_steps_and_plain_dqn_needs_no_demo_capacity(tmp_path):
     # demo_capacity=10 is below the limit 50: sized D_demo only for a method with demonstrations.
-    done = command("train.py", "--env", PONG, "--expert-loss", "none", *TINY_PONG, "--set", "demo_capacity=10",
-                   "--out", tmp_path / "a")
+    done = command(
+        "train.py",
+        "--env",
+        PONG,
+        "--expert-loss",
+        "none",
+        *TINY_PONG,
+        "--set",
+        "demo_capacity=10",
+        "--out",
+        tmp_path / "a",
+    )
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "a" / "eval.json").read_text())
     assert result["lengths"] == [50]  # not 50 emulator frames (about 12 agent steps)
@@ -434,13 +548,30 @@ def test_a_method_with_demonstrations_still_needs_demo_capacity_for_an_episode(t
 
 def test_atari_ram_trains_on_a_128_byte_vector_with_the_step_limit_in_agent_steps(tmp_path):
     (tmp_path / "ram_rules.py").write_text("def fire(obs):\n    return 1\n")
-    done = command("train.py", "--env", PONG, "--env-kwargs", 'obs_type="ram"', "--expert", "ram_rules:fire",
-                   *TINY_PONG, "--out", tmp_path / "a", path=[tmp_path])
+    done = command(
+        "train.py",
+        "--env",
+        PONG,
+        "--env-kwargs",
+        'obs_type="ram"',
+        "--expert",
+        "ram_rules:fire",
+        *TINY_PONG,
+        "--out",
+        tmp_path / "a",
+        path=[tmp_path],
+    )
     assert done.returncode == 0, done.stderr
     config = json.loads((tmp_path / "a" / "config.json").read_text())
     assert config["env_kwargs"] == {"obs_type": "ram"}
-    assert config["observation"] == {"space": "Box(128,) uint8", "shape": [128], "features": 128, "flattened": False,
-                                     "dropped": [], "frames": None}
+    assert config["observation"] == {
+        "space": "Box(128,) uint8",
+        "shape": [128],
+        "features": 128,
+        "flattened": False,
+        "dropped": [],
+        "frames": None,
+    }
     assert json.loads((tmp_path / "a" / "eval.json").read_text())["lengths"] == [50]
 
 
@@ -454,31 +585,51 @@ def test_atari_ram_keeps_the_no_op_starts_and_the_frame_skip():
     assert step_info["episode_frame_number"] == info["noops"] + 4 * 10
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    (['obs_type="ram"', "frame_stack=2"],
-     "error: --env-kwargs frame_stack: not with obs_type='ram', which observes the console's 128 bytes, not frames"),
-    (['obs_type="rgb"'],
-     "error: --env-kwargs obs_type: expected 'grayscale' (the screen as frames) or 'ram' (the console's 128 bytes), "
-     "got 'rgb'"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        (
+            ['obs_type="ram"', "frame_stack=2"],
+            "error: --env-kwargs frame_stack: not with obs_type='ram', which observes the console's 128 bytes, not frames",
+        ),
+        (
+            ['obs_type="rgb"'],
+            "error: --env-kwargs obs_type: expected 'grayscale' (the screen as frames) or 'ram' (the console's 128 bytes), "
+            "got 'rgb'",
+        ),
+    ],
+)
 def test_an_atari_observation_that_is_not_taken_is_one_line(tmp_path, kwargs, says):
-    assert_refused(command("train.py", "--env", PONG, "--env-kwargs", *kwargs, "--quick", "--out", tmp_path / "a"),
-                   says)
+    assert_refused(
+        command("train.py", "--env", PONG, "--env-kwargs", *kwargs, "--quick", "--out", tmp_path / "a"), says
+    )
     assert not (tmp_path / "a").exists()
 
 
-@pytest.mark.parametrize("registers, says", [
-    ("", 'register the class in myenv with gymnasium.register(id="MyEnvClass-v0", entry_point="myenv:MyEnvClass") '
-         "and pass --env myenv:MyEnvClass-v0"),
-    ('gymnasium.register(id="MyEnv-v0", entry_point="myenv:MyEnvClass")\n',
-     "myenv registers MyEnv-v0: pass --env myenv:MyEnv-v0"),
-])
+@pytest.mark.parametrize(
+    "registers, says",
+    [
+        (
+            "",
+            'register the class in myenv with gymnasium.register(id="MyEnvClass-v0", entry_point="myenv:MyEnvClass") '
+            "and pass --env myenv:MyEnvClass-v0",
+        ),
+        (
+            'gymnasium.register(id="MyEnv-v0", entry_point="myenv:MyEnvClass")\n',
+            "myenv registers MyEnv-v0: pass --env myenv:MyEnv-v0",
+        ),
+    ],
+)
 def test_env_given_a_class_says_how_to_register_it_before_tensorflow_loads(tmp_path, registers, says):
-    (tmp_path / "myenv.py").write_text(f"import gymnasium\n\n\nclass MyEnvClass(gymnasium.Env):\n    pass\n\n\n"
-                                       f"{registers}")
+    (tmp_path / "myenv.py").write_text(
+        f"import gymnasium\n\n\nclass MyEnvClass(gymnasium.Env):\n    pass\n\n\n{registers}"
+    )
     done = command("train.py", "--env", "myenv:MyEnvClass", "--quick", "--out", tmp_path / "a", path=[tmp_path])
-    assert_refused(done, "train.py: error: argument --env: myenv:MyEnvClass is a class, not an env id: --env takes a "
-                         f"registered Gymnasium id; {says}")
+    assert_refused(
+        done,
+        "train.py: error: argument --env: myenv:MyEnvClass is a class, not an env id: --env takes a "
+        f"registered Gymnasium id; {says}",
+    )
     assert_without_tensorflow(done)
     assert not (tmp_path / "a").exists()
 
@@ -492,35 +643,62 @@ DEMOS = ("-m", "dqfd_bc_keras.demos")
 GIB = 2**30
 
 
-@pytest.mark.parametrize("text, value", [
-    ("is_slippery=False", False), ("is_slippery=false", False), ("flag=True", True), ("flag=true", True),
-    ("seed=None", None), ("seed=null", None), ("n=3", 3), ("x=-1.5", -1.5), ("x=1e5", 100000.0),
-    ("obs_type='ram'", "ram"), ('obs_type="ram"', "ram"), ("shape=(3, 4)", [3, 4]), ("shape=[3, 4]", [3, 4]),
-    ('config={"lanes_count": 3}', {"lanes_count": 3}), ("config={'size': (2, 2)}", {"size": [2, 2]}),
-    ("render_mode=rgb_array", "rgb_array"), ("obs_type=ram", "ram"), ("map_name=8x8", "8x8"),
-    ("mode=human-ish", "human-ish"), ("path=maps/a.txt", "maps/a.txt"), (" key =ram", "ram"),
-])
+@pytest.mark.parametrize(
+    "text, value",
+    [
+        ("is_slippery=False", False),
+        ("is_slippery=false", False),
+        ("flag=True", True),
+        ("flag=true", True),
+        ("seed=None", None),
+        ("seed=null", None),
+        ("n=3", 3),
+        ("x=-1.5", -1.5),
+        ("x=1e5", 100000.0),
+        ("obs_type='ram'", "ram"),
+        ('obs_type="ram"', "ram"),
+        ("shape=(3, 4)", [3, 4]),
+        ("shape=[3, 4]", [3, 4]),
+        ('config={"lanes_count": 3}', {"lanes_count": 3}),
+        ("config={'size': (2, 2)}", {"size": [2, 2]}),
+        ("render_mode=rgb_array", "rgb_array"),
+        ("obs_type=ram", "ram"),
+        ("map_name=8x8", "8x8"),
+        ("mode=human-ish", "human-ish"),
+        ("path=maps/a.txt", "maps/a.txt"),
+        (" key =ram", "ram"),
+    ],
+)
 def test_env_kwargs_values_are_json_then_python_literals_then_words(text, value):
     key, parsed = env_kwarg(text)
     assert key == text.partition("=")[0].strip() and parsed == value and type(parsed) is type(value)
 
 
-@pytest.mark.parametrize("text, message", [
-    ("config={bad json", "config={bad json is not valid JSON (Expecting property name enclosed in double quotes: "
-                         "line 1 column 2 (char 1))"),
-    ("lanes=[1, 2", "lanes=[1, 2 is not valid JSON (Expecting ',' delimiter"),
-    ("shape=(3, 4", "shape=(3, 4 is not a valid Python literal (SyntaxError: '(' was never closed"),
-    ("name='ram", "name='ram is not a valid Python literal (SyntaxError: unterminated string literal"),
-    ("is_slippery=FALSE", "is_slippery=FALSE is neither JSON nor Python: write is_slippery=false or "
-                          "is_slippery=False, or is_slippery='\"FALSE\"' for the string"),
-    ("seed=none", "seed=none is neither JSON nor Python: write seed=null or seed=None"),
-    ("mission=go to the door", "mission=go to the door is neither JSON, a Python literal nor a word"),
-    ("x=-fast", "x=-fast is neither JSON, a Python literal nor a word"),
-    ("version=1.2.3", "version=1.2.3 is neither JSON, a Python literal nor a word"),
-    ("x=", "x= is neither JSON, a Python literal nor a word"),
-    ("ids={1, 2}", "ids={1, 2}: a Python set, which JSON cannot hold"),
-    ("=3", "expected KEY=VALUE with KEY a Python identifier, got '=3'"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (
+            "config={bad json",
+            "config={bad json is not valid JSON (Expecting property name enclosed in double quotes: "
+            "line 1 column 2 (char 1))",
+        ),
+        ("lanes=[1, 2", "lanes=[1, 2 is not valid JSON (Expecting ',' delimiter"),
+        ("shape=(3, 4", "shape=(3, 4 is not a valid Python literal (SyntaxError: '(' was never closed"),
+        ("name='ram", "name='ram is not a valid Python literal (SyntaxError: unterminated string literal"),
+        (
+            "is_slippery=FALSE",
+            "is_slippery=FALSE is neither JSON nor Python: write is_slippery=false or "
+            "is_slippery=False, or is_slippery='\"FALSE\"' for the string",
+        ),
+        ("seed=none", "seed=none is neither JSON nor Python: write seed=null or seed=None"),
+        ("mission=go to the door", "mission=go to the door is neither JSON, a Python literal nor a word"),
+        ("x=-fast", "x=-fast is neither JSON, a Python literal nor a word"),
+        ("version=1.2.3", "version=1.2.3 is neither JSON, a Python literal nor a word"),
+        ("x=", "x= is neither JSON, a Python literal nor a word"),
+        ("ids={1, 2}", "ids={1, 2}: a Python set, which JSON cannot hold"),
+        ("=3", "expected KEY=VALUE with KEY a Python identifier, got '=3'"),
+    ],
+)
 def test_env_kwargs_refuses_a_value_it_would_otherwise_pass_on_as_a_string(text, message):
     with pytest.raises(ArgumentTypeError) as refused:
         env_kwarg(text)
@@ -529,9 +707,25 @@ def test_env_kwargs_refuses_a_value_it_would_otherwise_pass_on_as_a_string(text,
 
 def test_is_slippery_false_reaches_the_env_and_config_json_as_false(tmp_path):
     out = tmp_path / "run"
-    done = command("train.py", "--env", "FrozenLake-v1", "--env-kwargs", "is_slippery=False", "--expert-loss", "none",
-                   "--quick", "--quiet", "--set", "total_steps=100", "--set", "eval_every=100", "--set",
-                   "batch_size=16", "--out", out)
+    done = command(
+        "train.py",
+        "--env",
+        "FrozenLake-v1",
+        "--env-kwargs",
+        "is_slippery=False",
+        "--expert-loss",
+        "none",
+        "--quick",
+        "--quiet",
+        "--set",
+        "total_steps=100",
+        "--set",
+        "eval_every=100",
+        "--set",
+        "batch_size=16",
+        "--out",
+        out,
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "config.json").read_text())["env_kwargs"] == {"is_slippery": False}
     assert '"is_slippery": false' in (out / "config.json").read_text()
@@ -539,9 +733,12 @@ def test_is_slippery_false_reaches_the_env_and_config_json_as_false(tmp_path):
 
 def test_malformed_env_kwargs_json_is_one_line_before_tensorflow(tmp_path):
     done = command("train.py", "--env", "FrozenLake-v1", "--env-kwargs", "config={bad json", "--out", tmp_path / "run")
-    assert_refused(done, "train.py: error: argument --env-kwargs: config={bad json is not valid JSON (Expecting "
-                         "property name enclosed in double quotes: line 1 column 2 (char 1)); a string that is not a "
-                         "word is written as JSON: config='\"...\"'")
+    assert_refused(
+        done,
+        "train.py: error: argument --env-kwargs: config={bad json is not valid JSON (Expecting "
+        "property name enclosed in double quotes: line 1 column 2 (char 1)); a string that is not a "
+        "word is written as JSON: config='\"...\"'",
+    )
     assert_without_tensorflow(done)
     assert left_in(tmp_path) == []
 
@@ -553,23 +750,42 @@ def test_the_default_configs_need_far_less_memory_than_any_machine_has():
         assert 1 * 2**20 < needed < min(1 * 2**30, machine_memory() / 10)
 
 
-@pytest.mark.parametrize("setting, subject, lower, at_least", [
-    # at_least: one part alone, from first principles. The replay's table: rows × (2·4 + 5 + 2) float32;
-    ("replay_capacity=10000000000", r"the replay \(replay_capacity=10000000000, demo_capacity=5000\) and networks",
-     r"replay_capacity \(or demo_capacity\)", (10**10 + 5000) * 15 * 4),
-    # the Q-network's 10^10 weights, its target's and Adam's two moments;
-    ("hidden=100000,100000", r"the networks \(hidden=100000,100000, bc_hidden=64,64\) and replay",
-     r"hidden \(or bc_hidden\)", 4 * 10**10 * 4),
-    # one forward pass of 10^9 states through 4 + 64 + 64 + 2 units.
-    ("batch_size=1000000000", r"the batches \(batch_size=1000000000\), replay and networks", "batch_size",
-     10**9 * 134 * 4),
-])
-def test_sizes_that_cannot_fit_are_refused_before_tensorflow_with_what_they_need(tmp_path, setting, subject, lower,
-                                                                                 at_least):
+@pytest.mark.parametrize(
+    "setting, subject, lower, at_least",
+    [
+        # at_least: one part alone, from first principles. The replay's table: rows × (2·4 + 5 + 2) float32;
+        (
+            "replay_capacity=10000000000",
+            r"the replay \(replay_capacity=10000000000, demo_capacity=5000\) and networks",
+            r"replay_capacity \(or demo_capacity\)",
+            (10**10 + 5000) * 15 * 4,
+        ),
+        # the Q-network's 10^10 weights, its target's and Adam's two moments;
+        (
+            "hidden=100000,100000",
+            r"the networks \(hidden=100000,100000, bc_hidden=64,64\) and replay",
+            r"hidden \(or bc_hidden\)",
+            4 * 10**10 * 4,
+        ),
+        # one forward pass of 10^9 states through 4 + 64 + 64 + 2 units.
+        (
+            "batch_size=1000000000",
+            r"the batches \(batch_size=1000000000\), replay and networks",
+            "batch_size",
+            10**9 * 134 * 4,
+        ),
+    ],
+)
+def test_sizes_that_cannot_fit_are_refused_before_tensorflow_with_what_they_need(
+    tmp_path, setting, subject, lower, at_least
+):
     done = command("train.py", "--quick", "--set", setting, "--out", tmp_path / "run")
     assert (done.returncode, done.stdout) == (2, ""), done.stderr
-    said = re.fullmatch(rf"error: {subject} need ~([\d,.]+) GiB, more than the ([\d,.]+) GiB this machine has; "
-                        rf"lower {lower}\n", done.stderr)  # one line
+    said = re.fullmatch(
+        rf"error: {subject} need ~([\d,.]+) GiB, more than the ([\d,.]+) GiB this machine has; "
+        rf"lower {lower}\n",
+        done.stderr,
+    )  # one line
     assert said, done.stderr
     needed, has = (float(n.replace(",", "")) for n in said.groups())
     assert at_least / GIB <= needed <= 10 * at_least / GIB  # an honest order of magnitude
@@ -602,8 +818,10 @@ def forge(source, target, member: str, shape: tuple[int, ...], data: bytes):
 def test_a_header_claiming_rows_its_member_does_not_hold_is_named_not_allocated(demos_file, tmp_path, rows):
     forged = forge(demos_file, tmp_path / "forged.npz", "obs.npy", (rows, 4), bytes(64))
     assert forged.stat().st_size < 20_000
-    expected = (f"error: {forged}: member obs.npy claims shape ({rows}, 4) of float32 ({rows * 16} bytes), "
-                "but holds 64 bytes of data")
+    expected = (
+        f"error: {forged}: member obs.npy claims shape ({rows}, 4) of float32 ({rows * 16} bytes), "
+        "but holds 64 bytes of data"
+    )
     assert_refused(command(*DEMOS, "inspect", forged), expected)
     if rows == 10**12:  # train.py reads the file through the same load
         assert_refused(command("train.py", "--quick", "--demos", forged, "--out", tmp_path / "run"), expected)
@@ -617,21 +835,25 @@ def test_a_member_claiming_more_than_its_compression_can_give_is_refused(demos_f
     with zipfile.ZipFile(forged) as archive:
         info = archive.getinfo("obs.npy")
     entry = content.index(b"PK\x01\x02")  # the central directory's entries, until obs.npy's
-    while content[entry + 46: entry + 46 + len(b"obs.npy")] != b"obs.npy":
+    while content[entry + 46 : entry + 46 + len(b"obs.npy")] != b"obs.npy":
         entry = content.index(b"PK\x01\x02", entry + 4)
     header_size = info.file_size - 64
     struct.pack_into("<I", content, entry + 24, 10**7 * 16 + header_size)  # its uncompressed size
     forged.write_bytes(bytes(content))
-    assert_refused(command(*DEMOS, "inspect", forged),
-                   f"error: {forged}: member obs.npy claims {10**7 * 16 + header_size} bytes from "
-                   f"{info.compress_size} compressed, which its compression cannot give (a damaged file)")
+    assert_refused(
+        command(*DEMOS, "inspect", forged),
+        f"error: {forged}: member obs.npy claims {10**7 * 16 + header_size} bytes from "
+        f"{info.compress_size} compressed, which its compression cannot give (a damaged file)",
+    )
 
 
 def test_demos_record_refuses_a_negative_seed_in_one_line(tmp_path):
-    done = command(*DEMOS, "record", "--task", "cartpole", "--expert", "strong", "--seed", "-1", "--out",
-                   tmp_path / "d.npz")
-    assert_refused(done, "python -m dqfd_bc_keras.demos record: error: argument --seed: must be in [0, 2147483647], "
-                         "got -1")
+    done = command(
+        *DEMOS, "record", "--task", "cartpole", "--expert", "strong", "--seed", "-1", "--out", tmp_path / "d.npz"
+    )
+    assert_refused(
+        done, "python -m dqfd_bc_keras.demos record: error: argument --seed: must be in [0, 2147483647], got -1"
+    )
     assert_without_tensorflow(done)
     assert left_in(tmp_path) == []
 
@@ -644,49 +866,100 @@ def test_demos_record_refuses_a_negative_seed_in_one_line(tmp_path):
 
 PACKAGE = REPO / "dqfd_bc_keras"
 
-MY_RULES = '''import numpy as np
+MY_RULES = """import numpy as np
 def bad(obs):
     return 1 / 0
-'''
+"""
 """my_rules.py: `bad` raises at line 3; the cases below replace its body."""
 
 
-@pytest.mark.parametrize("body, message", [
-    ("    return 1 / 0", "my_rules:bad raised ZeroDivisionError: division by zero (my_rules.py:3)"),
-    ("    return 1.0", "my_rules:bad returned 1.0 (float); a demonstrator returns an int action in [0, 2) "
-                     "(my_rules.py:2)"),
-    ("    return np.float64(1)", "my_rules:bad returned np.float64(1.0) (float64); a demonstrator returns an int "
-                               "action in [0, 2) (my_rules.py:2)"),
-    ("    return '1'", "my_rules:bad returned '1' (str); a demonstrator returns an int action in [0, 2) "
-                     "(my_rules.py:2)"),
-    ("    return obs[3] > 0", "my_rules:bad returned np.False_ (bool); a demonstrator returns an int action in "
-                            "[0, 2) (my_rules.py:2)"),
-    ("    return 7", "my_rules:bad returned 7 (int); a demonstrator returns an int action in [0, 2) (my_rules.py:2)"),
-], ids=["raises", "float", "numpy-float", "string", "bool", "out-of-range"])
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ("    return 1 / 0", "my_rules:bad raised ZeroDivisionError: division by zero (my_rules.py:3)"),
+        (
+            "    return 1.0",
+            "my_rules:bad returned 1.0 (float); a demonstrator returns an int action in [0, 2) (my_rules.py:2)",
+        ),
+        (
+            "    return np.float64(1)",
+            "my_rules:bad returned np.float64(1.0) (float64); a demonstrator returns an int "
+            "action in [0, 2) (my_rules.py:2)",
+        ),
+        (
+            "    return '1'",
+            "my_rules:bad returned '1' (str); a demonstrator returns an int action in [0, 2) (my_rules.py:2)",
+        ),
+        (
+            "    return obs[3] > 0",
+            "my_rules:bad returned np.False_ (bool); a demonstrator returns an int action in [0, 2) (my_rules.py:2)",
+        ),
+        (
+            "    return 7",
+            "my_rules:bad returned 7 (int); a demonstrator returns an int action in [0, 2) (my_rules.py:2)",
+        ),
+    ],
+    ids=["raises", "float", "numpy-float", "string", "bool", "out-of-range"],
+)
 def test_a_demonstrator_rule_that_fails_is_one_line_before_tensorflow_and_leaves_nothing(tmp_path, body, message):
     (tmp_path / "my_rules.py").write_text(MY_RULES.replace("    return 1 / 0", body))
-    done = command("train.py", "--env", "CartPole-v1", "--expert", "my_rules:bad", "--quick",
-                   cwd=tmp_path, path=[tmp_path], block_tensorflow=True)
+    done = command(
+        "train.py",
+        "--env",
+        "CartPole-v1",
+        "--expert",
+        "my_rules:bad",
+        "--quick",
+        cwd=tmp_path,
+        path=[tmp_path],
+        block_tensorflow=True,
+    )
     assert_refused(done, f"error: {message}")  # no banner either
     assert left_in(tmp_path) == ["my_rules.py"]  # no runs/ directory
 
 
-@pytest.mark.parametrize("rules, expert, message", [
-    (MY_RULES, "my_rules:flap",
-     "demonstrator my_rules:flap: my_rules (my_rules.py) has no function 'flap'; it has bad"),
-    ("import numpy\nimport not_installed_pkg\n" + MY_RULES, "my_rules:bad",
-     "demonstrator my_rules:bad: importing my_rules raised ModuleNotFoundError: No module named 'not_installed_pkg' "
-     "(my_rules.py:2)"),
-    ("def bad(obs)\n    return 0\n", "my_rules:bad",
-     "demonstrator my_rules:bad: importing my_rules raised SyntaxError: expected ':' (my_rules.py:1)"),
-    (MY_RULES, "my_rulez:bad",
-     "demonstrator my_rulez:bad: no module named 'my_rulez' (is its directory on PYTHONPATH?)"),
-], ids=["missing-function", "import-error", "syntax-error", "missing-module"])
-def test_a_demonstrator_module_that_cannot_give_its_rule_is_one_line_before_tensorflow(tmp_path, rules, expert,
-                                                                                       message):
+@pytest.mark.parametrize(
+    "rules, expert, message",
+    [
+        (
+            MY_RULES,
+            "my_rules:flap",
+            "demonstrator my_rules:flap: my_rules (my_rules.py) has no function 'flap'; it has bad",
+        ),
+        (
+            "import numpy\nimport not_installed_pkg\n" + MY_RULES,
+            "my_rules:bad",
+            "demonstrator my_rules:bad: importing my_rules raised ModuleNotFoundError: No module named 'not_installed_pkg' "
+            "(my_rules.py:2)",
+        ),
+        (
+            "def bad(obs)\n    return 0\n",
+            "my_rules:bad",
+            "demonstrator my_rules:bad: importing my_rules raised SyntaxError: expected ':' (my_rules.py:1)",
+        ),
+        (
+            MY_RULES,
+            "my_rulez:bad",
+            "demonstrator my_rulez:bad: no module named 'my_rulez' (is its directory on PYTHONPATH?)",
+        ),
+    ],
+    ids=["missing-function", "import-error", "syntax-error", "missing-module"],
+)
+def test_a_demonstrator_module_that_cannot_give_its_rule_is_one_line_before_tensorflow(
+    tmp_path, rules, expert, message
+):
     (tmp_path / "my_rules.py").write_text(rules)
-    done = command("train.py", "--env", "CartPole-v1", "--expert", expert, "--quick",
-                   cwd=tmp_path, path=[tmp_path], block_tensorflow=True)
+    done = command(
+        "train.py",
+        "--env",
+        "CartPole-v1",
+        "--expert",
+        expert,
+        "--quick",
+        cwd=tmp_path,
+        path=[tmp_path],
+        block_tensorflow=True,
+    )
     assert_refused(done, f"error: {message}")
     assert left_in(tmp_path) == ["my_rules.py"]
 
@@ -696,8 +969,17 @@ def test_a_rule_answering_an_integer_passes_the_check_and_training_goes_on(tmp_p
     """A numpy integer or a 0-d integer array is an action: the command goes on to load TensorFlow
     (blocked here), which shows that the failures above come before it."""
     (tmp_path / "my_rules.py").write_text(MY_RULES.replace("    return 1 / 0", body))
-    done = command("train.py", "--env", "CartPole-v1", "--expert", "my_rules:bad", "--quick",
-                   cwd=tmp_path, path=[tmp_path], block_tensorflow=True)
+    done = command(
+        "train.py",
+        "--env",
+        "CartPole-v1",
+        "--expert",
+        "my_rules:bad",
+        "--quick",
+        cwd=tmp_path,
+        path=[tmp_path],
+        block_tensorflow=True,
+    )
     assert done.returncode != 0 and "ImportError: tensorflow is blocked by the test" in done.stderr
     assert "my_rules" not in done.stderr
 
@@ -705,14 +987,26 @@ def test_a_rule_answering_an_integer_passes_the_check_and_training_goes_on(tmp_p
 def test_a_rule_that_raises_while_demonstrations_are_recorded_is_one_line_and_leaves_no_run(tmp_path):
     (tmp_path / "my_rules.py").write_text(
         "calls = 0\n\n\ndef bad(obs):\n    global calls\n    calls += 1\n"
-        "    if calls > 5:\n        raise RuntimeError(f'call {calls}')\n    return 0\n")
-    done = command("train.py", "--env", "CartPole-v1", "--expert", "my_rules:bad", "--quick", "--quiet",
-                   "--out", tmp_path / "run", cwd=tmp_path, path=[tmp_path])
+        "    if calls > 5:\n        raise RuntimeError(f'call {calls}')\n    return 0\n"
+    )
+    done = command(
+        "train.py",
+        "--env",
+        "CartPole-v1",
+        "--expert",
+        "my_rules:bad",
+        "--quick",
+        "--quiet",
+        "--out",
+        tmp_path / "run",
+        cwd=tmp_path,
+        path=[tmp_path],
+    )
     assert_refused(done, "error: my_rules:bad raised RuntimeError: call 6 (my_rules.py:8)")
     assert left_in(tmp_path) == ["my_rules.py"]  # the new run's directory is removed
 
 
-MY_TASKS = '''from dqfd_bc_keras.tasks import TaskSpec, register_task
+MY_TASKS = """from dqfd_bc_keras.tasks import TaskSpec, register_task
 
 
 def lean(obs):
@@ -721,7 +1015,7 @@ def lean(obs):
 
 register_task(TaskSpec("short-pole", "CartPole-v1", family="short-pole", max_steps=60, fall_penalty=-10.0,
                        defaults={"total_steps": 20_000}, experts={"lean": lean}))
-'''
+"""
 """docs/EXTENDING.md's preset, as it is written there."""
 
 
@@ -732,8 +1026,21 @@ def test_the_extending_recipe_is_the_preset_these_tests_train():
 def test_a_users_preset_without_an_imperfect_expert_demonstrates_with_its_own(tmp_path):
     (tmp_path / "my_tasks.py").write_text(MY_TASKS)
     out = tmp_path / "run"
-    done = command("train.py", "--task", "my_tasks:short-pole", "--quick", "--quiet", "--set", "total_steps=60",
-                   "--set", "pretrain_steps=5", "--out", out, cwd=tmp_path, path=[tmp_path])
+    done = command(
+        "train.py",
+        "--task",
+        "my_tasks:short-pole",
+        "--quick",
+        "--quiet",
+        "--set",
+        "total_steps=60",
+        "--set",
+        "pretrain_steps=5",
+        "--out",
+        out,
+        cwd=tmp_path,
+        path=[tmp_path],
+    )
     assert (done.returncode, done.stderr) == (0, "")
     assert json.loads((out / "config.json").read_text())["expert"] == "lean"
     assert json.loads((out / "demonstrations.json").read_text())["expert"] == "lean"
@@ -741,15 +1048,27 @@ def test_a_users_preset_without_an_imperfect_expert_demonstrates_with_its_own(tm
 
 def test_a_users_preset_refuses_an_expert_it_does_not_have_before_tensorflow(tmp_path):
     (tmp_path / "my_tasks.py").write_text(MY_TASKS)
-    done = command("train.py", "--task", "my_tasks:short-pole", "--expert", "imperfect", "--quick",
-                   cwd=tmp_path, path=[tmp_path], block_tensorflow=True)
-    assert_refused(done, "error: unknown expert name 'imperfect'; valid choices: lean (the scripted experts of "
-                         "short-pole: choose one with --expert)")
+    done = command(
+        "train.py",
+        "--task",
+        "my_tasks:short-pole",
+        "--expert",
+        "imperfect",
+        "--quick",
+        cwd=tmp_path,
+        path=[tmp_path],
+        block_tensorflow=True,
+    )
+    assert_refused(
+        done,
+        "error: unknown expert name 'imperfect'; valid choices: lean (the scripted experts of "
+        "short-pole: choose one with --expert)",
+    )
     assert left_in(tmp_path) == ["my_tasks.py"]
 
 
-MY_METHODS = '''from dqfd_bc_keras import losses
-from dqfd_bc_keras.methods import Method
+MY_METHODS = """from dqfd_bc_keras import losses
+from dqfd_bc_keras.core.methods import Method
 
 
 def half_ce(agent, q, batch):
@@ -758,7 +1077,7 @@ def half_ce(agent, q, batch):
 
 
 HALF_CE = Method("half_ce", "half of DQfD-BC's cross-entropy", bc_fit="mle", term=half_ce, reads=("temperature",))
-'''
+"""
 
 
 def unlocked_tree(run: Path) -> dict:
@@ -771,8 +1090,21 @@ def test_a_run_of_a_users_method_evaluates_without_its_module_and_resume_says_it
     code.mkdir()
     (code / "my_methods.py").write_text(MY_METHODS)
     out = tmp_path / "run"
-    trained = command("train.py", "--expert-loss", "my_methods:HALF_CE", "--quick", "--quiet", "--set",
-                      "total_steps=60", "--set", "pretrain_steps=5", "--out", out, cwd=tmp_path, path=[code])
+    trained = command(
+        "train.py",
+        "--expert-loss",
+        "my_methods:HALF_CE",
+        "--quick",
+        "--quiet",
+        "--set",
+        "total_steps=60",
+        "--set",
+        "pretrain_steps=5",
+        "--out",
+        out,
+        cwd=tmp_path,
+        path=[code],
+    )
     assert trained.returncode == 0, trained.stderr
     before = unlocked_tree(out)
     evaluated = command("evaluate.py", out, "--episodes", "1", cwd=tmp_path)
@@ -780,8 +1112,10 @@ def test_a_run_of_a_users_method_evaluates_without_its_module_and_resume_says_it
     assert "1 greedy episodes" in evaluated.stdout
     resumed = command("train.py", "--out", out, "--resume", "--quiet", cwd=tmp_path)
     assert (resumed.returncode, resumed.stderr) == (
-        2, "error: expert_loss='my_methods:HALF_CE': cannot import it (ModuleNotFoundError: No module named "
-           "'my_methods'); keep your module importable (on PYTHONPATH or installed)\n")
+        2,
+        "error: expert_loss='my_methods:HALF_CE': cannot import it (ModuleNotFoundError: No module named "
+        "'my_methods'); keep your module importable (on PYTHONPATH or installed)\n",
+    )
     assert unlocked_tree(out) == before
 
 
@@ -800,7 +1134,7 @@ def import_graph() -> dict[str, set[str]]:
             if isinstance(node, ast.Import):
                 edges |= {alias.name for alias in node.names}
             elif isinstance(node, ast.ImportFrom):
-                base = package.split(".")[:len(package.split(".")) - node.level + 1] if node.level else []
+                base = package.split(".")[: len(package.split(".")) - node.level + 1] if node.level else []
                 source = ".".join([*base, *([node.module] if node.module else [])])
                 for alias in node.names:
                     edges.add(f"{source}.{alias.name}" if f"{source}.{alias.name}" in modules else source)
@@ -816,7 +1150,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
         state[module] = "open"
         for child in sorted(graph[module]):
             if state.get(child) == "open":
-                found.append([*path[path.index(child):], child])
+                found.append([*path[path.index(child) :], child])
             elif child not in state:
                 visit(child, [*path, child])
         state[module] = "done"
@@ -830,8 +1164,8 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def test_the_import_graph_check_finds_a_cycle():
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c", "a"]]
     graph = import_graph()
-    assert "dqfd_bc_keras.recording" in graph["dqfd_bc_keras.experts"]  # relative imports are resolved
-    assert "dqfd_bc_keras.commands.experts" in graph["dqfd_bc_keras.experts"]  # the __main__ block counts
+    assert "dqfd_bc_keras.demos.recording" in graph["dqfd_bc_keras.demos.experts"]  # relative imports are resolved
+    assert "dqfd_bc_keras.commands.experts" in graph["dqfd_bc_keras.demos.experts"]  # the __main__ block counts
 
 
 def test_the_package_has_no_import_cycle():
@@ -839,7 +1173,7 @@ def test_the_package_has_no_import_cycle():
 
 
 def test_python_m_experts_still_runs_the_experts_command(tmp_path):
-    done = command("-m", "dqfd_bc_keras.experts", "--help", cwd=tmp_path)
+    done = command("-m", "dqfd_bc_keras.demos.experts", "--help", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.startswith("usage: python -m dqfd_bc_keras.experts")
+    assert done.stdout.startswith("usage: python -m dqfd_bc_keras.demos.experts")
     assert "Evaluate the scripted experts on the plain envs." in done.stdout

@@ -13,17 +13,27 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from dqfd_bc_keras import DQfD, demos
-from dqfd_bc_keras.config import QUICK
-from dqfd_bc_keras.errors import ConfigError, DqfdWarning
-from dqfd_bc_keras.evaluation import EvalResult, evaluate, load_policy
-from dqfd_bc_keras.records import EpisodeRow, EvalRow
-from dqfd_bc_keras.seeds import EVAL_SEED
 from toy_envs import Chain
 
+from dqfd_bc_keras import DQfD, demos
+from dqfd_bc_keras.core.config import QUICK
+from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.evaluation import EvalResult, evaluate, load_policy
+from dqfd_bc_keras.seeds import EVAL_SEED
+from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
+
 REPO = Path(__file__).resolve().parents[1]
-TINY = {"pretrain_steps": 10, "bc_epochs": 2, "bc_refit_epochs": 1, "demo_episodes": 2, "eval_every": 100,
-        "eval_episodes": 2, "final_eval_episodes": 2, "replay_capacity": 2000, "demo_capacity": 5000}
+TINY = {
+    "pretrain_steps": 10,
+    "bc_epochs": 2,
+    "bc_refit_epochs": 1,
+    "demo_episodes": 2,
+    "eval_every": 100,
+    "eval_episodes": 2,
+    "final_eval_episodes": 2,
+    "replay_capacity": 2000,
+    "demo_capacity": 5000,
+}
 
 
 def walk_right(obs):
@@ -34,14 +44,21 @@ def test_the_same_metrics_as_train_py(tmp_path):
     """DQfD(preset, seed, QUICK's fields).learn(N) gives train.py --quick's metrics.csv, wall time aside."""
     fields = {key: value for key, value in QUICK.items() if key != "total_steps"}
     model = DQfD("cartpole", seed=0, **fields).learn(QUICK["total_steps"])
-    done = subprocess.run([sys.executable, "train.py", "--quick", "--quiet", "--seed", "0", "--out", tmp_path / "run"],
-                          cwd=REPO, capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    done = subprocess.run(
+        [sys.executable, "train.py", "--quick", "--quiet", "--seed", "0", "--out", tmp_path / "run"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     assert done.returncode == 0, done.stderr
     with open(tmp_path / "run" / "metrics.csv") as file:
         expected = [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(file)]
-    ours = [{k: "" if v is None else str(v) for k, v in row.to_row().items() if k != "wall_time"}
-            for row in model.state.metrics]
+    ours = [
+        {k: "" if v is None else str(v) for k, v in row.to_row().items() if k != "wall_time"}
+        for row in model.state.metrics
+    ]
     assert ours == expected and len(ours) > 1
     assert json.loads((tmp_path / "run" / "config.json").read_text())["expert"] == model.config.expert == "imperfect"
 
@@ -118,11 +135,12 @@ def test_a_bad_keyword_is_a_did_you_mean():
 
 # --- demonstrations given every way the CLI takes them, and the same provenance ----------------------
 
+
 def test_demonstrations_as_a_dataset_a_file_and_a_minari_id(tmp_path, monkeypatch):
     """A DemoDataset, its .npz and its Minari copy give the same D_demo; config.json names where it
     came from, as train.py --demos writes it, and demonstrations.json says which kind of source."""
     pytest.importorskip("minari")
-    from dqfd_bc_keras.minari_io import to_minari
+    from dqfd_bc_keras.demos.minari import to_minari
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     dataset = demos.record("CartPole-v1", "toy_envs:pole_rule", 2, seed=0)
@@ -136,24 +154,51 @@ def test_demonstrations_as_a_dataset_a_file_and_a_minari_id(tmp_path, monkeypatc
         summary = json.loads((tmp_path / "runs" / source / "demonstrations.json").read_text())
         config = json.loads((tmp_path / "runs" / source / "config.json").read_text())
         assert summary["source"] == source and config["expert"] == model.config.expert
-    assert DQfD("CartPole-v1", kinds["python"]).config.expert == \
-        "demonstrations from a Python DemoDataset (toy_envs:pole_rule)"
+    assert (
+        DQfD("CartPole-v1", kinds["python"]).config.expert
+        == "demonstrations from a Python DemoDataset (toy_envs:pole_rule)"
+    )
     assert DQfD("CartPole-v1", kinds["minari"]).config.expert == "demonstrations from minari:cartpole/mine-v0"
 
-    done = subprocess.run([sys.executable, "train.py", "--env", "CartPole-v1", "--demos", tmp_path / "d.npz", "--quick",
-                           "--quiet", "--out", tmp_path / "cli"], cwd=REPO, capture_output=True, text=True,
-                          timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    done = subprocess.run(
+        [
+            sys.executable,
+            "train.py",
+            "--env",
+            "CartPole-v1",
+            "--demos",
+            tmp_path / "d.npz",
+            "--quick",
+            "--quiet",
+            "--out",
+            tmp_path / "cli",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     assert done.returncode == 0, done.stderr
     cli = json.loads((tmp_path / "cli" / "config.json").read_text())["expert"]
-    assert cli == json.loads((tmp_path / "runs" / "file" / "config.json").read_text())["expert"] == \
-        f"demonstrations from {tmp_path / 'd.npz'} (toy_envs:pole_rule)"
+    assert (
+        cli
+        == json.loads((tmp_path / "runs" / "file" / "config.json").read_text())["expert"]
+        == f"demonstrations from {tmp_path / 'd.npz'} (toy_envs:pole_rule)"
+    )
 
 
 def test_train_py_refuses_demos_and_an_expert_together(tmp_path):
-    done = subprocess.run([sys.executable, "train.py", "--demos", tmp_path / "d.npz", "--expert", "strong", "--out",
-                           tmp_path / "run"], cwd=REPO, capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [sys.executable, "train.py", "--demos", tmp_path / "d.npz", "--expert", "strong", "--out", tmp_path / "run"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 2 and done.stderr.strip().splitlines() == [
-        f"error: --demos {tmp_path / 'd.npz'} gives the demonstrations and --expert strong would record them: give one"]
+        f"error: --demos {tmp_path / 'd.npz'} gives the demonstrations and --expert strong would record them: give one"
+    ]
     assert not (tmp_path / "run").exists()
 
 
@@ -165,6 +210,7 @@ def test_demonstrators_by_name_and_by_saved_model():
 
 
 # --- envs: a factory, a gym.make with its own limit ----------------------------------------------------
+
 
 def test_a_factory_env_and_a_gym_make_limit():
     model = DQfD(lambda: Chain(), walk_right, max_steps=15, **TINY).learn(100)
@@ -186,9 +232,9 @@ def test_progress_bar_and_the_default_budget(capsys):
 
 # --- a user's Method object -----------------------------------------------------------------------------
 
-METHOD_MODULE = '''
+METHOD_MODULE = """
 from dqfd_bc_keras import losses
-from dqfd_bc_keras.methods import Method
+from dqfd_bc_keras.core.methods import Method
 
 
 def half_ce(agent, q, batch):
@@ -197,7 +243,7 @@ def half_ce(agent, q, batch):
 
 
 HALF_CE = Method("half_ce", "half of DQfD-BC's cross-entropy", bc_fit="mle", term=half_ce, reads=("temperature",))
-'''
+"""
 
 
 def test_a_method_object_from_a_users_module_is_saved_as_module_name(tmp_path, monkeypatch):
@@ -214,34 +260,51 @@ def test_a_method_object_from_a_users_module_is_saved_as_module_name(tmp_path, m
 
 
 def test_a_method_made_in_the_script_is_registered_and_said_at_save(tmp_path):
-    from dqfd_bc_keras.methods import Method
+    from dqfd_bc_keras.core.methods import Method
 
-    method = Method("script_margin", "a margin of our own", term="dqfd_bc_keras.expert_terms:margin",
-                    reads=("margin",))
+    method = Method(
+        "script_margin", "a margin of our own", term="dqfd_bc_keras.core.expert_terms:margin", reads=("margin",)
+    )
     model = DQfD("cartpole", expert_loss=method, **TINY).learn(60)
     assert model.config.expert_loss == "script_margin"
     with pytest.warns(DqfdWarning, match="the method 'script_margin' \\(registered in this process"):
         model.save(tmp_path / "run")
-    script = (f"from dqfd_bc_keras import DQfD\n"
-              f"try:\n    DQfD.load({str(tmp_path / 'run')!r}).learn(10)\n"
-              f"except Exception as error:\n    print(type(error).__name__, error)\n")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    script = (
+        f"from dqfd_bc_keras import DQfD\n"
+        f"try:\n    DQfD.load({str(tmp_path / 'run')!r}).learn(10)\n"
+        f"except Exception as error:\n    print(type(error).__name__, error)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     assert "ConfigError expert_loss='script_margin' is not one of" in done.stdout, done.stderr
-    assert "registered again with dqfd_bc_keras.methods.register" in done.stdout
-    done = subprocess.run([sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2"], cwd=REPO,
-                          capture_output=True, text=True, timeout=300)
+    assert "registered again with dqfd_bc_keras.core.methods.register" in done.stdout
+    done = subprocess.run(
+        [sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0 and "2 greedy episodes" in done.stdout, done.stderr  # evaluating needs no method
 
 
 # --- load, and a learn-more stopped halfway ----------------------------------------------------------
 
+
 def test_load_refuses_what_is_not_a_run(tmp_path):
     from dqfd_bc_keras.errors import RunDirectoryError
 
     (tmp_path / "notes.txt").write_text("mine")
-    for path, why in ((tmp_path, "is not a run directory"), (tmp_path / "missing", "does not exist"),
-                      (tmp_path / "notes.txt", "is not a directory")):
+    for path, why in (
+        (tmp_path, "is not a run directory"),
+        (tmp_path / "missing", "does not exist"),
+        (tmp_path / "notes.txt", "is not a directory"),
+    ):
         with pytest.raises(RunDirectoryError, match=f"^{path} {why}: DQfD.load reads a run directory"):
             DQfD.load(path)
     assert (tmp_path / "notes.txt").read_text() == "mine"
@@ -250,7 +313,7 @@ def test_load_refuses_what_is_not_a_run(tmp_path):
 def test_a_learn_more_stopped_before_config_json_resumes_with_train_py(tmp_path, monkeypatch):
     """continue_run checkpoints the new budget, then rewrites config.json: stopped between the two,
     train.py --resume takes the checkpoint's budget (it refused the run before)."""
-    from dqfd_bc_keras import runs
+    from dqfd_bc_keras.runs import directory as runs
 
     model = DQfD("cartpole", seed=0, out=tmp_path / "run", **TINY).learn(150)
 
@@ -261,8 +324,14 @@ def test_a_learn_more_stopped_before_config_json_resumes_with_train_py(tmp_path,
     with pytest.raises(KeyboardInterrupt):
         model.learn(150)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 150
-    done = subprocess.run([sys.executable, "train.py", "--resume", "--quiet", "--out", tmp_path / "run"], cwd=REPO,
-                          capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    done = subprocess.run(
+        [sys.executable, "train.py", "--resume", "--quiet", "--out", tmp_path / "run"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 300
     assert json.loads((tmp_path / "run" / "complete.json").read_text())["env_steps"] == 300
@@ -280,7 +349,12 @@ def test_a_third_party_env_from_pypi_made_by_gym_make(tmp_path):
     obs, _ = env.reset(seed=0)
     assert isinstance(obs, dict) and isinstance(model.predict(obs), int)
     model.save(tmp_path / "run")
-    done = subprocess.run([sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2", "--json"], cwd=REPO,
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2", "--json"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["lengths"] == model.evaluate(2).lengths

@@ -35,9 +35,9 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401
-from dqfd_bc_keras import reference
-from dqfd_bc_keras.agent import DQfDAgent, make_agent
-from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.core import reference
+from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
+from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.demos import DemoDataset, record
 
 PRETRAIN, ROUNDS, STORE, LEARN = 100, 3, 100, 50
@@ -55,8 +55,9 @@ def agent_data() -> DemoDataset:
 
 
 def config_for(loss: str) -> Config:
-    return Config.for_task("cartpole", expert_loss=loss, replay_capacity=150, target_update_period=50,
-                           beta_anneal_steps=200, seed=0)
+    return Config.for_task(
+        "cartpole", expert_loss=loss, replay_capacity=150, target_update_period=50, beta_anneal_steps=200, seed=0
+    )
 
 
 class GraphRows:
@@ -90,18 +91,27 @@ class GraphRows:
         cumulative = np.cumsum(p)
         for i in np.flatnonzero(mine != theirs):
             boundary = cumulative[min(mine[i], theirs[i])]
-            assert abs(mine[i] - theirs[i]) == 1 and abs(u[i] * cumulative[-1] - boundary) <= BOUNDARY * cumulative[-1], (
-                f"step {self.step}: the graph drew row {theirs[i]}, the reference's priorities give {mine[i]}")
-        self.step, self.mismatches, self.draws = self.step + 1, self.mismatches + int((mine != theirs).sum()), self.draws + size
+            assert (
+                abs(mine[i] - theirs[i]) == 1 and abs(u[i] * cumulative[-1] - boundary) <= BOUNDARY * cumulative[-1]
+            ), f"step {self.step}: the graph drew row {theirs[i]}, the reference's priorities give {mine[i]}"
+        self.step, self.mismatches, self.draws = (
+            self.step + 1,
+            self.mismatches + int((mine != theirs).sum()),
+            self.draws + size,
+        )
         return theirs
 
 
-def transitions(agent: DQfDAgent, data: DemoDataset, rows: np.ndarray, part: slice = slice(None)) -> reference.Transitions:
+def transitions(
+    agent: DQfDAgent, data: DemoDataset, rows: np.ndarray, part: slice = slice(None)
+) -> reference.Transitions:
     """`data[part]` with the BC model's view of each state, as the graph stored it in table rows `rows`."""
     table = agent.replay.table.numpy()[rows]
-    return reference.Transitions(*(x[part] for x in (data.obs, data.actions, data.rewards, data.next_obs,
-                                                     data.terminated, data.truncated)),
-                                 table[:, agent.replay.PI_BC], table[:, agent.replay.SIGMA_SQ])
+    return reference.Transitions(
+        *(x[part] for x in (data.obs, data.actions, data.rewards, data.next_obs, data.terminated, data.truncated)),
+        table[:, agent.replay.PI_BC],
+        table[:, agent.replay.SIGMA_SQ],
+    )
 
 
 def standardization(agent: DQfDAgent) -> tuple[np.ndarray, np.ndarray]:
@@ -129,8 +139,13 @@ def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_mod
     keras.utils.set_random_seed(0)
     agent = make_agent(config, demos, bc_model)
     rows = GraphRows(agent, PRETRAIN + ROUNDS * LEARN)
-    ref = reference.Learner(config, agent.q_network.get_weights(), standardization(agent),
-                            transitions(agent, demos, np.arange(len(demos))), draw=rows.draw)
+    ref = reference.Learner(
+        config,
+        agent.q_network.get_weights(),
+        standardization(agent),
+        transitions(agent, demos, np.arange(len(demos))),
+        draw=rows.draw,
+    )
     graph_terms = [agent.pretrain(PRETRAIN)]
     ref_terms = [ref.pretrain(PRETRAIN)]
     store = tf.function(agent.store, autograph=False)
@@ -138,8 +153,19 @@ def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_mod
         chunk = slice(r * STORE, (r + 1) * STORE)
         slots = (np.arange(STORE) + int(agent.replay.head.numpy())) % config.replay_capacity
         for t in range(chunk.start, chunk.stop):
-            store(*(tf.constant(x[t]) for x in (agent_data.obs, agent_data.actions, agent_data.rewards,
-                                               agent_data.next_obs, agent_data.terminated, agent_data.truncated)))
+            store(
+                *(
+                    tf.constant(x[t])
+                    for x in (
+                        agent_data.obs,
+                        agent_data.actions,
+                        agent_data.rewards,
+                        agent_data.next_obs,
+                        agent_data.terminated,
+                        agent_data.truncated,
+                    )
+                )
+            )
         ref.replay.store(transitions(agent, agent_data, agent.replay.demo_capacity + slots, chunk))
         agent.reset_metrics()
         graph_terms.append(agent.learn(tf.constant(LEARN)))
@@ -150,7 +176,7 @@ def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_mod
 @pytest.mark.parametrize("loss", ["margin", "bayes"])
 def test_reference_learns_what_the_graph_loop_learns(loss, demos, agent_data, bc_models):
     agent, ref, graph_terms, ref_terms, rows = run_both(config_for(loss), demos, agent_data, bc_models.get(loss))
-    for graph, steps in zip(graph_terms, ref_terms):
+    for graph, steps in zip(graph_terms, ref_terms, strict=True):
         assert_same_terms(graph, steps)
     assert_same_weights(agent.q_network.weights, ref.theta)
     assert_same_weights(agent.target_network.weights, ref.target)

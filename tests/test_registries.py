@@ -11,18 +11,26 @@ import sys
 from pathlib import Path
 
 import pytest
-from dqfd_bc_keras.config import Config
+
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import BAYES_FIELDS, METHODS, Method, get_method
 from dqfd_bc_keras.demos import record
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arms import BAYES_ONLY
 from dqfd_bc_keras.experiments.efficiency import TEACHER
 from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS, lab_settings
 from dqfd_bc_keras.experiments.suites import EFFICIENCY_TASKS
-from dqfd_bc_keras.methods import BAYES_FIELDS, METHODS, Method, get_method
 from dqfd_bc_keras.tasks import TASKS, family_preset
 
-BC_FIT = {"margin": "none", "bc_margin": "mle", "ce": "mle", "bayes": "map", "none": "none", "sqil": "none",
-          "bc-alone": "mle"}
+BC_FIT = {
+    "margin": "none",
+    "bc_margin": "mle",
+    "ce": "mle",
+    "bayes": "map",
+    "none": "none",
+    "sqil": "none",
+    "bc-alone": "mle",
+}
 """The paper's methods and the baselines, in the order registered, with how each fits π_bc."""
 FAMILIES = ("cartpole", "mountaincar", "acrobot", "lunarlander", "minatar-breakout", "minatar-freeway")
 """The package's families whose lab settings are checked by hand below."""
@@ -62,8 +70,11 @@ def test_the_registry_holds_every_builtin_method_and_config_derives_from_it():
         if not method.q_learning:
             continue
         config = Config.for_task("cartpole", expert_loss=method.name)
-        assert (config.uses_demos, config.uses_bc, config.bayesian_bc) == \
-            (method.needs_demos, method.bc_fit != "none", method.bc_fit == "map"), method.name
+        assert (config.uses_demos, config.uses_bc, config.bayesian_bc) == (
+            method.needs_demos,
+            method.bc_fit != "none",
+            method.bc_fit == "map",
+        ), method.name
         assert (method.term is None) == (method.expert_term() is None)
     assert set(BAYES_ONLY) == set(BAYES_FIELDS)  # what a bayes arm may differ from its ce pair in
 
@@ -87,13 +98,15 @@ def package(table: dict) -> dict:
 
 
 def test_the_lab_tables_derive_from_the_lab_settings():
-    assert EFFICIENCY_TASKS == {t: s.efficiency_demos for t, s in LAB_SETTINGS.items() if s.efficiency_demos}
-    assert TEACHER == {t: s.teacher_return for t, s in LAB_SETTINGS.items() if s.teacher_return is not None}
+    assert {t: s.efficiency_demos for t, s in LAB_SETTINGS.items() if s.efficiency_demos} == EFFICIENCY_TASKS
+    assert {t: s.teacher_return for t, s in LAB_SETTINGS.items() if s.teacher_return is not None} == TEACHER
     assert package(EFFICIENCY_TASKS) == {"cartpole": 5, "mountaincar": 10, "acrobot": 10, "lunarlander": 10}
     assert package(TEACHER) == {"acrobot": -112.68, "lunarlander": 129.03}
     assert [lab_settings(t).target_ratio for t in package(EFFICIENCY_TASKS)] == [10.0, 10.0, 5.0, 5.0]
     assert package({t: s.ablation_metric for t, s in LAB_SETTINGS.items() if s.ablation_metric}) == {
-        "cartpole": "mean_train_return", "mountaincar-goals": "goals_first30"}
+        "cartpole": "mean_train_return",
+        "mountaincar-goals": "goals_first30",
+    }
     assert family_preset("mountaincar").name == "mountaincar"  # the variant shares its family's experts
     assert TASKS["mountaincar-goals"].experts is TASKS["mountaincar"].experts
 

@@ -18,13 +18,14 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from dqfd_bc_keras import cli, runs
-from dqfd_bc_keras.config import QUICK, Config
-from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DemoFileError, RunDirectoryError
-from dqfd_bc_keras.files import DirectoryLock
+from dqfd_bc_keras.commands import cli
+from dqfd_bc_keras.core.config import QUICK, Config
+from dqfd_bc_keras.errors import ConfigError, DemoFileError, RunDirectoryError
 from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.experiments.sweep import run_suite
-from dqfd_bc_keras.training import TrainingState
+from dqfd_bc_keras.files import DirectoryLock
+from dqfd_bc_keras.runs import directory as runs
+from dqfd_bc_keras.training.loop import TrainingState
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -70,6 +71,7 @@ def finished(tmp_path_factory) -> Path:
 
 # --- checkpoints: an atomic switch ----------------------------------------------------------------
 
+
 @pytest.mark.parametrize("same_step", [False, True], ids=["new-step", "same-step"])
 def test_a_kill_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(tmp_path, monkeypatch, same_step):
     """Snapshot the run directory before and after every file operation of a save (what a
@@ -94,16 +96,23 @@ def test_a_kill_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(tmp_pat
             result = function(*args, **kwargs)
             snapshot()
             return result
+
         return operation
 
-    for module, name in [(runs, "write_text"), (runs, "sync_tree"), (runs.demo_io, "save"), (shutil, "rmtree"),
-                         (tf.train.Checkpoint, "write")]:
+    for module, name in [
+        (runs, "write_text"),
+        (runs, "sync_tree"),
+        (runs.demo_io, "save"),
+        (shutil, "rmtree"),
+        (tf.train.Checkpoint, "write"),
+    ]:
         monkeypatch.setattr(module, name, watched(getattr(module, name)))
     run.save_checkpoint()
     monkeypatch.undo()
     assert len(snapshots) >= 10
     assert [p.name for p in (out / "checkpoints").iterdir() if p.is_dir()] == [
-        json.loads((out / "checkpoints" / "latest.json").read_text())["dir"]]  # the old one is gone
+        json.loads((out / "checkpoints" / "latest.json").read_text())["dir"]
+    ]  # the old one is gone
     episodes = set()
     for snap in snapshots:
         reader = runs.RunDirectory(config, snap, run.learner, TrainingState(), quiet=True)
@@ -131,6 +140,7 @@ def test_an_interrupt_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(t
             if calls[0] == interrupt_after[0]:
                 raise cli.Terminated
             return result
+
         return operation
 
     for module, name in operations:
@@ -168,14 +178,25 @@ def test_the_final_save_at_the_checkpoints_step_never_removes_the_current_one(fi
 
 # --- one writer per run directory ----------------------------------------------------------------
 
+
 def test_a_second_writer_is_refused_with_the_holders_pid_and_force_deletes_nothing(tmp_path, capsys):
     out = tmp_path / "run"
     out.mkdir()
     (out / "keep.txt").write_text("the other writer's file")
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time\nfrom pathlib import Path\n"
-                               "from dqfd_bc_keras.files import DirectoryLock\n"
-                               "with DirectoryLock(Path(sys.argv[1])):\n print('locked', flush=True)\n time.sleep(60)",
-                               str(out)], stdout=subprocess.PIPE, text=True, cwd=REPO, env=ENV)
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nfrom pathlib import Path\n"
+            "from dqfd_bc_keras.files import DirectoryLock\n"
+            "with DirectoryLock(Path(sys.argv[1])):\n print('locked', flush=True)\n time.sleep(60)",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+        env=ENV,
+    )
     try:
         assert holder.stdout.readline() == "locked\n"
         code = cli.run(train_main, ["--quick", "--quiet", "--force", "--out", str(out)])
@@ -188,8 +209,9 @@ def test_a_second_writer_is_refused_with_the_holders_pid_and_force_deletes_nothi
     assert (out / ".lock").read_text() == f"{holder.pid}\n"
     with DirectoryLock(out):
         assert (out / ".lock").read_text() == f"{os.getpid()}\n"
-    assert capsys.readouterr().err == (f"warning: {out}: taking over the lock left by process {holder.pid}, "
-                                       "which is no longer running\n")
+    assert capsys.readouterr().err == (
+        f"warning: {out}: taking over the lock left by process {holder.pid}, which is no longer running\n"
+    )
     assert (out / ".lock").read_text() == ""  # released cleanly: nothing to take over next time
     with DirectoryLock(out):
         pass
@@ -205,6 +227,7 @@ def test_a_lock_is_exclusive_within_a_process_too(tmp_path):
 
 # --- corrupt or mismatched state -------------------------------------------------------------------
 
+
 def _checkpoint(run: Path) -> Path:
     return run / "checkpoints" / json.loads((run / "checkpoints" / "latest.json").read_text())["dir"]
 
@@ -213,17 +236,29 @@ DAMAGE = {
     "truncated tf.index": (lambda run: os.truncate(_checkpoint(run) / "tf.index", 10), "too short", "ckpt-"),
     "truncated tf.data": (lambda run: os.truncate(next(_checkpoint(run).glob("tf.data-*")), 100), "", "ckpt-"),
     "truncated state.json": (lambda run: os.truncate(_checkpoint(run) / "state.json", 5), "JSONDecodeError", "ckpt-"),
-    "empty latest.json": (lambda run: (run / "checkpoints" / "latest.json").write_text(""), "JSONDecodeError",
-                          "latest.json"),
+    "empty latest.json": (
+        lambda run: (run / "checkpoints" / "latest.json").write_text(""),
+        "JSONDecodeError",
+        "latest.json",
+    ),
     "garbage config.json": (lambda run: (run / "config.json").write_text("garbage{"), "JSONDecodeError", "config.json"),
     "config.json of another task": (
-        lambda run: (run / "config.json").write_text((run / "config.json").read_text().replace(
-            '"task": "cartpole"', '"task": "mountaincar"')), "task: 'mountaincar' (was 'cartpole')", "config.json"),
+        lambda run: (run / "config.json").write_text(
+            (run / "config.json").read_text().replace('"task": "cartpole"', '"task": "mountaincar"')
+        ),
+        "task: 'mountaincar' (was 'cartpole')",
+        "config.json",
+    ),
     "edited config.json": (
-        lambda run: (run / "config.json").write_text((run / "config.json").read_text().replace(
-            '"learning_rate": 0.001', '"learning_rate": 0.5').replace('"expert_loss": "bayes"', '"expert_loss": "none"')),
-        "differs from the config the run was trained with", "expert_loss: 'none' (was 'bayes'); learning_rate: 0.5 "
-                                                            "(was 0.001)"),
+        lambda run: (run / "config.json").write_text(
+            (run / "config.json")
+            .read_text()
+            .replace('"learning_rate": 0.001', '"learning_rate": 0.5')
+            .replace('"expert_loss": "bayes"', '"expert_loss": "none"')
+        ),
+        "differs from the config the run was trained with",
+        "expert_loss: 'none' (was 'bayes'); learning_rate: 0.5 (was 0.001)",
+    ),
 }
 
 
@@ -234,8 +269,9 @@ def test_resuming_a_corrupt_or_mismatched_run_is_one_line_and_changes_nothing(fi
     shutil.copytree(finished, run)
     apply(run)
     before = tree(run)
-    err = one_line(capsys, cli.run(train_main, ["--quiet", "--out", str(run), "--resume"]),
-                   "start the run over with --force")
+    err = one_line(
+        capsys, cli.run(train_main, ["--quiet", "--out", str(run), "--resume"]), "start the run over with --force"
+    )
     assert f"error: {run}/" in err and where in err and problem in err
     assert tree(run) == before
 
@@ -257,17 +293,22 @@ def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tm
 
 # --- full disks and other OS errors -----------------------------------------------------------------
 
+
 def test_a_full_disk_at_the_first_checkpoint_is_one_line_and_leaves_no_debris(tmp_path, monkeypatch, capsys):
     def full(self, path, options=None):
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         (Path(path).parent / "tf_temp").mkdir()  # what TensorFlow leaves half written
-        raise tf.errors.ResourceExhaustedError(None, None, "{{function_node SaveV2}} x.tempstate1; No space left "
-                                               "on device [Op:SaveV2]")
+        raise tf.errors.ResourceExhaustedError(
+            None, None, "{{function_node SaveV2}} x.tempstate1; No space left on device [Op:SaveV2]"
+        )
 
     monkeypatch.setattr(tf.train.Checkpoint, "write", full)
     out = tmp_path / "run"
-    err = one_line(capsys, cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
-                   f"error: {out}/checkpoints/ckpt-0: cannot write the checkpoint (ResourceExhaustedError: ")
+    err = one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
+        f"error: {out}/checkpoints/ckpt-0: cannot write the checkpoint (ResourceExhaustedError: ",
+    )
     assert err.endswith("x.tempstate1; No space left on device)\n")
     assert not out.exists()  # nothing of value was written: a rerun starts clean
 
@@ -284,8 +325,11 @@ def test_a_full_disk_mid_run_is_one_line_and_keeps_a_resumable_checkpoint(tmp_pa
 
     monkeypatch.setattr(runs.RunDirectory, "write_metrics", fills_up)
     out = tmp_path / "run"
-    one_line(capsys, cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
-             f"error: {out}/metrics.csv: No space left on device")
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
+        f"error: {out}/metrics.csv: No space left on device",
+    )
     assert (_checkpoint(out) / "state.json").is_file()
     assert not [p for p in out.rglob(".*") if p.name != ".lock"]  # no temporary files left behind
 
@@ -304,13 +348,19 @@ def test_a_real_full_disk_where_the_machine_allows_mounting_one(tmp_path, capsys
         subprocess.run(["umount", str(disk)], check=True)
 
 
-@pytest.mark.parametrize("make, args, message", [
-    (lambda p: p.write_text("x"), ["--quick", "--out", "{p}"], "{p} is a file, not a run directory"),
-    (lambda p: p.write_text("x"), ["--quick", "--out", "{p}/run"], "{p}/run: Not a directory"),
-    (lambda p: p.mkdir(), ["--quick", "--demos", "{p}"], "{p}: is a directory, not an .npz file"),
-    (lambda p: (p.symlink_to(p.with_name("b")), p.with_name("b").symlink_to(p)), ["--quick", "--demos", "{p}"],
-     "{p}: is a symbolic link loop"),
-])
+@pytest.mark.parametrize(
+    "make, args, message",
+    [
+        (lambda p: p.write_text("x"), ["--quick", "--out", "{p}"], "{p} is a file, not a run directory"),
+        (lambda p: p.write_text("x"), ["--quick", "--out", "{p}/run"], "{p}/run: Not a directory"),
+        (lambda p: p.mkdir(), ["--quick", "--demos", "{p}"], "{p}: is a directory, not an .npz file"),
+        (
+            lambda p: (p.symlink_to(p.with_name("b")), p.with_name("b").symlink_to(p)),
+            ["--quick", "--demos", "{p}"],
+            "{p}: is a symbolic link loop",
+        ),
+    ],
+)
 def test_bad_paths_are_named_in_one_line(tmp_path, capsys, monkeypatch, make, args, message):
     monkeypatch.chdir(tmp_path)
     path = tmp_path / "a"
@@ -323,16 +373,22 @@ def test_a_read_only_filesystem_is_one_line(tmp_path, monkeypatch, capsys):
         raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(self))
 
     monkeypatch.setattr(Path, "mkdir", read_only)
-    one_line(capsys, cli.run(train_main, ["--quick", "--out", str(tmp_path / "run")]),
-             f"error: {tmp_path / 'run'}: Read-only file system")
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--out", str(tmp_path / "run")]),
+        f"error: {tmp_path / 'run'}: Read-only file system",
+    )
     monkeypatch.undo()
     ro = tmp_path / "ro"
     ro.mkdir()
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=100k", "tmpfs", str(ro)], capture_output=True).returncode:
         return  # a real read-only mount needs root; the injected case above runs everywhere
     try:
-        one_line(capsys, cli.run(train_main, ["--quick", "--out", str(ro / "run")]),
-                 f"error: {ro / 'run'}: Read-only file system")
+        one_line(
+            capsys,
+            cli.run(train_main, ["--quick", "--out", str(ro / "run")]),
+            f"error: {ro / 'run'}: Read-only file system",
+        )
     finally:
         subprocess.run(["umount", str(ro)], check=True)
 
@@ -344,14 +400,18 @@ def test_evaluate_into_a_directory_is_one_line(finished, tmp_path, capsys):
 
 # --- values out of range --------------------------------------------------------------------------
 
-@pytest.mark.parametrize("main, args, message", [
-    (train_main, ["--seed", "-1"], "argument --seed: must be in [0, 2147483647], got -1"),
-    (train_main, ["--seed", "99999999999999999999"], "got 99999999999999999999"),
-    (train_main, ["--set", "seed=-3"], "seed must be in [0, 2147483647], got -3"),
-    (train_main, ["--set", "learning_rate=inf"], "learning_rate must be a finite number, got inf"),
-    (train_main, ["--set", "sigma0_sq=nan"], "sigma0_sq must be a finite number, got nan"),
-    (evaluate_main, ["models/cartpole", "--seed", "-1"], "argument --seed: must be in [0, 2147483647], got -1"),
-])
+
+@pytest.mark.parametrize(
+    "main, args, message",
+    [
+        (train_main, ["--seed", "-1"], "argument --seed: must be in [0, 2147483647], got -1"),
+        (train_main, ["--seed", "99999999999999999999"], "got 99999999999999999999"),
+        (train_main, ["--set", "seed=-3"], "seed must be in [0, 2147483647], got -3"),
+        (train_main, ["--set", "learning_rate=inf"], "learning_rate must be a finite number, got inf"),
+        (train_main, ["--set", "sigma0_sq=nan"], "sigma0_sq must be a finite number, got nan"),
+        (evaluate_main, ["models/cartpole", "--seed", "-1"], "argument --seed: must be in [0, 2147483647], got -1"),
+    ],
+)
 def test_out_of_range_values_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, main, args, message):
     monkeypatch.chdir(REPO)
     out = tmp_path / "run"
@@ -372,16 +432,23 @@ def test_every_float_field_must_be_finite(field):
 
 
 def test_the_largest_seed_runs(tmp_path):
-    assert cli.run(train_main, ["--quick", "--quiet", "--seed", "2147483647", "--steps", "100",
-                                "--out", str(tmp_path / "run")]) == 0
+    assert (
+        cli.run(
+            train_main, ["--quick", "--quiet", "--seed", "2147483647", "--steps", "100", "--out", str(tmp_path / "run")]
+        )
+        == 0
+    )
 
 
 # --- divergence and signals -------------------------------------------------------------------------
 
+
 def test_divergence_stops_at_the_first_non_finite_loss_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
     out = tmp_path / "run"
-    code = cli.run(train_main, ["--quick", "--quiet", "--set", "learning_rate=1e30", "--set", "pretrain_steps=0",
-                                "--out", str(out)])
+    code = cli.run(
+        train_main,
+        ["--quick", "--quiet", "--set", "learning_rate=1e30", "--set", "pretrain_steps=0", "--out", str(out)],
+    )
     one_line(capsys, code, f"error: {out}: training diverged in episode 1 (env step ")
     assert json.loads((out / "checkpoints" / "latest.json").read_text())["dir"] == "ckpt-0"
     assert not (out / "eval.json").exists()
@@ -396,8 +463,18 @@ def test_divergence_in_pre_training_keeps_nothing(tmp_path, capsys):
 
 def test_sigterm_stops_a_run_like_ctrl_c_and_it_resumes(tmp_path):
     out = tmp_path / "run"
-    args = [sys.executable, str(REPO / "train.py"), "--quick", "--quiet", "--set", "total_steps=3000",
-            "--set", "checkpoint_every=300", "--out", str(out)]
+    args = [
+        sys.executable,
+        str(REPO / "train.py"),
+        "--quick",
+        "--quiet",
+        "--set",
+        "total_steps=3000",
+        "--set",
+        "checkpoint_every=300",
+        "--out",
+        str(out),
+    ]
     process = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     latest, deadline = out / "checkpoints" / "latest.json", time.time() + 240
     while time.time() < deadline and process.poll() is None:
@@ -416,16 +493,24 @@ def test_sigterm_stops_a_run_like_ctrl_c_and_it_resumes(tmp_path):
 
 # --- round 2: a resumed run is the run it says it is --------------------------------------------
 
+
 def test_resume_refuses_flags_that_would_change_the_run(finished, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(finished, run)
     before = tree(run)
-    one_line(capsys, cli.run(train_main, ["--quiet", "--out", str(run), "--resume", "--set", "learning_rate=0.5",
-                                          "--expert-loss", "ce"]),
-             "--resume continues the run in its own config, but the command changes expert_loss='ce' (the run has "
-             "'bayes'), learning_rate=0.5 (the run has 0.001)")
-    one_line(capsys, cli.run(train_main, ["--quiet", "--out", str(run), "--resume", "--demos", "x.npz"]),
-             "--demos (the run keeps the demonstrations it started with)")
+    one_line(
+        capsys,
+        cli.run(
+            train_main, ["--quiet", "--out", str(run), "--resume", "--set", "learning_rate=0.5", "--expert-loss", "ce"]
+        ),
+        "--resume continues the run in its own config, but the command changes expert_loss='ce' (the run has "
+        "'bayes'), learning_rate=0.5 (the run has 0.001)",
+    )
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quiet", "--out", str(run), "--resume", "--demos", "x.npz"]),
+        "--demos (the run keeps the demonstrations it started with)",
+    )
     assert tree(run) == before
     assert cli.run(train_main, ["--quick", "--quiet", "--out", str(run), "--resume"]) == 0  # the same values: fine
 
@@ -445,14 +530,17 @@ def test_the_runner_resumes_a_run_only_if_its_config_is_the_arms(finished, tmp_p
 
 # --- round 2: nothing half-written counts as done ---------------------------------------------------
 
+
 def test_a_kill_at_any_file_operation_of_the_final_phase_is_resumed_never_skipped(finished, tmp_path, monkeypatch):
     """Snapshot the run directory at every file operation of `finish` while its temporary exists
     (what a SIGKILL then leaves); no snapshot is complete, and each one resumes to a complete run
     with the same evaluation and no temporaries left."""
     import contextlib
 
-    from dqfd_bc_keras import demo_files, files, run_files
+    from dqfd_bc_keras import files
+    from dqfd_bc_keras.demos import npz as demo_files
     from dqfd_bc_keras.experiments.sweep import Job
+    from dqfd_bc_keras.runs import writers as run_files
 
     run = tmp_path / "run"
     shutil.copytree(finished, run)
@@ -471,8 +559,16 @@ def test_a_kill_at_any_file_operation_of_the_final_phase_is_resumed_never_skippe
     assert cli.run(train_main, ["--quick", "--quiet", "--out", str(run), "--resume"]) == 0  # finishes again
     monkeypatch.undo()
     names = [name for name, _ in snapshots]
-    assert {"q_network.keras", "bc_model.keras", "eval.json", "learning_curve.png", "state.json", "latest.json",
-            "provenance.json", runs.COMPLETE} <= set(names), names
+    assert {
+        "q_network.keras",
+        "bc_model.keras",
+        "eval.json",
+        "learning_curve.png",
+        "state.json",
+        "latest.json",
+        "provenance.json",
+        runs.COMPLETE,
+    } <= set(names), names
     assert names[-1] == runs.COMPLETE
     final = json.loads((finished / "eval.json").read_text())
     arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
@@ -510,11 +606,14 @@ def test_the_report_names_every_run_it_leaves_out(finished, tmp_path):
     (cut / "eval.json").unlink()
     warned = []
     report(suite, tmp_path / "RESULTS.md", tmp_path / "figures", warn=warned.append)
-    assert warned == [f"{suite}/cartpole-bootstrap-bayes-quick/seed1/eval.json: missing: the run has not finished "
-                      "(still running, or cut off: run the suite again to resume it); run skipped"]
+    assert warned == [
+        f"{suite}/cartpole-bootstrap-bayes-quick/seed1/eval.json: missing: the run has not finished "
+        "(still running, or cut off: run the suite again to resume it); run skipped"
+    ]
 
 
 # --- round 2: Ctrl-C on a sweep ----------------------------------------------------------------------
+
 
 def _deaf_to_sigterm(ready) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -543,19 +642,40 @@ def test_runs_that_do_not_stop_are_killed_together_after_one_grace_and_named(tmp
     assert 2.0 <= seconds < 4.0, seconds  # one grace for both: one each would be 4 s
     assert capsys.readouterr().err.splitlines() == [
         f"warning: {tmp_path / arm.name}/seed{seed}: the run had not stopped 2 s after SIGTERM; killed (its last "
-        "checkpoint is kept, and the next sweep resumes from it)" for seed in (0, 1)]
+        "checkpoint is kept, and the next sweep resumes from it)"
+        for seed in (0, 1)
+    ]
 
 
 def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
     out = tmp_path / "sweep"
-    args = [sys.executable, "-m", "dqfd_bc_keras.experiments", "run", "quick", "--seeds", "2", "--workers", "2",
-            "--set", "total_steps=5000", "--set", "checkpoint_every=300", "--out", str(out)]
-    process = subprocess.Popen(args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               preexec_fn=ctrl_c_reaches)
+    args = [
+        sys.executable,
+        "-m",
+        "dqfd_bc_keras.experiments",
+        "run",
+        "quick",
+        "--seeds",
+        "2",
+        "--workers",
+        "2",
+        "--set",
+        "total_steps=5000",
+        "--set",
+        "checkpoint_every=300",
+        "--out",
+        str(out),
+    ]
+    process = subprocess.Popen(
+        args, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=ctrl_c_reaches
+    )
     deadline = time.time() + 240
     while time.time() < deadline and process.poll() is None:
-        latest = [json.loads(p.read_text())["dir"] for p in out.glob("*/seed0/checkpoints/latest.json")
-                  if p.read_text().strip()]
+        latest = [
+            json.loads(p.read_text())["dir"]
+            for p in out.glob("*/seed0/checkpoints/latest.json")
+            if p.read_text().strip()
+        ]
         if len([d for d in latest if d != "ckpt-0"]) == 2:  # both runs have checkpointed during learning
             break
         time.sleep(0.1)
@@ -567,8 +687,9 @@ def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
     assert process.returncode == 130, err
     assert seconds < 30, (seconds, err)  # a liveness bound: the runs stop at their next step, not at their end
     assert "interrupted after 0 of 4 runs; no run was started after it" in stdout
-    assert err.strip().splitlines()[-1] == ("interrupted (Ctrl-C); every finished run is kept; run the same command "
-                                            "again to go on")
+    assert err.strip().splitlines()[-1] == (
+        "interrupted (Ctrl-C); every finished run is kept; run the same command again to go on"
+    )
     assert sorted(p.name for p in out.glob("*/seed*")) == ["seed0", "seed0"]  # seed 1 never started
     for run in out.glob("*/seed0"):
         assert (run / ".lock").read_text() == "" and not (run / runs.COMPLETE).exists()
@@ -579,25 +700,54 @@ def test_ctrl_c_on_a_sweep_starts_no_new_run_and_exits_within_seconds(tmp_path):
 
 # --- round 2: demonstrations checked before any TensorFlow work --------------------------------------
 
+
 def test_demonstrations_are_checked_against_the_task_before_any_training(tmp_path, capsys):
     from dqfd_bc_keras import demos as demo_io
 
     data = demo_io.record("mountaincar", "imperfect", 1)  # 2 features, 3 actions; its own meta consistent
     demo_io.save(data, tmp_path / "mc.npz")
     out = tmp_path / "run"
-    one_line(capsys, cli.run(train_main, ["--quick", "--demos", str(tmp_path / "mc.npz"), "--out", str(out)]),
-             "was recorded on task 'mountaincar', not on the requested 'cartpole'")
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--demos", str(tmp_path / "mc.npz"), "--out", str(out)]),
+        "was recorded on task 'mountaincar', not on the requested 'cartpole'",
+    )
     meta = json.loads(str(np.load(tmp_path / "mc.npz")["meta"]))
     arrays = dict(np.load(tmp_path / "mc.npz"))
     np.savez(tmp_path / "renamed.npz", **{**arrays, "meta": np.array(json.dumps({**meta, "task": "cartpole"}))})
-    one_line(capsys, cli.run(train_main, ["--quick", "--demos", str(tmp_path / "renamed.npz"), "--out", str(out)]),
-             "holds observations of 2 features and 3 actions, but task cartpole has 4 features and 2 actions")
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--demos", str(tmp_path / "renamed.npz"), "--out", str(out)]),
+        "holds observations of 2 features and 3 actions, but task cartpole has 4 features and 2 actions",
+    )
     np.savez(tmp_path / "typed.npz", **{**arrays, "meta": np.array(json.dumps({**meta, "obs_dim": "2"}))})
-    one_line(capsys, cli.run(train_main, ["--quick", "--task", "mountaincar", "--demos", str(tmp_path / "typed.npz"),
-                                          "--out", str(out)]), "meta's obs_dim must be int, got '2'")
-    one_line(capsys, cli.run(train_main, ["--quick", "--task", "mountaincar", "--demos", str(tmp_path / "mc.npz"),
-                                          "--set", "demo_capacity=100", "--set", "max_steps=100", "--out", str(out)]),
-             f"holds {len(data)} transitions, more than demo_capacity=100")
+    one_line(
+        capsys,
+        cli.run(
+            train_main, ["--quick", "--task", "mountaincar", "--demos", str(tmp_path / "typed.npz"), "--out", str(out)]
+        ),
+        "meta's obs_dim must be int, got '2'",
+    )
+    one_line(
+        capsys,
+        cli.run(
+            train_main,
+            [
+                "--quick",
+                "--task",
+                "mountaincar",
+                "--demos",
+                str(tmp_path / "mc.npz"),
+                "--set",
+                "demo_capacity=100",
+                "--set",
+                "max_steps=100",
+                "--out",
+                str(out),
+            ],
+        ),
+        f"holds {len(data)} transitions, more than demo_capacity=100",
+    )
     assert not out.exists()
 
 
@@ -612,6 +762,7 @@ def test_the_size_is_read_from_the_header_without_the_arrays(tmp_path, monkeypat
 
 # --- round 2: long evaluations, tiny budgets, provenance ---------------------------------------------
 
+
 def test_a_long_evaluation_shows_progress_and_an_interrupt_says_so(tmp_path, monkeypatch, capsys):
     evaluate = importlib.util.module_from_spec(importlib.util.spec_from_file_location("evaluate", REPO / "evaluate.py"))
     evaluate.__spec__.loader.exec_module(evaluate)
@@ -620,11 +771,19 @@ def test_a_long_evaluation_shows_progress_and_an_interrupt_says_so(tmp_path, mon
     report = evaluate.progress_lines(100)
     for done in (1, 2, 3, 4):
         report(done)
-    assert capsys.readouterr().err.splitlines() == ["evaluated 2 of 100 episodes (11 s)",
-                                                    "evaluated 4 of 100 episodes (25 s)"]
-    process = subprocess.Popen([sys.executable, "evaluate.py", "models/cartpole", "--episodes", "100000000"],
-                               cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               preexec_fn=ctrl_c_reaches)
+    assert capsys.readouterr().err.splitlines() == [
+        "evaluated 2 of 100 episodes (11 s)",
+        "evaluated 4 of 100 episodes (25 s)",
+    ]
+    process = subprocess.Popen(
+        [sys.executable, "evaluate.py", "models/cartpole", "--episodes", "100000000"],
+        cwd=REPO,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=ctrl_c_reaches,
+    )
     time.sleep(15)  # TensorFlow's import, then episodes
     process.send_signal(signal.SIGINT)
     _, err = process.communicate(timeout=60)

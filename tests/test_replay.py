@@ -1,4 +1,4 @@
-"""Tests for the prioritized replay in dqfd_bc_keras.replay (ALGORITHM.md §1).
+"""Tests for the prioritized replay in dqfd_bc_keras.core.replay (ALGORITHM.md §1).
 
 Every expected value is worked out by hand (the arithmetic is written as literals); none is
 computed by calling the code under test. Transition rows are tagged: row t has
@@ -10,21 +10,32 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
+from dqfd_bc_keras.core.replay import PrioritizedReplay, SumTree
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.replay import PrioritizedReplay, SumTree
 
 G = 0.9  # γ in every test
 ATOL = 1e-5
 
 
 def close(actual, expected, atol=ATOL) -> None:
-    np.testing.assert_allclose(np.asarray(actual, dtype=np.float64), np.asarray(expected, dtype=np.float64),
-                               rtol=1e-6, atol=atol)
+    np.testing.assert_allclose(
+        np.asarray(actual, dtype=np.float64), np.asarray(expected, dtype=np.float64), rtol=1e-6, atol=atol
+    )
 
 
 def make_replay(**kwargs) -> PrioritizedReplay:
-    options = dict(obs_dim=2, n_actions=2, capacity=8, demo_capacity=10, n_step=3, gamma=G, alpha=0.5,
-                   eps_agent=0.25, eps_demo=1.0, seed=0)
+    options = dict(
+        obs_dim=2,
+        n_actions=2,
+        capacity=8,
+        demo_capacity=10,
+        n_step=3,
+        gamma=G,
+        alpha=0.5,
+        eps_agent=0.25,
+        eps_demo=1.0,
+        seed=0,
+    )
     options.update(kwargs)
     return PrioritizedReplay(**options)
 
@@ -77,13 +88,22 @@ def draw(replay, calls, batch_size=1000, beta=0.4) -> np.ndarray:
 # 1. SumTree
 # --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("mass, leaf", [
-    (0.0, 0), (0.5, 0), (0.999, 0),
-    (1.0, 2),  # the boundary of leaf 0 skips the empty leaf 1
-    (1.2, 2), (3.9, 2),
-    (4.0, 3), (4.1, 3), (5.9, 3),
-    (6.0, 3),  # mass == total (float rounding at the edge) still lands on the last non-empty leaf
-])
+
+@pytest.mark.parametrize(
+    "mass, leaf",
+    [
+        (0.0, 0),
+        (0.5, 0),
+        (0.999, 0),
+        (1.0, 2),  # the boundary of leaf 0 skips the empty leaf 1
+        (1.2, 2),
+        (3.9, 2),
+        (4.0, 3),
+        (4.1, 3),
+        (5.9, 3),
+        (6.0, 3),  # mass == total (float rounding at the edge) still lands on the last non-empty leaf
+    ],
+)
 def test_sumtree_find_hand_built(mass, leaf):
     tree = SumTree(4)
     tree.set(tf.constant([0, 1, 2, 3]), tf.constant([1.0, 0.0, 3.0, 2.0]))
@@ -127,7 +147,7 @@ def test_sumtree_with_nan_priorities_still_returns_stored_rows():
     tree = SumTree(100)  # 2 blocks of 64 leaves, the last 28 padding
     tree.set(tf.range(100), tf.fill([100], float("nan")))
     found = tree.find(tf.constant([0.0, 1.0, float("nan")])).numpy()
-    assert ((0 <= found) & (found < 100)).all()
+    assert ((found >= 0) & (found < 100)).all()
 
 
 def test_sumtree_many_sets_against_numpy():
@@ -157,7 +177,7 @@ def test_sumtree_many_sets_against_numpy():
 # --------------------------------------------------------------------------------------------
 
 # α = 0.5, ε_d = 1, ε_a = 0.25: |δ| chosen so that (|δ|+ε)^½ is a round number.
-DEMO_TD = [0.0, 3.0, 8.0, 0.0]      # (0+1)^½ = 1, (3+1)^½ = 2, (8+1)^½ = 3, 1
+DEMO_TD = [0.0, 3.0, 8.0, 0.0]  # (0+1)^½ = 1, (3+1)^½ = 2, (8+1)^½ = 3, 1
 AGENT_TD = [0.75, 3.75, 0.0, 8.75]  # (0.75+0.25)^½ = 1, (3.75+.25)^½ = 2, (0+.25)^½ = 0.5, (8.75+.25)^½ = 3
 PRIORITY = {0: 1.0, 1: 2.0, 2: 3.0, 3: 1.0, 10: 1.0, 11: 2.0, 12: 0.5, 13: 3.0}
 TOTAL = 1 + 2 + 3 + 1 + 1 + 2 + 0.5 + 3  # 13.5
@@ -202,7 +222,7 @@ def test_same_seed_same_samples():
     a, b, c = proportional_replay(seed=7), proportional_replay(seed=7), proportional_replay(seed=8)
     draws_a = [a.sample(64, tf.constant(0.4)) for _ in range(3)]
     draws_b = [b.sample(64, tf.constant(0.4)) for _ in range(3)]
-    for x, y in zip(draws_a, draws_b):
+    for x, y in zip(draws_a, draws_b, strict=True):
         np.testing.assert_array_equal(x.indices.numpy(), y.indices.numpy())
         np.testing.assert_array_equal(x.weights.numpy(), y.weights.numpy())
     other = np.concatenate([c.sample(64, tf.constant(0.4)).indices.numpy() for _ in range(3)])
@@ -219,16 +239,17 @@ def test_importance_weights_by_hand(beta):
     w = np.array([(n * PRIORITY[i] / 13.5) ** -beta for i in indices])
     close(batch.weights, w / w.max())
     close(batch.weights.numpy().max(), 1.0)
-    weight = dict(zip(indices.tolist(), batch.weights.numpy().tolist()))
+    weight = dict(zip(indices.tolist(), batch.weights.numpy().tolist(), strict=True))
     # the rarest row has the largest weight, 1; a p = 3 row has (3/0.5)^−β = 6^−β
     close(weight[12], 1.0)
-    close(weight[13], 6.0 ** -beta)
-    close(weight[11], 4.0 ** -beta)  # (2/0.5)^−β
+    close(weight[13], 6.0**-beta)
+    close(weight[11], 4.0**-beta)  # (2/0.5)^−β
 
 
 # --------------------------------------------------------------------------------------------
 # 4. Priority update and max priority
 # --------------------------------------------------------------------------------------------
+
 
 def test_update_priorities_by_hand():
     replay = make_replay(alpha=0.4, eps_demo=1.0, eps_agent=0.25)
@@ -249,15 +270,16 @@ def test_update_priorities_by_hand():
     # a smaller update leaves the max alone; a new row enters at the max
     replay.update_priorities(tf.constant([10]), tf.constant([0.5]))
     close(leaves(replay, [10]), [(0.5 + 0.25) ** 0.4])
-    close(replay.max_priority, 4.0 ** 0.4)
+    close(replay.max_priority, 4.0**0.4)
     store_all(replay, make_rows(replay, [12]))
-    close(leaves(replay, [12]), [4.0 ** 0.4])
+    close(leaves(replay, [12]), [4.0**0.4])
 
     # a larger one raises it
     replay.update_priorities(tf.constant([0, 12]), tf.constant([1.0, 10.0]))
     close(replay.max_priority, (10 + 0.25) ** 0.4)
-    close(replay.tree.total, (1 + 1.0) ** 0.4 + 4.0 ** 0.4 + 1.0 + 0.75 ** 0.4 + 0.25 ** 0.4 + 10.25 ** 0.4
-          + 1.0)  # rows 0, 1, 2, 10, 11, 12 and the never-stored row 9 (set to (0+1)^0.4 above)
+    close(
+        replay.tree.total, (1 + 1.0) ** 0.4 + 4.0**0.4 + 1.0 + 0.75**0.4 + 0.25**0.4 + 10.25**0.4 + 1.0
+    )  # rows 0, 1, 2, 10, 11, 12 and the never-stored row 9 (set to (0+1)^0.4 above)
 
 
 def test_max_priority_stays_one_when_updates_are_small():
@@ -281,6 +303,7 @@ def test_set_demos_enters_at_max_priority():
 # --------------------------------------------------------------------------------------------
 # 5. Eviction and replacing D_demo
 # --------------------------------------------------------------------------------------------
+
 
 def test_agent_buffer_evicts_oldest_and_keeps_demos():
     replay = make_replay(capacity=8, demo_capacity=10)
@@ -328,6 +351,7 @@ def test_set_demos_with_fewer_rows_drops_the_rest():
 # 6. n-step returns
 # --------------------------------------------------------------------------------------------
 
+
 def load(replay, rows, region) -> int:
     """Put `rows` into D_demo or D_replay; the table index of the first one."""
     if region == "demo":
@@ -348,15 +372,18 @@ REGIONS = pytest.mark.parametrize("region", ["demo", "agent"])
 
 
 @REGIONS
-@pytest.mark.parametrize("n_step, position, n_return, n_discount, n_next_obs", [
-    # rewards r_t = t+1 = 1, 2, 3, 4, 5, 6; the episode terminates at t = 5
-    (3, 0, 1 + 0.9 * 2 + 0.9**2 * 3, 0.9**3, [3, -3]),                   # 5.23, s_3
-    (3, 2, 3 + 0.9 * 4 + 0.9**2 * 5, 0.9**3, [5, -5]),                   # 10.65, s_5
-    (4, 0, 1 + 0.9 * 2 + 0.9**2 * 3 + 0.9**3 * 4, 0.9**4, [4, -4]),      # 8.146, s_4
-    (4, 1, 2 + 0.9 * 3 + 0.9**2 * 4 + 0.9**3 * 5, 0.9**4, [5, -5]),
-    (3, 4, 5 + 0.9 * 6, 0.0, [6, -6]),                                    # hits the termination
-    (3, 5, 6, 0.0, [6, -6]),
-])
+@pytest.mark.parametrize(
+    "n_step, position, n_return, n_discount, n_next_obs",
+    [
+        # rewards r_t = t+1 = 1, 2, 3, 4, 5, 6; the episode terminates at t = 5
+        (3, 0, 1 + 0.9 * 2 + 0.9**2 * 3, 0.9**3, [3, -3]),  # 5.23, s_3
+        (3, 2, 3 + 0.9 * 4 + 0.9**2 * 5, 0.9**3, [5, -5]),  # 10.65, s_5
+        (4, 0, 1 + 0.9 * 2 + 0.9**2 * 3 + 0.9**3 * 4, 0.9**4, [4, -4]),  # 8.146, s_4
+        (4, 1, 2 + 0.9 * 3 + 0.9**2 * 4 + 0.9**3 * 5, 0.9**4, [5, -5]),
+        (3, 4, 5 + 0.9 * 6, 0.0, [6, -6]),  # hits the termination
+        (3, 5, 6, 0.0, [6, -6]),
+    ],
+)
 def test_n_step_inside_an_episode(region, n_step, position, n_return, n_discount, n_next_obs):
     replay = make_replay(n_step=n_step)
     start = load(replay, make_rows(replay, range(6), terminated=[5]), region)
@@ -364,19 +391,21 @@ def test_n_step_inside_an_episode(region, n_step, position, n_return, n_discount
 
 
 @REGIONS
-@pytest.mark.parametrize("terminated, truncated, position, n_return, n_discount, n_next_obs", [
-    # episode A = t 0..1, episode B = t 2..5 (terminates at 5); rewards 1..6
-    ([1, 5], [], 0, 1 + 0.9 * 2, 0.0, [2, -2]),           # stops at the termination, no bootstrap
-    ([1, 5], [], 1, 2, 0.0, [2, -2]),
-    ([1, 5], [], 2, 3 + 0.9 * 4 + 0.9**2 * 5, 0.9**3, [5, -5]),  # the next episode is not affected
-    ([5], [1], 0, 1 + 0.9 * 2, 0.9**2, [2, -2]),          # a truncation stops but bootstraps
-    ([5], [1], 1, 2, 0.9, [2, -2]),
-    ([1, 5], [1], 0, 1 + 0.9 * 2, 0.0, [2, -2]),          # both flags: a termination
-    ([5], [0], 0, 1, 0.9, [1, -1]),                       # truncated at the first step: m = 1
-    ([0, 5], [], 0, 1, 0.0, [1, -1]),                     # terminated at the first step
-])
-def test_n_step_across_episode_boundary(region, terminated, truncated, position, n_return, n_discount,
-                                        n_next_obs):
+@pytest.mark.parametrize(
+    "terminated, truncated, position, n_return, n_discount, n_next_obs",
+    [
+        # episode A = t 0..1, episode B = t 2..5 (terminates at 5); rewards 1..6
+        ([1, 5], [], 0, 1 + 0.9 * 2, 0.0, [2, -2]),  # stops at the termination, no bootstrap
+        ([1, 5], [], 1, 2, 0.0, [2, -2]),
+        ([1, 5], [], 2, 3 + 0.9 * 4 + 0.9**2 * 5, 0.9**3, [5, -5]),  # the next episode is not affected
+        ([5], [1], 0, 1 + 0.9 * 2, 0.9**2, [2, -2]),  # a truncation stops but bootstraps
+        ([5], [1], 1, 2, 0.9, [2, -2]),
+        ([1, 5], [1], 0, 1 + 0.9 * 2, 0.0, [2, -2]),  # both flags: a termination
+        ([5], [0], 0, 1, 0.9, [1, -1]),  # truncated at the first step: m = 1
+        ([0, 5], [], 0, 1, 0.0, [1, -1]),  # terminated at the first step
+    ],
+)
+def test_n_step_across_episode_boundary(region, terminated, truncated, position, n_return, n_discount, n_next_obs):
     replay = make_replay(n_step=3)
     rows = make_rows(replay, range(6), terminated=terminated, truncated=truncated)
     start = load(replay, rows, region)
@@ -406,13 +435,16 @@ def test_n_step_ignores_stale_demo_rows_after_set_demos_shrinks():
     check_n_step(replay, 2, 3, 0.9, [3, -3])
 
 
-@pytest.mark.parametrize("position, n_return, n_discount, n_next_obs", [
-    # capacity 4, tags 0..5 stored (rewards 1..6): positions hold [4, 5, 2, 3], head = 2
-    (3, 4 + 0.9 * 5 + 0.9**2 * 6, 0.9**3, [6, -6]),  # t = 3, 4, 5 — across the buffer's end: 13.36
-    (2, 3 + 0.9 * 4 + 0.9**2 * 5, 0.9**3, [5, -5]),  # t = 2, 3, 4: 10.65
-    (0, 5 + 0.9 * 6, 0.9**2, [6, -6]),               # t = 4, 5, then the newest: m = 2
-    (1, 6, 0.9, [6, -6]),                            # t = 5, the newest
-])
+@pytest.mark.parametrize(
+    "position, n_return, n_discount, n_next_obs",
+    [
+        # capacity 4, tags 0..5 stored (rewards 1..6): positions hold [4, 5, 2, 3], head = 2
+        (3, 4 + 0.9 * 5 + 0.9**2 * 6, 0.9**3, [6, -6]),  # t = 3, 4, 5 — across the buffer's end: 13.36
+        (2, 3 + 0.9 * 4 + 0.9**2 * 5, 0.9**3, [5, -5]),  # t = 2, 3, 4: 10.65
+        (0, 5 + 0.9 * 6, 0.9**2, [6, -6]),  # t = 4, 5, then the newest: m = 2
+        (1, 6, 0.9, [6, -6]),  # t = 5, the newest
+    ],
+)
 def test_n_step_wraps_around_the_agent_buffer(position, n_return, n_discount, n_next_obs):
     replay = make_replay(n_step=3, capacity=4, demo_capacity=5)
     replay.set_demos(make_rows(replay, [50, 51, 52, 53, 54], rewards=[1000] * 5))  # no leak from here
@@ -430,17 +462,20 @@ def test_n_step_wraps_around_and_stops_at_a_termination():
     check_n_step(replay, 5 + 1, 6, 0.9, [6, -6])  # t = 5 begins a new episode
 
 
-@pytest.mark.parametrize("flags, position, n_return, n_discount, n_next_obs", [
-    # D_demo fills the region (6 rows, demo_capacity 6): episode 1 = t 0..2 (terminated),
-    # episode 2 = t 3..5, ending truncated, or unfinished (ending at the last demo row)
-    ("truncated", 1, 2 + 0.9 * 3, 0.0, [3, -3]),
-    ("truncated", 0, 1 + 0.9 * 2 + 0.9**2 * 3, 0.0, [3, -3]),
-    ("truncated", 3, 4 + 0.9 * 5 + 0.9**2 * 6, 0.9**3, [6, -6]),
-    ("truncated", 4, 5 + 0.9 * 6, 0.9**2, [6, -6]),
-    ("truncated", 5, 6, 0.9, [6, -6]),
-    ("open", 4, 5 + 0.9 * 6, 0.9**2, [6, -6]),  # the demo region ends: no agent rows follow
-    ("open", 5, 6, 0.9, [6, -6]),
-])
+@pytest.mark.parametrize(
+    "flags, position, n_return, n_discount, n_next_obs",
+    [
+        # D_demo fills the region (6 rows, demo_capacity 6): episode 1 = t 0..2 (terminated),
+        # episode 2 = t 3..5, ending truncated, or unfinished (ending at the last demo row)
+        ("truncated", 1, 2 + 0.9 * 3, 0.0, [3, -3]),
+        ("truncated", 0, 1 + 0.9 * 2 + 0.9**2 * 3, 0.0, [3, -3]),
+        ("truncated", 3, 4 + 0.9 * 5 + 0.9**2 * 6, 0.9**3, [6, -6]),
+        ("truncated", 4, 5 + 0.9 * 6, 0.9**2, [6, -6]),
+        ("truncated", 5, 6, 0.9, [6, -6]),
+        ("open", 4, 5 + 0.9 * 6, 0.9**2, [6, -6]),  # the demo region ends: no agent rows follow
+        ("open", 5, 6, 0.9, [6, -6]),
+    ],
+)
 def test_n_step_demo_episodes_in_time_order(flags, position, n_return, n_discount, n_next_obs):
     replay = make_replay(n_step=3, capacity=4, demo_capacity=6)
     store_all(replay, make_rows(replay, [60, 61, 62, 63], rewards=[1000] * 4))  # right after the demos
@@ -457,8 +492,9 @@ def test_n_step_private_helper_agrees_for_a_whole_batch():
     indices = tf.constant([0, 2, 4, 10, 11, 12])
     window = tf.gather(replay.table, replay._window(indices))
     n_returns, n_next_obs, n_discount = replay._n_step(indices, window)
-    close(n_returns, [1 + 0.9 * 2, 3 + 0.9 * 4 + 0.9**2 * 5, 5 + 0.9 * 6,
-                      11 + 0.9 * 12 + 0.9**2 * 13, 12 + 0.9 * 13, 13])
+    close(
+        n_returns, [1 + 0.9 * 2, 3 + 0.9 * 4 + 0.9**2 * 5, 5 + 0.9 * 6, 11 + 0.9 * 12 + 0.9**2 * 13, 12 + 0.9 * 13, 13]
+    )
     close(n_discount, [0.0, 0.9**3, 0.0, 0.9**3, 0.9**2, 0.9])
     close(n_next_obs, [[2, -2], [5, -5], [6, -6], [13, -13], [13, -13], [13, -13]])
 
@@ -475,17 +511,25 @@ def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
     tag = 0
     for round_ in range(3):
         terminated, truncated = flags(5 + round_)
-        replay.set_demos(make_rows(replay, range(100 * round_, 100 * round_ + 5 + round_),
-                                   rewards=rng.normal(size=5 + round_), terminated=terminated, truncated=truncated))
+        replay.set_demos(
+            make_rows(
+                replay,
+                range(100 * round_, 100 * round_ + 5 + round_),
+                rewards=rng.normal(size=5 + round_),
+                terminated=terminated,
+                truncated=truncated,
+            )
+        )
         for _ in range(10):
             terminated, truncated = flags(1)
-            store_all(replay, make_rows(replay, [tag], rewards=rng.normal(size=1), terminated=terminated,
-                                        truncated=truncated))
+            store_all(
+                replay, make_rows(replay, [tag], rewards=rng.normal(size=1), terminated=terminated, truncated=truncated)
+            )
             tag += 1
             indices = replay.stored_indices()
             plain = replay._n_step(indices, tf.gather(replay.table, replay._window(indices)))
             cached = tf.split(tf.gather(replay.n_step_view, indices), [1, 2, 1], axis=1)
-            for expected, got in zip(plain, (cached[0][:, 0], cached[1], cached[2][:, 0])):
+            for expected, got in zip(plain, (cached[0][:, 0], cached[1], cached[2][:, 0]), strict=True):
                 np.testing.assert_array_equal(got.numpy(), expected.numpy())
 
 
@@ -493,21 +537,43 @@ def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
 # 7. 1-step fields
 # --------------------------------------------------------------------------------------------
 
+
 def test_one_step_fields_round_trip():
     replay = make_replay(obs_dim=2, n_actions=3, capacity=4, demo_capacity=4, n_step=2)
     # flags per row (terminated, truncated): (0,0), (1,0), (0,1), (1,1)
     pi = [[0.1, 0.2, 0.7], [0.5, 0.25, 0.25], [0.0, 1.0, 0.0], [0.6, 0.3, 0.1]]
-    replay.set_demos(make_rows(replay, [0, 1, 2, 3], rewards=[-1.5, 0.0, 2.5, 100.0], terminated=[1, 3],
-                               truncated=[2, 3], actions=[2, 0, 1, 2], pi_bc=pi, sigma_sq=[0.5, 0.75, 1.0, 2.0]))
-    store_all(replay, make_rows(replay, [10, 11, 12, 13], rewards=[1.0, -2.0, 3.0, -100.0], terminated=[1, 3],
-                                truncated=[2, 3], actions=[1, 2, 0, 1], pi_bc=pi[::-1], sigma_sq=[3, 4, 5, 6]))
+    replay.set_demos(
+        make_rows(
+            replay,
+            [0, 1, 2, 3],
+            rewards=[-1.5, 0.0, 2.5, 100.0],
+            terminated=[1, 3],
+            truncated=[2, 3],
+            actions=[2, 0, 1, 2],
+            pi_bc=pi,
+            sigma_sq=[0.5, 0.75, 1.0, 2.0],
+        )
+    )
+    store_all(
+        replay,
+        make_rows(
+            replay,
+            [10, 11, 12, 13],
+            rewards=[1.0, -2.0, 3.0, -100.0],
+            terminated=[1, 3],
+            truncated=[2, 3],
+            actions=[1, 2, 0, 1],
+            pi_bc=pi[::-1],
+            sigma_sq=[3, 4, 5, 6],
+        ),
+    )
     expected = {
         # index: (tag, action, reward, discount, pi_bc, sigma_sq, is_demo)
         0: (0, 2, -1.5, 0.9, pi[0], 0.5, 1.0),
         1: (1, 0, 0.0, 0.0, pi[1], 0.75, 1.0),
-        2: (2, 1, 2.5, 0.9, pi[2], 1.0, 1.0),     # truncated keeps γ
-        3: (3, 2, 100.0, 0.0, pi[3], 2.0, 1.0),   # row demo_capacity − 1 is still a demo row
-        4: (10, 1, 1.0, 0.9, pi[3], 3.0, 0.0),    # row demo_capacity is the first agent row
+        2: (2, 1, 2.5, 0.9, pi[2], 1.0, 1.0),  # truncated keeps γ
+        3: (3, 2, 100.0, 0.0, pi[3], 2.0, 1.0),  # row demo_capacity − 1 is still a demo row
+        4: (10, 1, 1.0, 0.9, pi[3], 3.0, 0.0),  # row demo_capacity is the first agent row
         5: (11, 2, -2.0, 0.0, pi[2], 4.0, 0.0),
         6: (12, 0, 3.0, 0.9, pi[1], 5.0, 0.0),
         7: (13, 1, -100.0, 0.0, pi[0], 6.0, 0.0),
@@ -517,8 +583,19 @@ def test_one_step_fields_round_trip():
     assert batch.indices.dtype == tf.int32
     got = batch.indices.numpy()
     assert set(got.tolist()) == set(expected)
-    for field in ("obs", "rewards", "next_obs", "discount", "pi_bc", "sigma_sq", "is_demo", "weights",
-                  "n_returns", "n_discount", "n_next_obs"):
+    for field in (
+        "obs",
+        "rewards",
+        "next_obs",
+        "discount",
+        "pi_bc",
+        "sigma_sq",
+        "is_demo",
+        "weights",
+        "n_returns",
+        "n_discount",
+        "n_next_obs",
+    ):
         assert getattr(batch, field).dtype == tf.float32, field
     for b, index in enumerate(got):
         tag, action, reward, discount, pi_bc, sigma_sq, is_demo = expected[index]
@@ -549,6 +626,7 @@ def test_set_expert_targets_overwrites_only_pi_bc_and_sigma_sq():
 # --------------------------------------------------------------------------------------------
 # 8. Errors
 # --------------------------------------------------------------------------------------------
+
 
 def test_capacity_below_n_step_is_a_config_error():
     with pytest.raises(ConfigError, match=r"n_step=10.*got 5"):

@@ -8,14 +8,15 @@ import tarfile
 from pathlib import Path
 
 import pytest
-from dqfd_bc_keras.config import QUICK
+
+from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arms import group_arms
 from dqfd_bc_keras.experiments.data import REPLICATIONS, export_archive, load_runs
 from dqfd_bc_keras.experiments.replicate import Comparison, parse_seeds, replicate, replication_section
-from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.experiments.suites import arm
-from dqfd_bc_keras.runs import train
+from dqfd_bc_keras.experiments.summary import summary
+from dqfd_bc_keras.runs.directory import train
 
 REPO = Path(__file__).resolve().parents[1]
 ARM = arm("cartpole", "bootstrap", "ce", 1, **QUICK)
@@ -35,13 +36,49 @@ def test_a_replication_reruns_the_arm_at_fresh_seeds_and_compares(archive, tmp_p
     with tarfile.open(archive) as tar:
         tar.extractall(suite, filter="data")
     out = suite / REPLICATIONS  # the reruns travel with the suite
-    done = subprocess.run([sys.executable, "-m", "dqfd_bc_keras.experiments", "replicate", ARM.name, "--seeds", "0-0",
-                           "--archive", str(archive), "--out", str(out)], capture_output=True, text=True, cwd=REPO,
-                          env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dqfd_bc_keras.experiments",
+            "replicate",
+            ARM.name,
+            "--seeds",
+            "0-0",
+            "--archive",
+            str(archive),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        timeout=300,
+    )
     assert done.returncode == 2 and "the archive already has seed(s) [0]" in done.stderr
-    done = subprocess.run([sys.executable, "-m", "dqfd_bc_keras.experiments", "replicate", ARM.name, "--seeds", "7-7",
-                           "--archive", str(archive), "--out", str(out), "--workers", "1"], capture_output=True,
-                          text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dqfd_bc_keras.experiments",
+            "replicate",
+            ARM.name,
+            "--seeds",
+            "7-7",
+            "--archive",
+            str(archive),
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     config = json.loads((out / ARM.name / "seed7" / "config.json").read_text())
     archived = json.loads(json.dumps({**ARM.config(0).to_dict(), "seed": 7}))

@@ -10,8 +10,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
 DOCS = sorted((REPO / "docs").glob("*.md"))
-CODE = [REPO / "train.py", REPO / "evaluate.py",
-        *sorted(p for d in ("dqfd_bc_keras", "benchmarks", "tests") for p in (REPO / d).rglob("*.py"))]
+CODE = [
+    REPO / "train.py",
+    REPO / "evaluate.py",
+    *sorted(p for d in ("dqfd_bc_keras", "benchmarks", "tests") for p in (REPO / d).rglob("*.py")),
+]
 NOTES = ("<!-- notes: hand-written, kept when the report is regenerated -->", "<!-- /notes -->")
 
 
@@ -26,7 +29,7 @@ def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
     assert len(commands) == 3 and all("\n" not in c for c in commands)
     main, python, tests = commands
     assert main.startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/dqfd-train")
-    assert python.startswith(".venv/bin/python -c \"from dqfd_bc_keras import DQfD;")
+    assert python.startswith('.venv/bin/python -c "from dqfd_bc_keras import DQfD;')
     assert tests.startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt")
     assert tests.endswith("-m pytest -q -n 2")
     ci = (REPO / ".ci" / "run").read_text().splitlines()
@@ -45,9 +48,12 @@ def relative_links(markdown: Path) -> list[str]:
 
 
 def test_every_relative_link_of_the_docs_resolves_to_a_file_in_the_repository():
-    broken = [f"{md.relative_to(REPO)} → {target}" for md in [README, *DOCS] for target in relative_links(md)
-              if not (md.parent / target).resolve().exists()
-              or not (md.parent / target).resolve().is_relative_to(REPO)]
+    broken = [
+        f"{md.relative_to(REPO)} → {target}"
+        for md in [README, *DOCS]
+        for target in relative_links(md)
+        if not (md.parent / target).resolve().exists() or not (md.parent / target).resolve().is_relative_to(REPO)
+    ]
     assert not broken, broken
     assert "docs/ALGORITHM.md" in relative_links(README)  # the scan sees the README's links at all
 
@@ -65,13 +71,20 @@ def algorithm_citations(text: str) -> set[int]:
 
 
 def test_algorithm_citations_are_parsed_with_ranges():
-    assert algorithm_citations("(ALGORITHM.md §4–§5) and ALGORITHM.md §7, C1 and §9; ALGORITHM.md §2, §3") == {2, 3, 4, 5, 7}
+    assert algorithm_citations("(ALGORITHM.md §4–§5) and ALGORITHM.md §7, C1 and §9; ALGORITHM.md §2, §3") == {
+        2,
+        3,
+        4,
+        5,
+        7,
+    }
 
 
 def test_every_algorithm_section_the_code_cites_is_a_heading_of_docs_algorithm_md():
     headings = {int(n) for n in re.findall(r"^## (\d+)\. ", (REPO / "docs" / "ALGORITHM.md").read_text(), flags=re.M)}
-    cited = {(path.relative_to(REPO), n) for path in [*CODE, README, *DOCS]
-             for n in algorithm_citations(path.read_text())}
+    cited = {
+        (path.relative_to(REPO), n) for path in [*CODE, README, *DOCS] for n in algorithm_citations(path.read_text())
+    }
     assert {n for _, n in cited} >= {1, 2, 3, 4, 5, 6, 7}  # the code's citations are all found
     assert not {c for c in cited if c[1] not in headings}, sorted(c for c in cited if c[1] not in headings)
 
@@ -84,24 +97,31 @@ def user_facing_text() -> dict[str, str]:
     """README and docs/*.md; of RESULTS.md only its hand-written notes (the rest is generated)."""
     pages = {str(p.relative_to(REPO)): p.read_text() for p in [README, *DOCS]}
     results = pages["docs/RESULTS.md"]
-    pages["docs/RESULTS.md"] = results[results.find(NOTES[0]):results.find(NOTES[1])]
+    pages["docs/RESULTS.md"] = results[results.find(NOTES[0]) : results.find(NOTES[1])]
     return pages
 
 
 def test_user_facing_docs_cite_no_issue_letters():
-    assert [m.group(0) for m in ISSUE_LETTER.finditer("issue H, (issues D, E), E's protocol")] == ["issue H", "issues D", "E's"]
+    assert [m.group(0) for m in ISSUE_LETTER.finditer("issue H, (issues D, E), E's protocol")] == [
+        "issue H",
+        "issues D",
+        "E's",
+    ]
     assert not ISSUE_LETTER.search("DQfD's margin, BCModel's fit, TD's target, C4's flags, the issue's goal")
-    found = [f"{name}: {m.group(0)!r}" for name, text in user_facing_text().items() for m in ISSUE_LETTER.finditer(text)]
+    found = [
+        f"{name}: {m.group(0)!r}" for name, text in user_facing_text().items() for m in ISSUE_LETTER.finditer(text)
+    ]
     assert not found, found
 
 
 def test_tensorflow_is_quiet_and_single_threaded():
-    code = ("from dqfd_bc_keras import runtime; runtime.configure_tensorflow(); import tensorflow as tf; "
-            "print(tf.reduce_sum(tf.ones(3)).numpy(), tf.config.threading.get_intra_op_parallelism_threads(), "
-            "tf.config.threading.get_inter_op_parallelism_threads())")
+    code = (
+        "from dqfd_bc_keras import runtime; runtime.configure_tensorflow(); import tensorflow as tf; "
+        "print(tf.reduce_sum(tf.ones(3)).numpy(), tf.config.threading.get_intra_op_parallelism_threads(), "
+        "tf.config.threading.get_inter_op_parallelism_threads())"
+    )
     env = {k: v for k, v in os.environ.items() if not k.startswith(("TF_", "DQFD_"))}
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
-                          env=env, timeout=120)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, env=env, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["3.0", "1", "1"]
     assert done.stderr == ""

@@ -12,15 +12,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dqfd_bc_keras.cli import run
+
+from dqfd_bc_keras.commands.cli import run
+from dqfd_bc_keras.demos import record, save
 from dqfd_bc_keras.experiments import figures
 from dqfd_bc_keras.experiments.__main__ import main
-from dqfd_bc_keras.experiments.metrics import PER_RUN
-from dqfd_bc_keras.experiments.data import load_runs, open_suite
-from dqfd_bc_keras.demos import record, save
 from dqfd_bc_keras.experiments.baselines_table import demo_source
+from dqfd_bc_keras.experiments.data import load_runs, open_suite
+from dqfd_bc_keras.experiments.metrics import PER_RUN
 from dqfd_bc_keras.experiments.report import NOTES, PER_SEED
-from dqfd_bc_keras.records import DemoSummary
+from dqfd_bc_keras.training.records import DemoSummary
 
 DATA = Path(__file__).with_name("data")
 FIXTURE = DATA / "suite.tar.xz"
@@ -62,15 +63,22 @@ def test_report_from_the_archive_matches_the_golden_file(work):
     text = (work["root"] / "suite-report" / "RESULTS.md").read_text()
     if os.environ.get("UPDATE_GOLDEN") == "1":
         GOLDEN.write_text(text)
-    assert text == GOLDEN.read_text(), (f"RESULTS.md of {FIXTURE.name} differs from {GOLDEN.relative_to(DATA.parents[1])}; "
-                                        f"if the report changed on purpose, regenerate it: {REGENERATE_GOLDEN}")
+    assert text == GOLDEN.read_text(), (
+        f"RESULTS.md of {FIXTURE.name} differs from {GOLDEN.relative_to(DATA.parents[1])}; "
+        f"if the report changed on purpose, regenerate it: {REGENERATE_GOLDEN}"
+    )
 
 
 def test_a_second_report_is_byte_identical(work):
     first, second = work["first"], work["second"]
-    assert sorted(first) == ["RESULTS.md", "figures/cartpole-naive-cases.png", "figures/cartpole-naive-curves.png",
-                             "figures/mountaincar-goals-bootstrap-cases.png",
-                             "figures/mountaincar-goals-bootstrap-curves.png", PER_SEED]
+    assert sorted(first) == [
+        "RESULTS.md",
+        "figures/cartpole-naive-cases.png",
+        "figures/cartpole-naive-curves.png",
+        "figures/mountaincar-goals-bootstrap-cases.png",
+        "figures/mountaincar-goals-bootstrap-curves.png",
+        PER_SEED,
+    ]
     assert first == second
     assert b"Software" not in first["figures/cartpole-naive-curves.png"]
 
@@ -113,7 +121,8 @@ def test_the_goal_count_setting_gets_a_zoomed_panel(work):
 
     first = work["first"]
     assert width(first["figures/mountaincar-goals-bootstrap-curves.png"]) > width(
-        first["figures/cartpole-naive-curves.png"])
+        first["figures/cartpole-naive-curves.png"]
+    )
 
 
 def test_docs_only_when_asked_and_the_notes_survive(tmp_path, monkeypatch, capsys):
@@ -160,25 +169,39 @@ def test_a_run_that_stopped_early_holds_its_last_value():
     np.testing.assert_allclose(running, [2, 2, 2])
 
 
-
 def test_a_run_given_demonstrations_in_a_file_is_reported_as_such(tmp_path):
     """train.py --demos FILE, as a user runs it: the lab reads where the demonstrations came from
     out of the run's own demonstrations.json, not the file's demonstrator."""
     save(record("cartpole", "strong", 2, seed=7), tmp_path / "given.npz")
     out = tmp_path / "run"
-    done = subprocess.run([sys.executable, "train.py", "--quick", "--quiet", "--demos", str(tmp_path / "given.npz"),
-                           "--out", str(out)], cwd=DATA.parents[1], capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "train.py", "--quick", "--quiet", "--demos", str(tmp_path / "given.npz"), "--out", str(out)],
+        cwd=DATA.parents[1],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     [run_] = load_runs(out)
     assert (run_.demonstrations.source, run_.demonstrations.expert, run_.demonstrations.episodes) == (
-        "file", "strong", 2)
+        "file",
+        "strong",
+        2,
+    )
     assert demo_source(run_.demonstrations) == "2 episodes from a file"
 
 
 def test_the_demonstrations_column_names_their_source():
     def summary(source, expert="imperfect"):
-        return DemoSummary(transitions=100, episodes=2, expert=expert, episode_returns=[50.0, 50.0],
-                           plain_returns=[50.0, 50.0], pretrain_steps=10, source=source)
+        return DemoSummary(
+            transitions=100,
+            episodes=2,
+            expert=expert,
+            episode_returns=[50.0, 50.0],
+            plain_returns=[50.0, 50.0],
+            pretrain_steps=10,
+            source=source,
+        )
 
     assert demo_source(summary("recorded")) == demo_source(summary(None)) == "2 × imperfect"
     assert demo_source(summary("file")) == "2 episodes from a file"

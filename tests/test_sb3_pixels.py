@@ -83,21 +83,41 @@ def test_an_8_bit_image_space_is_refused():
 
 def test_the_schedule_is_the_zoo_atari_entry_with_learning_starts_at_1_percent():
     assert hyperparameters(1_000_000) == dict(
-        buffer_size=100_000, learning_rate=1e-4, batch_size=32, learning_starts=10_000, target_update_interval=1000,
-        train_freq=4, gradient_steps=1, exploration_fraction=0.1, exploration_final_eps=0.01,
-        optimize_memory_usage=False)
+        buffer_size=100_000,
+        learning_rate=1e-4,
+        batch_size=32,
+        learning_starts=10_000,
+        target_update_interval=1000,
+        train_freq=4,
+        gradient_steps=1,
+        exploration_fraction=0.1,
+        exploration_final_eps=0.01,
+        optimize_memory_usage=False,
+    )
     assert hyperparameters(250_000)["learning_starts"] == 2500
 
 
 def command(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    return subprocess.run([sys.executable, "-m", MODULE, *args], cwd=ROOT, capture_output=True, text=True,
-                          env=env, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", MODULE, *args], cwd=ROOT, capture_output=True, text=True, env=env, timeout=300
+    )
 
 
 def test_quick_run_writes_the_evaluation_grid_within_the_budget(tmp_path):
-    done = command("--env", "MinAtar/Breakout-v1", "--out", str(tmp_path), "--quick", "--budget", "1000",
-                   "--every", "300", "--eval-episodes", "3")
+    done = command(
+        "--env",
+        "MinAtar/Breakout-v1",
+        "--out",
+        str(tmp_path),
+        "--quick",
+        "--budget",
+        "1000",
+        "--every",
+        "300",
+        "--eval-episodes",
+        "3",
+    )
     assert done.returncode == 0, done.stderr
     path = tmp_path / "MinAtar-Breakout-v1" / "seed0-quick.json"
     run = json.loads(path.read_text())
@@ -106,20 +126,37 @@ def test_quick_run_writes_the_evaluation_grid_within_the_budget(tmp_path):
         assert len(e["returns"]) == 3 and e["mean_return"] == pytest.approx(np.mean(e["returns"]))
     assert (run["budget"], run["eval_every"], run["eval_seed"]) == (1000, 300, eval_seed(0))
     assert run["hyperparameters"]["learning_starts"] == 10
-    assert run["hyperparameters"]["policy_kwargs"] == {"features_extractor_class": "MinAtarCNN", "net_arch": [],
-                                                      "normalize_images": False}
+    assert run["hyperparameters"]["policy_kwargs"] == {
+        "features_extractor_class": "MinAtarCNN",
+        "net_arch": [],
+        "normalize_images": False,
+    }
     assert set(run["versions"]) == {"stable-baselines3", "torch", "gymnasium", "minatar"}
-    again = command("--env", "MinAtar/Breakout-v1", "--out", str(tmp_path), "--quick", "--budget", "1000",
-                    "--every", "300", "--eval-episodes", "3")
+    again = command(
+        "--env",
+        "MinAtar/Breakout-v1",
+        "--out",
+        str(tmp_path),
+        "--quick",
+        "--budget",
+        "1000",
+        "--every",
+        "300",
+        "--eval-episodes",
+        "3",
+    )
     assert again.returncode == 0 and "kept" in again.stdout
     assert json.loads(path.read_text()) == run
 
 
-@pytest.mark.parametrize("args, says", [
-    (["--env", "MinAtar/Breakot-v1", "--quick"], "unknown MinAtar env id 'MinAtar/Breakot-v1'"),
-    (["--env", "CartPole-v1", "--quick"], "unknown MinAtar env id 'CartPole-v1'"),
-    (["--env", "MinAtar/Breakout-v1"], "--budget is required"),
-])
+@pytest.mark.parametrize(
+    "args, says",
+    [
+        (["--env", "MinAtar/Breakot-v1", "--quick"], "unknown MinAtar env id 'MinAtar/Breakot-v1'"),
+        (["--env", "CartPole-v1", "--quick"], "unknown MinAtar env id 'CartPole-v1'"),
+        (["--env", "MinAtar/Breakout-v1"], "--budget is required"),
+    ],
+)
 def test_a_bad_command_exits_non_zero_with_one_line(tmp_path, args, says):
     done = command(*args, "--out", str(tmp_path))
     assert done.returncode != 0

@@ -36,7 +36,12 @@ def quick_runs(tmp_path_factory):
             loss = pending.pop(0)
             active[loss] = subprocess.Popen(
                 script("train.py", "--quick", "--expert-loss", loss, "--out", root / loss),
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO, env=ENV)
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                cwd=REPO,
+                env=ENV,
+            )
         for loss, process in list(active.items()):
             if process.poll() is not None:
                 out, err = process.communicate()
@@ -77,8 +82,9 @@ def test_resume_after_sigkill_reproduces_the_uninterrupted_run(tmp_path):
     args = ["--quick", "--set", "total_steps=2500", "--set", "checkpoint_every=500", "--quiet"]
     whole, cut = tmp_path / "whole", tmp_path / "cut"
     assert run("train.py", *args, "--out", whole).returncode == 0
-    process = subprocess.Popen(script("train.py", *args, "--out", cut), cwd=REPO, env=ENV,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(
+        script("train.py", *args, "--out", cut), cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     latest = cut / "checkpoints" / "latest.json"
     deadline = time.time() + 240
     while time.time() < deadline and process.poll() is None:
@@ -114,24 +120,48 @@ def test_train_refuses_to_overwrite_a_run(quick_runs):
     assert (run_dir / "metrics.csv").read_bytes() == before
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--task", "pong"], "invalid choice: 'pong'"),
-    (["--expert-loss", "kl"], "expert_loss='kl' is not one of ('margin'"),
-    (["--steps", "0"], "must be a positive integer, got 0"),
-    (["--set", "gama=0.9"], "--set 'gama=0.9': unknown Config field 'gama'; did you mean gamma?"),
-    (["--set", "gamma=abc"], "--set gamma='abc': expected float"),
-    (["--set", "gamma=2"], "gamma must be in [0, 1], got 2.0"),
-    (["--demos", "missing.npz"], "missing.npz: no such file"),
-    (["--resume", "--out", "nowhere"], "nowhere has no checkpoint to resume from"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--task", "pong"], "invalid choice: 'pong'"),
+        (["--expert-loss", "kl"], "expert_loss='kl' is not one of ('margin'"),
+        (["--steps", "0"], "must be a positive integer, got 0"),
+        (["--set", "gama=0.9"], "--set 'gama=0.9': unknown Config field 'gama'; did you mean gamma?"),
+        (["--set", "gamma=abc"], "--set gamma='abc': expected float"),
+        (["--set", "gamma=2"], "gamma must be in [0, 1], got 2.0"),
+        (["--demos", "missing.npz"], "missing.npz: no such file"),
+        (["--resume", "--out", "nowhere"], "nowhere has no checkpoint to resume from"),
+    ],
+)
 def test_train_rejects_bad_input_in_one_line(args, message):
     one_line_error(run("train.py", "--quick", *args), message)
 
 
 def test_train_rejects_demos_of_another_task(tmp_path):
     demos = tmp_path / "mc.npz"
-    assert subprocess.run([sys.executable, "-m", "dqfd_bc_keras.demos", "record", "--task", "mountaincar",
-                           "--expert", "strong", "--episodes", "1", "--out", demos], cwd=REPO, env=ENV).returncode == 0
-    one_line_error(run("train.py", "--quick", "--demos", demos, "--out", tmp_path / "x"),
-                   "was recorded on task 'mountaincar', not on the requested 'cartpole'")
+    assert (
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "dqfd_bc_keras.demos",
+                "record",
+                "--task",
+                "mountaincar",
+                "--expert",
+                "strong",
+                "--episodes",
+                "1",
+                "--out",
+                demos,
+            ],
+            cwd=REPO,
+            env=ENV,
+        ).returncode
+        == 0
+    )
+    one_line_error(
+        run("train.py", "--quick", "--demos", demos, "--out", tmp_path / "x"),
+        "was recorded on task 'mountaincar', not on the requested 'cartpole'",
+    )
     assert not (tmp_path / "x").exists()

@@ -34,7 +34,9 @@ def test_the_suite_runs_each_estimator_and_sigma0_on_every_setting_once():
     assert {a.config(0).uncertainty for a in arms} == {"distance", "mc_dropout"}
     # distance before mc_dropout on CartPole, MountainCar last (the pre-registered order)
     order = [(a.task, a.config(0).uncertainty) for a in arms]
-    assert order.index(("cartpole", "mc_dropout")) > max(i for i, o in enumerate(order) if o == ("cartpole", "distance"))
+    assert order.index(("cartpole", "mc_dropout")) > max(
+        i for i, o in enumerate(order) if o == ("cartpole", "distance")
+    )
     assert all(task == "mountaincar" for task, _ in order[-4:])
 
 
@@ -44,8 +46,17 @@ def c3_runs(tmp_path, loss, lengths_by_seed, weights=None, **fields):
         rows = cartpole_rows(lengths)
         if weights:
             rows = [{**r, "imitation_weight_demo": weights[0], "imitation_weight_agent": weights[1]} for r in rows]
-        runs.append(make_run(tmp_path / f"{loss}{fields}{seed}", rows, task="cartpole", timeout="bootstrap",
-                             expert_loss=loss, seed=seed, **fields))
+        runs.append(
+            make_run(
+                tmp_path / f"{loss}{fields}{seed}",
+                rows,
+                task="cartpole",
+                timeout="bootstrap",
+                expert_loss=loss,
+                seed=seed,
+                **fields,
+            )
+        )
     return runs
 
 
@@ -55,17 +66,25 @@ def test_a_clear_win_survives_holm_over_the_family_and_a_tie_does_not(tmp_path):
     p = 2(1 − Φ((100 − 50 − ½)/√(10·10·21/12))) = 1.83e-4, × 32 = 5.8e-3 < 0.05: better. bayes at
     σ0² = 0.1 draws the same returns as ce: p = 1, no measurable difference."""
     ce = c3_runs(tmp_path, "ce", [[100 + s] * 5 for s in range(10)])
-    win = c3_runs(tmp_path, "bayes", [[400 + s] * 5 for s in range(10)], weights=(25.0, 5.0),
-                  uncertainty="distance", sigma0_sq=0.02)
-    tie = c3_runs(tmp_path, "bayes", [[100 + s] * 5 for s in range(10)], weights=(5.0, 4.0),
-                  uncertainty="distance", sigma0_sq=0.1)
+    win = c3_runs(
+        tmp_path,
+        "bayes",
+        [[400 + s] * 5 for s in range(10)],
+        weights=(25.0, 5.0),
+        uncertainty="distance",
+        sigma0_sq=0.02,
+    )
+    tie = c3_runs(
+        tmp_path, "bayes", [[100 + s] * 5 for s in range(10)], weights=(5.0, 4.0), uncertainty="distance", sigma0_sq=0.1
+    )
     everything = sigma0.results(group_arms(ce + win + tie))
     found = [r for r in everything if r.setting == "C3"]
     assert [(r.sigma0_sq, r.verdict) for r in found] == [(0.02, "better"), (0.1, "no measurable difference")]
     # C3's arms are also the grid's imperfect × 5 cell: seeds 0-4 on interactions to 475 (never: all ∞, p = 1)
     grid = [r for r in everything if r.setting != "C3"]
     assert [(r.setting, len(r.bayes.runs), r.verdict) for r in grid] == [
-        ("grid imperfect ε=0 × 5", 5, "no measurable difference")] * 2
+        ("grid imperfect ε=0 × 5", 5, "no measurable difference")
+    ] * 2
     expected = 2 * (1 - sps.norm.cdf(49.5 / np.sqrt(175)))
     assert found[0].p == pytest.approx(expected, rel=1e-6) and found[0].p_holm == pytest.approx(32 * expected)
     assert found[1].p == pytest.approx(1.0) and found[1].p_holm == 1.0
@@ -94,14 +113,15 @@ def test_the_study_report_command_writes_its_markdown_and_refuses_a_bad_source(t
     from test_claims import write_run
 
     suite = tmp_path / "suite"
-    for run in (c3_runs(suite, "ce", [[100 + s] * 5 for s in range(3)]) +
-                c3_runs(suite, "bayes", [[300 + s] * 5 for s in range(3)], weights=(25.0, 5.0),
-                        uncertainty="distance", sigma0_sq=0.02)):
+    for run in c3_runs(suite, "ce", [[100 + s] * 5 for s in range(3)]) + c3_runs(
+        suite, "bayes", [[300 + s] * 5 for s in range(3)], weights=(25.0, 5.0), uncertainty="distance", sigma0_sq=0.02
+    ):
         write_run(run)
     repo = Path(__file__).resolve().parents[1]
     command = [sys.executable, "-m", "dqfd_bc_keras.experiments.sigma0"]
-    done = subprocess.run([*command, suite, "--report", tmp_path / "SIGMA0.md"], capture_output=True, text=True,
-                          cwd=repo, timeout=300)
+    done = subprocess.run(
+        [*command, suite, "--report", tmp_path / "SIGMA0.md"], capture_output=True, text=True, cwd=repo, timeout=300
+    )
     assert done.returncode == 0, done.stderr
     text = (tmp_path / "SIGMA0.md").read_text()
     assert text.startswith("# The Bayesian loss where it can act") and "Provenance" in text

@@ -4,9 +4,25 @@ import math
 
 import numpy as np
 import pytest
-from dqfd_bc_keras.experiments.stats import (CensoredSummary, Summary, beyond, bootstrap_ci, bootstrap_diff_ci,
-                                            bound_power, equivalence_power, equivalent, fisher_exact, iqm, mann_whitney,
-                                            pooled_sd, sd_from_ci, seeds_for_bound, seeds_for_equivalence, tost_ci)
+
+from dqfd_bc_keras.experiments.stats import (
+    CensoredSummary,
+    Summary,
+    beyond,
+    bootstrap_ci,
+    bootstrap_diff_ci,
+    bound_power,
+    equivalence_power,
+    equivalent,
+    fisher_exact,
+    iqm,
+    mann_whitney,
+    pooled_sd,
+    sd_from_ci,
+    seeds_for_bound,
+    seeds_for_equivalence,
+    tost_ci,
+)
 
 SAMPLE = np.arange(1.0, 11.0)  # 1..10: mean 5.5, population std √8.25
 Z95, Z90, Z80 = 1.6448536, 1.2815516, 0.8416212  # z_0.95, z_0.90, z_0.80 from a normal table
@@ -107,18 +123,32 @@ def test_fisher_exact_lady_tasting_tea():
         fisher_exact(5, 4, 0, 4)
 
 
-@pytest.mark.parametrize("ci, margin, expected", [
-    ((-1.0, 1.0), 2.0, True), ((-2.0, 2.0), 2.0, True), ((0.5, 1.5), 2.0, True),
-    ((-3.0, 1.0), 2.0, False), ((1.0, 2.5), 2.0, False), ((-5.0, 5.0), 2.0, False),
-])
+@pytest.mark.parametrize(
+    "ci, margin, expected",
+    [
+        ((-1.0, 1.0), 2.0, True),
+        ((-2.0, 2.0), 2.0, True),
+        ((0.5, 1.5), 2.0, True),
+        ((-3.0, 1.0), 2.0, False),
+        ((1.0, 2.5), 2.0, False),
+        ((-5.0, 5.0), 2.0, False),
+    ],
+)
 def test_equivalent_means_the_whole_ci_is_inside_the_margin(ci, margin, expected):
     assert equivalent(ci, margin) is expected
 
 
-@pytest.mark.parametrize("ci, expected", [
-    ((2.5, 3.0), True), ((-3.0, -2.5), True), ((1.0, 3.0), False), ((-1.0, 1.0), False), ((-3.0, 3.0), False),
-    ((2.0, 3.0), False),  # touching the margin: a difference larger than it is not shown
-])
+@pytest.mark.parametrize(
+    "ci, expected",
+    [
+        ((2.5, 3.0), True),
+        ((-3.0, -2.5), True),
+        ((1.0, 3.0), False),
+        ((-1.0, 1.0), False),
+        ((-3.0, 3.0), False),
+        ((2.0, 3.0), False),  # touching the margin: a difference larger than it is not shown
+    ],
+)
 def test_beyond_means_the_whole_ci_is_outside_the_margin(ci, expected):
     assert beyond(ci, 2.0) is expected
 
@@ -181,8 +211,14 @@ def _simulated_power(n: int, experiments: int = 300) -> float:
     """How often the TOST decision the claims use (bootstrap 90% CI inside ±1) says "equivalent"
     for two arms of n normal(0, 1) seeds: the truth is no difference."""
     rng = np.random.default_rng(7)
-    return float(np.mean([equivalent(tost_ci(rng.normal(size=n), rng.normal(size=n), resamples=1000, seed=i), 1.0)
-                          for i in range(experiments)]))
+    return float(
+        np.mean(
+            [
+                equivalent(tost_ci(rng.normal(size=n), rng.normal(size=n), resamples=1000, seed=i), 1.0)
+                for i in range(experiments)
+            ]
+        )
+    )
 
 
 def test_equivalence_power_matches_a_simulation():

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from dqfd_bc_keras.config import QUICK
+from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.claims import PAPER
@@ -18,21 +18,40 @@ from dqfd_bc_keras.experiments.sweep import Job, run_suite, sweep_jobs
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
     arms = SUITES["paper"]
     names = [arm.name for arm in arms]
-    assert names[:8] == [f"{setting}-{loss}" for setting in ("cartpole-naive", "cartpole-200-naive",
-                         "cartpole-bootstrap", "mountaincar-goals-bootstrap") for loss in ("ce", "bayes")]
-    assert [arm.seeds for arm in arms[:8:2]] == [planned_seeds(claim, setting) for claim, setting in (
-        ("C1", "cartpole/naive"), ("C1", "cartpole-200/naive"), ("C3", "cartpole/bootstrap"),
-        ("C4", "mountaincar-goals/*"))] == [36, 24, 26, 10]
+    assert names[:8] == [
+        f"{setting}-{loss}"
+        for setting in ("cartpole-naive", "cartpole-200-naive", "cartpole-bootstrap", "mountaincar-goals-bootstrap")
+        for loss in ("ce", "bayes")
+    ]
+    assert (
+        [arm.seeds for arm in arms[:8:2]]
+        == [
+            planned_seeds(claim, setting)
+            for claim, setting in (
+                ("C1", "cartpole/naive"),
+                ("C1", "cartpole-200/naive"),
+                ("C3", "cartpole/bootstrap"),
+                ("C4", "mountaincar-goals/*"),
+            )
+        ]
+        == [36, 24, 26, 10]
+    )
     paper_reading = [arm.config(0) for arm in arms[8:]]
-    assert [(c.task, c.timeout, c.expert_loss, c.early_stop_window, c.total_steps // c.limit)
-            for c in paper_reading] == [("cartpole-200", "naive", loss, 0, 300) for loss in ("ce", "bayes")]
+    assert [
+        (c.task, c.timeout, c.expert_loss, c.early_stop_window, c.total_steps // c.limit) for c in paper_reading
+    ] == [("cartpole-200", "naive", loss, 0, 300) for loss in ("ce", "bayes")]
     # §11: 7 of 10 collapsed in each arm, p = 0.7: ⌈2 (1.645 + 1.282)² · 0.21 / 0.2²⌉ = 90 seeds per arm
     assert [arm.seeds for arm in arms[8:]] == [90, 90] == [planned_seeds("C2", PAPER)] * 2
     baselines = {arm.expert_loss for arm in SUITES["baselines"]}
     assert baselines == {"none", "margin", "bc_margin"}
     config = arms[2].config(seed=7)
     assert (config.task, config.timeout, config.expert_loss, config.seed, config.max_steps) == (
-        "cartpole-200", "naive", "ce", 7, None)
+        "cartpole-200",
+        "naive",
+        "ce",
+        7,
+        None,
+    )
 
 
 def test_dynamic_efficiency_and_ablation_suites_share_the_protocol_and_their_arms():
@@ -44,11 +63,18 @@ def test_dynamic_efficiency_and_ablation_suites_share_the_protocol_and_their_arm
     assert len(modes) == 8 == len(SUITES["dynamic"])
     default = {a.name for a in SUITES["dynamic"] if a.config(0).dynamic_demos == "episodes"}
     assert default <= {a.name for a in SUITES["efficiency"]}  # the preset's mode is the efficiency arm
-    ablations = {(a.task, a.expert_loss, c.dynamic_demos, c.bayes_prior, c.mc_dropout)
-                 for a in SUITES["ablations"] for c in [a.config(0)]}
+    ablations = {
+        (a.task, a.expert_loss, c.dynamic_demos, c.bayes_prior, c.mc_dropout)
+        for a in SUITES["ablations"]
+        for c in [a.config(0)]
+    }
     for task in ("cartpole", "mountaincar-goals"):
-        assert {(task, "bayes", "off", True, True), (task, "ce", "off", True, True),
-                (task, "bayes", "episodes", False, True), (task, "bayes", "episodes", True, False)} <= ablations
+        assert {
+            (task, "bayes", "off", True, True),
+            (task, "ce", "off", True, True),
+            (task, "bayes", "episodes", False, True),
+            (task, "bayes", "episodes", True, False),
+        } <= ablations
 
 
 def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
@@ -65,10 +91,17 @@ def test_sensitivity_suite_sweeps_sigma0_and_the_demonstrator():
 def test_arms_equal_in_config_share_a_name_across_suites():
     """The sensitivity suite's preset cells are the paper's arms: with one --out they share runs."""
     names = {a.name for a in SUITES["sensitivity"]}
-    assert {"cartpole-bootstrap-bayes", "cartpole-bootstrap-ce", "mountaincar-goals-bootstrap-bayes",
-            "mountaincar-goals-bootstrap-ce"} <= names & {a.name for a in SUITES["paper"]}
-    assert {"cartpole-bootstrap-bayes-sigma0.05", "cartpole-bootstrap-bayes-strong-sigma2",
-            "mountaincar-goals-bootstrap-ce-strong"} <= names
+    assert {
+        "cartpole-bootstrap-bayes",
+        "cartpole-bootstrap-ce",
+        "mountaincar-goals-bootstrap-bayes",
+        "mountaincar-goals-bootstrap-ce",
+    } <= names & {a.name for a in SUITES["paper"]}
+    assert {
+        "cartpole-bootstrap-bayes-sigma0.05",
+        "cartpole-bootstrap-bayes-strong-sigma2",
+        "mountaincar-goals-bootstrap-ce-strong",
+    } <= names
 
 
 def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
@@ -76,7 +109,11 @@ def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
     order = [(job.arm.expert_loss, job.seed) for job in sweep_jobs([a, b], None, tmp_path)]
     assert order == [("ce", 0), ("bayes", 0), ("ce", 1), ("ce", 2)]
     assert [(job.arm.expert_loss, job.seed) for job in sweep_jobs([a, b], 2, tmp_path)] == [
-        ("ce", 0), ("bayes", 0), ("ce", 1), ("bayes", 1)]
+        ("ce", 0),
+        ("bayes", 0),
+        ("ce", 1),
+        ("bayes", 1),
+    ]
 
 
 def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
@@ -127,15 +164,23 @@ def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path
     bayes, ce = SUITES["quick"]
     jobs = [Job(bayes, 1, tmp_path / "reused"), Job(ce, 0, tmp_path / "reused"), Job(bayes, 0, tmp_path / "reused")]
     reused = run_jobs(jobs, tmp_path / "reused", "reused", 2, workers=1, runs_per_worker=3, progress=lambda _: None)
-    fresh = run_jobs([Job(bayes, 0, tmp_path / "fresh")], tmp_path / "fresh", "fresh", 1, workers=1,
-                     runs_per_worker=1, progress=lambda _: None)
+    fresh = run_jobs(
+        [Job(bayes, 0, tmp_path / "fresh")],
+        tmp_path / "fresh",
+        "fresh",
+        1,
+        workers=1,
+        runs_per_worker=1,
+        progress=lambda _: None,
+    )
     assert len({o.pid for o in reused}) == 1 and fresh[0].pid not in {o.pid for o in reused}
     assert not any(o.error for o in reused + fresh)
 
     def results(root):
         run = root / bayes.name / "seed0"
-        metrics = [{k: v for k, v in row.items() if k != "wall_time"}
-                   for row in csv.DictReader((run / "metrics.csv").open())]
+        metrics = [
+            {k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader((run / "metrics.csv").open())
+        ]
         return metrics, (run / "evals.csv").read_text(), json.loads((run / "eval.json").read_text())["returns"]
 
     metrics, evals, returns = results(tmp_path / "reused")
@@ -148,10 +193,12 @@ def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_on
     _, ce = SUITES["quick"]
     dying = dataclasses.replace(ce, overrides=(*ce.overrides, ("expert", "toy_envs:dies")), label="quick-dies")
     lines = []
-    with pytest.raises(ConfigError, match=r"1 of 2 runs failed; first: .*quick-dies/seed0: its process died "
-                                          r"\(exit code 3\)"):
-        run_jobs([Job(dying, 0, tmp_path), Job(ce, 0, tmp_path)], tmp_path, "dies", 1, workers=1,
-                 progress=lines.append)
+    with pytest.raises(
+        ConfigError,
+        match=r"1 of 2 runs failed; first: .*quick-dies/seed0: its process died "
+        r"\(exit code 3\)",
+    ):
+        run_jobs([Job(dying, 0, tmp_path), Job(ce, 0, tmp_path)], tmp_path, "dies", 1, workers=1, progress=lines.append)
     assert (tmp_path / ce.name / "seed0" / "complete.json").is_file()
     assert "its process died (exit code 3)" in lines[1] and "episodes" in lines[2]
 
@@ -175,12 +222,16 @@ def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_pat
     assert (logged["suite"], logged["runs"], logged["workers"], logged["backend"]) == ("quick", 2, 2, backend)
     assert logged["seconds"] > 0  # the second call ran nothing and logged nothing
     assert set(logged) >= {"code_commit", "rules_commit", "dirty", "versions"}
-    assert json.loads((tmp_path / "cartpole-bootstrap-bayes-quick" / "seed0" / "provenance.json").read_text()
-                      )["code_commit"] == logged["code_commit"]
+    assert (
+        json.loads((tmp_path / "cartpole-bootstrap-bayes-quick" / "seed0" / "provenance.json").read_text())[
+            "code_commit"
+        ]
+        == logged["code_commit"]
+    )
 
 
 def test_cli_rejects_bad_arguments_in_one_line(capsys):
-    from dqfd_bc_keras.cli import run
+    from dqfd_bc_keras.commands.cli import run
 
     with pytest.raises(SystemExit) as exit_:
         run(main, ["run", "nope", "--out", "x"])
@@ -194,16 +245,27 @@ def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     from dqfd_bc_keras.experiments.report import report
 
     run_suite("quick", 2, tmp_path / "suite", workers=2, progress=lambda line: None)
-    assert main(["report", str(tmp_path / "suite"), "--results", str(tmp_path / "RESULTS.md"),
-                 "--figures", str(tmp_path / "figures")]) == 0
+    assert (
+        main(
+            [
+                "report",
+                str(tmp_path / "suite"),
+                "--results",
+                str(tmp_path / "RESULTS.md"),
+                "--figures",
+                str(tmp_path / "figures"),
+            ]
+        )
+        == 0
+    )
     text = (tmp_path / "RESULTS.md").read_text()
     assert "python -m dqfd_bc_keras.experiments report" in text
     assert "C1" in text and "C4" in text and "not run" in text  # the quick suite covers no paper setting
     assert sorted(p.suffix for p in (tmp_path / "figures").iterdir()) and all(
-        p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in (tmp_path / "figures").iterdir())
+        p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in (tmp_path / "figures").iterdir()
+    )
     assert len((tmp_path / "per_seed.csv").read_text().splitlines()) == 1 + 2 * 2  # a row per run
     # Real run directories (models, checkpoints, TensorBoard) exported: the archive holds all the report reads.
     assert main(["export", str(tmp_path / "suite"), "--out", str(tmp_path / "suite.tar.xz")]) == 0
     again = report(tmp_path / "suite.tar.xz", tmp_path / "again.md", tmp_path / "figures")
     assert again == (tmp_path / "again.md").read_text() and again.replace("suite.tar.xz", "suite") == text
-

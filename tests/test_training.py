@@ -8,6 +8,7 @@ are trained end to end.
 
 import csv
 import dataclasses
+import itertools
 import json
 
 import numpy as np
@@ -16,23 +17,35 @@ import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401  (first: TF settings, custom objects)
 from dqfd_bc_keras import demos as demo_io
-from dqfd_bc_keras import runs, training
-from dqfd_bc_keras.agent import LOSS_TERMS
-from dqfd_bc_keras.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Losses
-from dqfd_bc_keras.run_state import TrainingState
-from dqfd_bc_keras.config import Config
-from dqfd_bc_keras.envs import make_task
+from dqfd_bc_keras.choices import LOSS_TERMS
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.make import make_task
 from dqfd_bc_keras.errors import ConfigError, OutputExistsError
 from dqfd_bc_keras.evaluation import GreedyPolicy, load_model
+from dqfd_bc_keras.runs import directory as runs
 from dqfd_bc_keras.seeds import ROLLOUT, episode_seed
+from dqfd_bc_keras.training import loop as training
+from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Losses
+from dqfd_bc_keras.training.state import TrainingState
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def tiny(expert_loss: str = "bayes", **overrides) -> Config:
-    settings = dict(expert_loss=expert_loss, total_steps=300, pretrain_steps=20, bc_epochs=1, bc_refit_epochs=1,
-                    demo_episodes=2, eval_every=150, eval_episodes=1, final_eval_episodes=1,
-                    checkpoint_every=150, replay_capacity=2000, demo_capacity=5000)
+    settings = dict(
+        expert_loss=expert_loss,
+        total_steps=300,
+        pretrain_steps=20,
+        bc_epochs=1,
+        bc_refit_epochs=1,
+        demo_episodes=2,
+        eval_every=150,
+        eval_episodes=1,
+        final_eval_episodes=1,
+        checkpoint_every=150,
+        replay_capacity=2000,
+        demo_capacity=5000,
+    )
     settings.update(overrides)
     return Config.for_task("cartpole", **settings)
 
@@ -42,6 +55,7 @@ def ret(episode: demo_io.DemoDataset) -> float:
 
 
 # --- the early-stopping rule (§6) ----------------------------------------------------------------
+
 
 def test_early_stop_needs_the_whole_window_at_98_percent_of_the_limit():
     config = Config.for_task("cartpole", early_stop_window=10, early_stop_fraction=0.98)
@@ -69,29 +83,65 @@ def test_early_stop_threshold_follows_the_step_limit():
 
 # --- episode seeds -------------------------------------------------------------------------------
 
+
 def test_run_state_round_trips_through_json():
-    row = EpisodeRow(episode=1, env_step=20, interactions=20, return_=20.0, plain_return=20.0, length=20, goals=0,
-                     epsilon=0.5, losses=Losses(1.0, 0.5, 0.25, 0.125, 0.0625), demo_size=100, wall_time=1.5)
-    update = DemoUpdate(episode=1, env_step=20, interactions=25, moving_average=20.0, mode="rollouts",
-                        new_returns=[30.0], new_transitions=5, demo_transitions=105, demo_episodes=3, bc_accuracy=0.5)
-    state = TrainingState(episode=3, returns=[1.0, -50.0, 500.0], metrics=[row], bc_fits=2, demo_updates=[update],
-                          evals=[EvalRow(env_step=0, interactions=0, episode=0, mean_return=9.5, std_return=0.5)])
+    row = EpisodeRow(
+        episode=1,
+        env_step=20,
+        interactions=20,
+        return_=20.0,
+        plain_return=20.0,
+        length=20,
+        goals=0,
+        epsilon=0.5,
+        losses=Losses(1.0, 0.5, 0.25, 0.125, 0.0625),
+        demo_size=100,
+        wall_time=1.5,
+    )
+    update = DemoUpdate(
+        episode=1,
+        env_step=20,
+        interactions=25,
+        moving_average=20.0,
+        mode="rollouts",
+        new_returns=[30.0],
+        new_transitions=5,
+        demo_transitions=105,
+        demo_episodes=3,
+        bc_accuracy=0.5,
+    )
+    state = TrainingState(
+        episode=3,
+        returns=[1.0, -50.0, 500.0],
+        metrics=[row],
+        bc_fits=2,
+        demo_updates=[update],
+        evals=[EvalRow(env_step=0, interactions=0, episode=0, mean_return=9.5, std_return=0.5)],
+    )
     assert state.best_average == -np.inf
     fields = json.loads(json.dumps(state.to_dict()))
     assert (fields["metrics"][0]["return"], fields["metrics"][0]["td"], fields["evals"][0]["mean_goals"]) == (
-        20.0, 0.5, None)
+        20.0,
+        0.5,
+        None,
+    )
     assert list(fields["metrics"][0]) == list(EpisodeRow.columns())  # state.json keys rows as metrics.csv does
     assert TrainingState.from_dict({**fields, "unknown": 1}) == state
 
 
 # --- step 1: demonstrations ----------------------------------------------------------------------
 
+
 def test_demonstrations_records_the_configured_expert_with_the_timeout_and_limit():
     config = tiny(timeout="naive", max_steps=30, seed=2)
     data = training.demonstrations(config, None)
     assert data.n_episodes == 2 and len(data) == 60  # the imperfect expert outlasts 30 steps
-    assert (data.meta.task, data.meta.expert, data.meta.timeout, data.meta.seed) == ("cartpole", "imperfect",
-                                                                                      "naive", 2000)
+    assert (data.meta.task, data.meta.expert, data.meta.timeout, data.meta.seed) == (
+        "cartpole",
+        "imperfect",
+        "naive",
+        2000,
+    )
     assert data.meta.episode_returns == [30.0, 30.0]
     # naive mode: the time limit is a termination, never a truncation
     assert not data.truncated.any()
@@ -109,14 +159,17 @@ def test_demonstrations_passes_a_dataset_through_and_none_has_none(demos):
 
 # --- step 2: the pre-trained learner -------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def built():
     """The tiny bayes learner, and its counters right after `build`."""
     config = tiny()
     learner, losses = training.build(config)
-    snapshot = {"train_steps": int(learner.agent.train_steps.numpy()),
-                "agent_size": int(learner.agent.replay.agent_size.numpy()),
-                "env_steps": int(learner.interaction.env_steps.numpy())}
+    snapshot = {
+        "train_steps": int(learner.agent.train_steps.numpy()),
+        "agent_size": int(learner.agent.replay.agent_size.numpy()),
+        "env_steps": int(learner.interaction.env_steps.numpy()),
+    }
     return learner, losses, snapshot
 
 
@@ -134,6 +187,7 @@ def test_build_fits_bc_and_pretrains_on_the_recorded_demonstrations(built):
 
 # --- step 3: ε-greedy schedule -------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("loss, start", [("bayes", 0.1), ("none", 1.0)])
 def test_epsilon_decays_linearly_over_the_first_tenth_of_the_budget(built, loss, start):
     learner = built[0]
@@ -141,8 +195,14 @@ def test_epsilon_decays_linearly_over_the_first_tenth_of_the_budget(built, loss,
     assert config.initial_epsilon == start
     interaction = training.Interaction(learner.agent, learner.interaction.env, config)
     end = config.epsilon_end
-    for steps, expected in [(0, start), (6, start - (start - end) * 0.2), (15, (start + end) / 2),
-                            (30, end), (31, end), (300, end)]:
+    for steps, expected in [
+        (0, start),
+        (6, start - (start - end) * 0.2),
+        (15, (start + end) / 2),
+        (30, end),
+        (31, end),
+        (300, end),
+    ]:
         interaction.env_steps.assign(steps)
         assert float(interaction.epsilon()) == pytest.approx(expected, abs=1e-6), steps
 
@@ -154,12 +214,13 @@ def test_epsilon_start_can_be_set():
 
 # --- step 3: one episode is one graph call -------------------------------------------------------
 
+
 def episode_rows(agent, length: int) -> np.ndarray:
     """The last `length` rows stored in D_replay (no wrap-around at these sizes)."""
     replay = agent.replay
     head = int(replay.head.numpy())
     assert head >= length
-    return replay.table.numpy()[replay.demo_capacity + head - length: replay.demo_capacity + head]
+    return replay.table.numpy()[replay.demo_capacity + head - length : replay.demo_capacity + head]
 
 
 def test_one_episode_acts_stores_and_learns_every_step(built):
@@ -237,6 +298,7 @@ def test_an_episode_cut_by_the_time_limit_stores_the_timeout_modes_flags(built, 
 
 # --- step 4: dynamic demonstrations (§5) ---------------------------------------------------------
 
+
 def test_dynamic_demos_are_due_at_a_new_best_moving_average_at_least_the_demos(demos):
     assert demos.meta.episode_returns == [500.0] * 5
     config = tiny(dynamic_window=3)
@@ -273,8 +335,13 @@ def greedy_rollouts(learner, episode: int) -> demo_io.DemoDataset:
     """What `update` should add at `state.episode = episode`: M greedy episodes on stream 2."""
     c = learner.config
     seeds = [episode_seed(c.seed, episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
-    return demo_io.rollout(make_task(c.task, timeout=c.timeout, max_steps=c.max_steps),
-                           GreedyPolicy.from_model(learner.agent.q_network), seeds, task=c.task, source="agent")
+    return demo_io.rollout(
+        make_task(c.task, timeout=c.timeout, max_steps=c.max_steps),
+        GreedyPolicy.from_model(learner.agent.q_network),
+        seeds,
+        task=c.task,
+        source="agent",
+    )
 
 
 def test_dynamic_update_adds_m_greedy_episodes_and_refits_bc(capped):
@@ -296,7 +363,7 @@ def test_dynamic_update_adds_m_greedy_episodes_and_refits_bc(capped):
     assert update["demo_episodes"] == len(dynamic.episodes) == episodes0 + 3
     assert update["moving_average"] == 50.0 and update["episode"] == 7
     assert state.bc_fits == 1 and 0.0 <= update["bc_accuracy"] <= 1.0
-    assert any(not np.array_equal(w0, w.numpy()) for w0, w in zip(weights0, bc.trainable_weights))
+    assert any(not np.array_equal(w0, w.numpy()) for w0, w in zip(weights0, bc.trainable_weights, strict=True))
     returns = [ret(e) for e in dynamic.episodes]
     assert returns == sorted(returns, reverse=True)
     np.testing.assert_array_equal(agent.replay.table.numpy()[:size, agent.replay.OBS], dynamic.dataset.obs)
@@ -376,8 +443,9 @@ def test_every_interaction_is_counted_and_evaluations_sit_on_the_exact_grid(tmp_
     """20-step episodes, W = 2, M = 3 roll-outs: D_demo grows many times within 300 steps, and
     roll-outs (60 interactions each) jump over several 25-interaction grid points at once."""
     counter = CountSteps(monkeypatch)
-    config = tiny(max_steps=20, demo_episodes=4, dynamic_window=2, dynamic_rollouts=3, dynamic_demos=mode,
-                  eval_every=25)
+    config = tiny(
+        max_steps=20, demo_episodes=4, dynamic_window=2, dynamic_rollouts=3, dynamic_demos=mode, eval_every=25
+    )
     result = runs.train(config, tmp_path / "run", quiet=True)
     updates = json.loads((tmp_path / "run" / "dynamic_demos.json").read_text())
     assert updates and all(u["mode"] == mode for u in updates)
@@ -404,6 +472,7 @@ def test_plain_dqns_random_scaling_play_counts_as_interactions(tmp_path, monkeyp
 
 
 # --- runs.train end to end -----------------------------------------------------------------------
+
 
 def read_csv(path):
     with open(path, newline="") as file:
@@ -435,14 +504,14 @@ def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
     assert [int(r["episode"]) for r in rows] == list(range(1, len(rows) + 1))
     steps = [int(r["env_step"]) for r in rows]
     lengths = [int(r["length"]) for r in rows]
-    assert all(b > a for a, b in zip(steps, steps[1:]))
+    assert all(b > a for a, b in itertools.pairwise(steps))
     assert not result.stopped_early  # 10 episodes ≥ 490 cannot fit in 300 steps
     assert steps[-1] == result.env_steps == config.total_steps
     assert steps == list(np.cumsum(lengths))  # every env step belongs to one episode
-    for row, length in zip(rows[:-1], lengths):  # all but the last (cut by the budget) fell
+    for row, length in zip(rows[:-1], lengths, strict=False):  # all but the last (cut by the budget) fell
         assert float(row["return"]) == length - 101 and float(row["plain_return"]) == length
     assert float(rows[-1]["plain_return"]) == lengths[-1]
-    for row, step in zip(rows, steps):
+    for row, step in zip(rows, steps, strict=True):
         assert float(row["epsilon"]) == pytest.approx(max(0.01, 0.1 - 0.09 * step / 30), abs=1e-6)
         assert all(np.isfinite(float(row[k])) for k in LOSS_TERMS)
     recorded = training.demonstrations(config, None)
@@ -461,8 +530,15 @@ def test_train_evaluates_at_exactly_every_eval_every_interactions(bayes_run):
     # the episode boundaries; an episode running across 150 was paused there and went on.
     assert [int(e["interactions"]) for e in evals] == [0, 150, 300] and result.interactions == 300
     assert [int(e["env_step"]) for e in evals] == [0, 150, 300]
-    assert {"train/return", "train/epsilon", "train/expert", "train/demo_size", "train/env_step",
-            "eval/plain_return", "eval/env_step"} <= tb_tags(out / "tb")
+    assert {
+        "train/return",
+        "train/epsilon",
+        "train/expert",
+        "train/demo_size",
+        "train/env_step",
+        "eval/plain_return",
+        "eval/env_step",
+    } <= tb_tags(out / "tb")
 
 
 def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
@@ -512,8 +588,9 @@ def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
     checkpoint = out / "checkpoints" / latest["dir"]
     assert json.loads((checkpoint / "state.json").read_text())["episode"] == result.episodes
     assert (checkpoint / "tf.index").is_file() and (checkpoint / "demos.npz").is_file()
-    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(["latest.json", latest["dir"],
-                                                                            runs.GIVEN_DEMOS])
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(
+        ["latest.json", latest["dir"], runs.GIVEN_DEMOS]
+    )
 
 
 def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path):
@@ -552,10 +629,26 @@ def test_existing_run_dir_is_refused_kept_and_replaced_only_with_force(tmp_path)
 
 # --- Config --------------------------------------------------------------------------------------
 
+
 def test_with_overrides_types_each_value():
-    config = tiny().with_overrides(["hidden=32,32", "max_steps=none", "dynamic_demos=off", "mc_dropout=false", "gamma=0.9",
-                                    "n-step=3", "epsilon_start=0.2", "expert_loss=ce"])
-    assert config.hidden == (32, 32) and config.max_steps is None and config.dynamic_demos == "off" and config.mc_dropout is False
+    config = tiny().with_overrides(
+        [
+            "hidden=32,32",
+            "max_steps=none",
+            "dynamic_demos=off",
+            "mc_dropout=false",
+            "gamma=0.9",
+            "n-step=3",
+            "epsilon_start=0.2",
+            "expert_loss=ce",
+        ]
+    )
+    assert (
+        config.hidden == (32, 32)
+        and config.max_steps is None
+        and config.dynamic_demos == "off"
+        and config.mc_dropout is False
+    )
     assert config.gamma == 0.9 and config.n_step == 3 and config.epsilon_start == 0.2
     assert config.expert_loss == "ce" and config.total_steps == 300  # the rest is kept
     assert tiny(max_steps=50).with_overrides(["max_steps=none"]).max_steps is None
@@ -564,18 +657,21 @@ def test_with_overrides_types_each_value():
     assert (kept.seed, kept.demo_episodes, kept.total_steps, kept.early_stop_window) == (3, 10, 100_000, 0)
 
 
-@pytest.mark.parametrize("assignment, match", [
-    ("nope=1", "unknown Config field 'nope'"),
-    ("hidden", "key=value"),
-    ("batch_size=abc", "batch_size='abc': expected int"),
-    ("mc_dropout=maybe", "expected bool"),
-    ("dynamic_demos=maybe", "dynamic_demos='maybe' is not one of"),
-    ("hidden=a,b", "expected tuple"),
-    ("gamma=2", "gamma must be in"),
-    ("expert_loss=magic", "expert_loss='magic' is not one of"),
-    ("task=mountaincar", "--task"),
-    ("task=", "--task"),
-])
+@pytest.mark.parametrize(
+    "assignment, match",
+    [
+        ("nope=1", "unknown Config field 'nope'"),
+        ("hidden", "key=value"),
+        ("batch_size=abc", "batch_size='abc': expected int"),
+        ("mc_dropout=maybe", "expected bool"),
+        ("dynamic_demos=maybe", "dynamic_demos='maybe' is not one of"),
+        ("hidden=a,b", "expected tuple"),
+        ("gamma=2", "gamma must be in"),
+        ("expert_loss=magic", "expert_loss='magic' is not one of"),
+        ("task=mountaincar", "--task"),
+        ("task=", "--task"),
+    ],
+)
 def test_with_overrides_rejects_bad_keys_values_and_the_task(assignment, match):
     with pytest.raises(ConfigError, match=match):
         tiny().with_overrides([assignment])

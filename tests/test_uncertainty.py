@@ -7,12 +7,18 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401
-from dqfd_bc_keras.agent import make_agent
-from dqfd_bc_keras.bc import BCModel, build_bc_model
-from dqfd_bc_keras.config import Config
+from dqfd_bc_keras.core.agent import make_agent
+from dqfd_bc_keras.core.bc import BCModel, build_bc_model
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.uncertainty import (
+    NearestDemoVariance,
+    bootstrap_counts,
+    max_policy_variance,
+    policy_variance,
+    reference_rows,
+)
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.evaluation import GreedyPolicy
-from dqfd_bc_keras.uncertainty import reference_rows, NearestDemoVariance, bootstrap_counts, max_policy_variance, policy_variance
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +84,7 @@ def test_distance_variance_by_hand_and_monotone_in_the_distance():
     d = np.array([0.0, 0.25, 0.5, 1.0, 2.0, 3.0, 5.0], np.float32)
     z = np.stack([np.zeros_like(d), d], axis=1)  # straight up from the reference at the origin
     variance = layer(tf.constant(z)).numpy()
-    np.testing.assert_allclose(variance, 0.25 * (1 - np.exp(-d**2)), rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(variance, 0.25 * (1 - np.exp(-(d**2))), rtol=1e-5, atol=1e-7)
     assert variance[0] == 0.0 and np.all(np.diff(variance) > 0) and variance[-1] == pytest.approx(0.25)
     # The nearest reference counts: next to the second one the variance is 0 again.
     assert float(layer(tf.constant([[10.0, 0.0]]))[0]) == pytest.approx(0.0, abs=1e-6)
@@ -128,7 +134,7 @@ def test_estimators_save_and_load_with_the_bc_model(tmp_path, fitted, held_out, 
     model.save(tmp_path / "bc.keras")
     loaded = keras.saving.load_model(tmp_path / "bc.keras")
     obs = tf.constant(held_out.obs[:64])
-    for original, restored in zip(model.predictive(obs), loaded.predictive(obs)):
+    for original, restored in zip(model.predictive(obs), loaded.predictive(obs), strict=True):
         np.testing.assert_allclose(restored, original, rtol=1e-6)
     assert loaded.uncertainty == uncertainty
     policy = GreedyPolicy.from_model(loaded)  # what evaluate.py --policy bc plays
@@ -152,11 +158,17 @@ def test_the_agent_stores_the_estimators_variance_and_recomputes_it_after_a_refi
     assert after.mean() > 0.5
 
 
-@pytest.mark.parametrize("change, match", [
-    ({"uncertainty": "laplace"}, "uncertainty='laplace' is not one of"),
-    ({"uncertainty": "ensemble", "mc_dropout": False}, "mc_dropout must be True when uncertainty is not mc_dropout"),
-    ({"uncertainty": "ensemble", "ensemble_members": 1}, "ensemble_members must be ≥ 2"),
-])
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"uncertainty": "laplace"}, "uncertainty='laplace' is not one of"),
+        (
+            {"uncertainty": "ensemble", "mc_dropout": False},
+            "mc_dropout must be True when uncertainty is not mc_dropout",
+        ),
+        ({"uncertainty": "ensemble", "ensemble_members": 1}, "ensemble_members must be ≥ 2"),
+    ],
+)
 def test_bad_estimator_settings_are_refused(change, match):
     with pytest.raises(ConfigError, match=match):
         Config.for_task("cartpole", **change)
@@ -185,7 +197,7 @@ def test_a_run_checkpoint_restores_the_estimator_for_a_resume(demos, held_out, t
     obs = tf.constant(held_out.obs[:64])
     assert not np.allclose(saved.bc_model.predictive(obs)[1], resumed.bc_model.predictive(obs)[1])
     resumed.checkpoint().read(saved.checkpoint().write(str(tmp_path / "ckpt"))).expect_partial()
-    for original, restored in zip(saved.bc_model.predictive(obs), resumed.bc_model.predictive(obs)):
+    for original, restored in zip(saved.bc_model.predictive(obs), resumed.bc_model.predictive(obs), strict=True):
         np.testing.assert_allclose(restored, original, rtol=1e-6)
 
 
@@ -200,9 +212,29 @@ def test_a_run_logs_the_imitation_weight_on_and_off_the_demonstrations(tmp_path,
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, "train.py", "--task", "cartpole", "--quick", "--expert-loss", "bayes",
-                           "--set", "uncertainty=distance", "--set", "sigma0_sq=0.1", "--set", "dynamic_demos=off",
-                           "--out", tmp_path / "bayes"], capture_output=True, text=True, timeout=600, cwd=repo)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "train.py",
+            "--task",
+            "cartpole",
+            "--quick",
+            "--expert-loss",
+            "bayes",
+            "--set",
+            "uncertainty=distance",
+            "--set",
+            "sigma0_sq=0.1",
+            "--set",
+            "dynamic_demos=off",
+            "--out",
+            tmp_path / "bayes",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=repo,
+    )
     assert done.returncode == 0, done.stderr
     rows = list(csv.DictReader((tmp_path / "bayes" / "metrics.csv").open()))
     on, off = ([float(r[f"imitation_weight_{kind}"]) for r in rows] for kind in ("demo", "agent"))

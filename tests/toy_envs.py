@@ -24,8 +24,13 @@ class Chain(gym.Env):
         self.observation_space = {
             "flat": gym.spaces.Box(0.0, 1.0, (size,), np.float32),
             "grid": gym.spaces.Box(0.0, 1.0, (size, 2), np.float32),
-            "dict": gym.spaces.Dict({"cell": gym.spaces.Discrete(size), "mission": gym.spaces.Text(20),
-                                     "visits": gym.spaces.MultiBinary(size)}),
+            "dict": gym.spaces.Dict(
+                {
+                    "cell": gym.spaces.Discrete(size),
+                    "mission": gym.spaces.Text(20),
+                    "visits": gym.spaces.MultiBinary(size),
+                }
+            ),
         }[observe]
         self.action_space = gym.spaces.Discrete(2)
         self.state = 0
@@ -86,12 +91,27 @@ gym.register("ToyChainNoLimit-v0", entry_point="toy_envs:Chain")
 gym.register("ToyDictChainNoLimit-v0", entry_point="toy_envs:Chain", kwargs={"observe": "dict"})
 gym.register("ToyGridChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "grid"})
 gym.register("ToyDictChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "dict"})
-gym.register("ToyImage-v0", entry_point="toy_envs:Unsupported", kwargs={  # frames inside a Dict: still refused
-    "observation_space": gym.spaces.Dict({"pixels": gym.spaces.Box(0, 255, (84, 84, 3), np.uint8),
-                                          "speed": gym.spaces.Box(-1.0, 1.0, (1,), np.float32)}),
-    "action_space": gym.spaces.Discrete(2)})
-gym.register("ToyTextOnly-v0", entry_point="toy_envs:Unsupported", kwargs={
-    "observation_space": gym.spaces.Dict({"mission": gym.spaces.Text(5)}), "action_space": gym.spaces.Discrete(2)})
+gym.register(
+    "ToyImage-v0",
+    entry_point="toy_envs:Unsupported",
+    kwargs={  # frames inside a Dict: still refused
+        "observation_space": gym.spaces.Dict(
+            {
+                "pixels": gym.spaces.Box(0, 255, (84, 84, 3), np.uint8),
+                "speed": gym.spaces.Box(-1.0, 1.0, (1,), np.float32),
+            }
+        ),
+        "action_space": gym.spaces.Discrete(2),
+    },
+)
+gym.register(
+    "ToyTextOnly-v0",
+    entry_point="toy_envs:Unsupported",
+    kwargs={
+        "observation_space": gym.spaces.Dict({"mission": gym.spaces.Text(5)}),
+        "action_space": gym.spaces.Discrete(2),
+    },
+)
 
 
 def breakout_rule(obs: np.ndarray) -> int:

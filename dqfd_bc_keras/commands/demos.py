@@ -1,6 +1,6 @@
 """Demonstration datasets: record them with any demonstrator (a scripted expert, a rule
 `module:function`, a saved `.keras` model), save them as plain `.npz`, and load them back with
-every check a learner relies on; Minari datasets convert both ways (`minari_io`).
+every check a learner relies on; Minari datasets convert both ways (`demos/minari.py`).
 
     python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
     python -m dqfd_bc_keras.demos record --env Acrobot-v1 --policy my_rules:swing --out acrobot.npz
@@ -14,13 +14,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..choices import TIMEOUT_MODES
-from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, seed
-from ..demo_files import load, save
-from ..errors import ConfigError
-from ..experts import EXPERT_NAMES
-from ..minari_io import to_minari
-from ..recording import record
+from dqfd_bc_keras.choices import TIMEOUT_MODES
+from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, seed
+from dqfd_bc_keras.demos.experts import EXPERT_NAMES
+from dqfd_bc_keras.demos.minari import to_minari
+from dqfd_bc_keras.demos.npz import load, save
+from dqfd_bc_keras.demos.recording import record
+from dqfd_bc_keras.errors import ConfigError
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -28,9 +28,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
     rec = commands.add_parser("record", help="record a dataset with a demonstrator")
     add_task_arguments(rec, required=True)
-    rec.add_argument("--expert", "--policy", dest="expert", required=True,
-                     help=f"a preset's {' | '.join(EXPERT_NAMES)}, a rule module:function (obs → action) "
-                          "or a saved model.keras (its greedy policy)")
+    rec.add_argument(
+        "--expert",
+        "--policy",
+        dest="expert",
+        required=True,
+        help=f"a preset's {' | '.join(EXPERT_NAMES)}, a rule module:function (obs → action) "
+        "or a saved model.keras (its greedy policy)",
+    )
     rec.add_argument("--episodes", type=positive_int, default=5)
     rec.add_argument("--seed", type=seed, default=0, help="episode i resets with seed + i")
     rec.add_argument("--epsilon", type=float, default=0.0, help="probability of a random action")
@@ -48,8 +53,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not args.out.endswith(".npz"):
             raise ConfigError(f"--out must end in .npz, got {args.out!r}")
         env = env_settings(args)
-        dataset = record(chosen_task(args), args.expert, args.episodes, args.seed, args.epsilon, args.timeout,
-                         env.get("max_steps"), env.get("env_kwargs"))
+        dataset = record(
+            chosen_task(args),
+            args.expert,
+            args.episodes,
+            args.seed,
+            args.epsilon,
+            args.timeout,
+            env.get("max_steps"),
+            env.get("env_kwargs"),
+        )
         save(dataset, args.out, force=args.force)
         print(f"wrote {args.out}")
     elif args.command == "export":

@@ -22,34 +22,53 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from .. import demos
-from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run, seed
-from ..choices import TARGETS, TIMEOUT_MODES
-from ..config import QUICK, Config, parse_assignments
-from ..envs import checked_spaces, task_slug, task_spaces
-from ..errors import ConfigError
-from ..experts import EXPERT_NAMES, try_demonstrator
-from ..files import DirectoryLock
-from ..methods import METHODS
-from ..run_files import check_dir
+from dqfd_bc_keras import demos
+from dqfd_bc_keras.choices import TARGETS, TIMEOUT_MODES
+from dqfd_bc_keras.commands.cli import (
+    ArgumentParser,
+    add_task_arguments,
+    chosen_task,
+    env_settings,
+    positive_int,
+    run,
+    seed,
+)
+from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
+from dqfd_bc_keras.core.methods import METHODS
+from dqfd_bc_keras.demos.experts import EXPERT_NAMES, try_demonstrator
+from dqfd_bc_keras.envs.make import checked_spaces, task_slug, task_spaces
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.files import DirectoryLock
+from dqfd_bc_keras.runs.writers import check_dir
 
 
 def parse(argv: Sequence[str] | None) -> argparse.Namespace:
-    parser = ArgumentParser(description=__doc__.split("\n\n")[0],
-                                epilog="Every Config field can be set with --set key=value "
-                                       "(see dqfd_bc_keras/config.py for the list and the defaults).")
+    parser = ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog="Every Config field can be set with --set key=value "
+        "(see dqfd_bc_keras/core/config.py for the list and the defaults).",
+    )
     add_task_arguments(parser, default="cartpole")
-    parser.add_argument("--expert-loss", metavar="METHOD",
-                        help=f"J_E: {' | '.join(METHODS)} or your own MODULE:NAME (default: bayes; "
-                             "none = plain DQN; sqil = SQIL's rewards, no J_E)")
+    parser.add_argument(
+        "--expert-loss",
+        metavar="METHOD",
+        help=f"J_E: {' | '.join(METHODS)} or your own MODULE:NAME (default: bayes; "
+        "none = plain DQN; sqil = SQIL's rewards, no J_E)",
+    )
     parser.add_argument("--target", choices=TARGETS, help="bootstrap target (default: dqn)")
     parser.add_argument("--timeout", choices=TIMEOUT_MODES, help="time-limit handling (default: bootstrap)")
-    parser.add_argument("--demos", help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari "
-                        "cache); else recorded from --expert")
-    parser.add_argument("--expert", "--policy", dest="expert",
-                        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect; a preset "
-                             "of yours without one: its first expert), "
-                             "a rule module:function (obs → action) or a saved model.keras")
+    parser.add_argument(
+        "--demos",
+        help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari cache); else recorded from --expert",
+    )
+    parser.add_argument(
+        "--expert",
+        "--policy",
+        dest="expert",
+        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect; a preset "
+        "of yours without one: its first expert), "
+        "a rule module:function (obs → action) or a saved model.keras",
+    )
     parser.add_argument("--demo-episodes", type=positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
     parser.add_argument("--steps", type=positive_int, help="environment-step budget")
     parser.add_argument("--seed", type=seed, help="seed of every random generator (default: 0)")
@@ -69,8 +88,10 @@ def refuse_changes(config: Config, given: dict, demos_source: str | None) -> Non
     if demos_source:
         changed.append("--demos (the run keeps the demonstrations it started with)")
     if changed:
-        raise ConfigError(f"--resume continues the run in its own config, but the command changes {', '.join(changed)}; "
-                          "drop those flags, or start the run over with --force")
+        raise ConfigError(
+            f"--resume continues the run in its own config, but the command changes {', '.join(changed)}; "
+            "drop those flags, or start the run over with --force"
+        )
 
 
 def check_out(out: str | None) -> None:
@@ -82,15 +103,23 @@ def check_out(out: str | None) -> None:
         try:
             out.encode()
         except UnicodeEncodeError:
-            raise ConfigError(f"--out {os.fsencode(out)!r} is not a UTF-8 path, and TensorFlow writes only to "
-                              "those; choose another name") from None
+            raise ConfigError(
+                f"--out {os.fsencode(out)!r} is not a UTF-8 path, and TensorFlow writes only to "
+                "those; choose another name"
+            ) from None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse(argv)
-    flags = {"expert_loss": args.expert_loss, "target": args.target, "timeout": args.timeout,
-             "expert": args.expert, "demo_episodes": args.demo_episodes, "total_steps": args.steps,
-             "seed": args.seed}
+    flags = {
+        "expert_loss": args.expert_loss,
+        "target": args.target,
+        "timeout": args.timeout,
+        "expert": args.expert,
+        "demo_episodes": args.demo_episodes,
+        "total_steps": args.steps,
+        "seed": args.seed,
+    }
     chosen = {k: v for k, v in flags.items() if v is not None}
     # Every override before the one validation: --max-steps or --set max_steps=N makes an env
     # without a time limit usable.
@@ -98,11 +127,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     task = chosen_task(args)
     check_out(args.out)
     if args.demos and args.expert:
-        raise ConfigError(f"--demos {args.demos} gives the demonstrations and --expert {args.expert} would record "
-                          "them: give one")
+        raise ConfigError(
+            f"--demos {args.demos} gives the demonstrations and --expert {args.expert} would record them: give one"
+        )
     defaults = Config.__dataclass_fields__
-    out = args.out or (f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
-                       f"-seed{overrides.get('seed', defaults['seed'].default)}")
+    out = args.out or (
+        f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
+        f"-seed{overrides.get('seed', defaults['seed'].default)}"
+    )
     dataset = None
     if not args.resume:  # what a new run needs, checked before TensorFlow loads
         task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
@@ -111,25 +143,39 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (Path(out) / DirectoryLock.NAME).exists():  # else the lock's holder is named first, in `train`
             check_dir(Path(out), resume=False, force=args.force)
         if args.demos:
-            dataset = demos.load_source(args.demos, task=config.task, timeout=config.timeout,
-                                        env_kwargs=config.env_kwargs, max_transitions=config.demo_capacity)
+            dataset = demos.load_source(
+                args.demos,
+                task=config.task,
+                timeout=config.timeout,
+                env_kwargs=config.env_kwargs,
+                max_transitions=config.demo_capacity,
+            )
             config = dataclasses.replace(config, expert=demos.given_expert(args.demos, dataset))
         elif config.uses_demos:
             try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
-    from ..runs import saved_config, train  # TensorFlow from here on: every argument has been checked
+    from dqfd_bc_keras.runs.directory import (  # TensorFlow from here on: every argument has been checked
+        saved_config,
+        train,
+    )
 
     # A resumed run is the run in `out`, as its config.json says; a flag that would change it is refused.
     if args.resume:
         config = saved_config(out)
-        refuse_changes(config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})},
-                       args.demos)
+        refuse_changes(
+            config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}, args.demos
+        )
     if not args.quiet:
-        print(f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
-              f"config: {out}/config.json", flush=True)
+        print(
+            f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
+            f"config: {out}/config.json",
+            flush=True,
+        )
     result = train(config, out, dataset, resume=args.resume, force=args.force, quiet=args.quiet)
     if not args.quiet:
-        print(f"{result.episodes} episodes, {result.env_steps} env steps, {result.interactions} interactions in all"
-              f"{' (early stop)' if result.stopped_early else ''}, {result.wall_time:.0f} s of training")
+        print(
+            f"{result.episodes} episodes, {result.env_steps} env steps, {result.interactions} interactions in all"
+            f"{' (early stop)' if result.stopped_early else ''}, {result.wall_time:.0f} s of training"
+        )
         print(result.evaluation.summary())
     return 0
 

@@ -13,8 +13,8 @@ from collections.abc import Sequence
 from importlib.util import find_spec
 from pathlib import Path
 
-from ..cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
-from .suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, SUITES, on_task, suite_arms
+from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
+from dqfd_bc_keras.experiments.suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, SUITES, on_task, suite_arms
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
@@ -27,6 +27,7 @@ RUNS_PER_WORKER = 25
 
 def comma_list(allowed: Sequence[str], what: str):
     """argparse type of a comma-separated list of names among `allowed`."""
+
     def parse(text: str) -> list[str]:
         names = text.split(",")
         unknown = sorted(set(names) - set(allowed))
@@ -50,132 +51,225 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     go = commands.add_parser("run", help="run a suite's incomplete runs")
-    go.add_argument("suite", type=suite_name,
-                    help=f"one of {', '.join(sorted(SUITES))}; all: {', '.join(ALL)}; or your own list of arms as "
-                         "module:NAME (docs/EXTENDING.md)")
+    go.add_argument(
+        "suite",
+        type=suite_name,
+        help=f"one of {', '.join(sorted(SUITES))}; all: {', '.join(ALL)}; or your own list of arms as "
+        "module:NAME (docs/EXTENDING.md)",
+    )
     go.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: each arm's planned seeds)")
     go.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     go.add_argument("--out", required=True, help="suite directory")
     go.add_argument("--backend", choices=BACKENDS, default="local", help="local (a process pool, the default) or ray")
     go.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
     add_task_arguments(go)  # the suite's arms on this task instead of their own
-    go.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="a Config field for every arm, e.g. expert=my_rules:swing on an env without scripted experts")
-    go.add_argument("--runs-per-worker", type=positive_int, default=RUNS_PER_WORKER,
-                    help="runs a worker process takes in turn before a fresh one replaces it (default %(default)s; "
-                         "1: a fresh process per run)")
-    go.add_argument("--restart-broken", action="store_true",
-                    help="start over every run whose checkpoint cannot be resumed (default: report it as failed)")
+    go.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a Config field for every arm, e.g. expert=my_rules:swing on an env without scripted experts",
+    )
+    go.add_argument(
+        "--runs-per-worker",
+        type=positive_int,
+        default=RUNS_PER_WORKER,
+        help="runs a worker process takes in turn before a fresh one replaces it (default %(default)s; "
+        "1: a fresh process per run)",
+    )
+    go.add_argument(
+        "--restart-broken",
+        action="store_true",
+        help="start over every run whose checkpoint cannot be resumed (default: report it as failed)",
+    )
     exp = commands.add_parser(
-        "export", help="one archive of exactly the files the report reads",
+        "export",
+        help="one archive of exactly the files the report reads",
         description="Writes the suite's config.json, metrics.csv, evals.csv, eval.json, demonstrations.json, "
-                    "dynamic_demos.json and provenance.json of every complete run, its sweep logs and the sample-"
-                    "efficiency benchmark's files into one .tar.xz; the same data give the same bytes.")
+        "dynamic_demos.json and provenance.json of every complete run, its sweep logs and the sample-"
+        "efficiency benchmark's files into one .tar.xz; the same data give the same bytes.",
+    )
     exp.add_argument("directory", help="suite directory")
     exp.add_argument("--out", required=True, help="archive to write, e.g. results.tar.xz")
     rep = commands.add_parser(
-        "report", help="statistics, figures, RESULTS.md and per_seed.csv of a suite directory or archive",
+        "report",
+        help="statistics, figures, RESULTS.md and per_seed.csv of a suite directory or archive",
         description="Writes RESULTS.md, per_seed.csv and figures/ into SOURCE if it is a suite directory, or into "
-                    "<name>-report/ beside it if it is an archive (results.tar.xz: results-report/); into the "
-                    "project's docs/ only with --docs. The hand-written block between the notes markers of an "
-                    "existing RESULTS.md is kept.")
+        "<name>-report/ beside it if it is an archive (results.tar.xz: results-report/); into the "
+        "project's docs/ only with --docs. The hand-written block between the notes markers of an "
+        "existing RESULTS.md is kept.",
+    )
     rep.add_argument("source", help="a suite directory, or an archive written by `export`")
-    rep.add_argument("--docs", action="store_true",
-                     help="write docs/RESULTS.md, docs/per_seed.csv and docs/figures/ of the current directory")
-    rep.add_argument("--results", help="markdown file to write, per_seed.csv beside it (overrides the default "
-                     "and --docs)")
+    rep.add_argument(
+        "--docs",
+        action="store_true",
+        help="write docs/RESULTS.md, docs/per_seed.csv and docs/figures/ of the current directory",
+    )
+    rep.add_argument(
+        "--results", help="markdown file to write, per_seed.csv beside it (overrides the default and --docs)"
+    )
     rep.add_argument("--figures", help="directory for the PNG figures (default: figures/ beside the markdown)")
-    rep.add_argument("--strict", action="store_true",
-                     help=f"exit {EXIT_SKIPPED} if any run was skipped (a file missing, truncated or unreadable)")
+    rep.add_argument(
+        "--strict",
+        action="store_true",
+        help=f"exit {EXIT_SKIPPED} if any run was skipped (a file missing, truncated or unreadable)",
+    )
     cal = commands.add_parser(
-        "calibrate", help="each σ² estimator on demonstrated, agent, random and far states",
+        "calibrate",
+        help="each σ² estimator on demonstrated, agent, random and far states",
         description="Fits the bayes BC model with each estimator (3 seeds of each task's demonstrations) and "
-                    "writes mean σ² − σ0² per kind of state, the off/on-demo ratios and the pre-registered pick "
-                    "of the best other estimator to OUT (JSON).")
+        "writes mean σ² − σ0² per kind of state, the off/on-demo ratios and the pre-registered pick "
+        "of the best other estimator to OUT (JSON).",
+    )
     cal.add_argument("--out", required=True, help="JSON file to write")
     cal.add_argument("--figure", help="PNG file for the figure")
     cal.add_argument("--quick", action="store_true", help="one seed, one episode, CartPole only (seconds)")
     grid = commands.add_parser(
-        "grid", help="the demonstration quality × quantity grid: runs, BC alone, GRID.md and heatmaps",
+        "grid",
+        help="the demonstration quality × quantity grid: runs, BC alone, GRID.md and heatmaps",
         description="Runs every missing run of the grid (suite `demos`) and of BC alone into OUT, then writes "
-                    "OUT/GRID.md and OUT/figures/grid-TASK-*.png (docs/PREREGISTRATION.md §8, §12).")
+        "OUT/GRID.md and OUT/figures/grid-TASK-*.png (docs/PREREGISTRATION.md §8, §12).",
+    )
     grid.add_argument("--out", required=True, help="suite directory")
-    grid.add_argument("--task", choices=GRID_TASKS, action="append",
-                      help="run this task's grid only (repeatable; default: every task's); GRID.md shows all that ran")
-    grid.add_argument("--quick", action="store_true", help="1 cell of CartPole, 1 seed, the QUICK budget (about a minute)")
+    grid.add_argument(
+        "--task",
+        choices=GRID_TASKS,
+        action="append",
+        help="run this task's grid only (repeatable; default: every task's); GRID.md shows all that ran",
+    )
+    grid.add_argument(
+        "--quick", action="store_true", help="1 cell of CartPole, 1 seed, the QUICK budget (about a minute)"
+    )
     grid.add_argument("--seeds", type=positive_int, help="seeds 0 … N−1 per arm (default: 5)")
     grid.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     rep2 = commands.add_parser(
-        "replicate", help="rerun an archived arm at fresh seeds and compare its metrics' distributions",
+        "replicate",
+        help="rerun an archived arm at fresh seeds and compare its metrics' distributions",
         description="Reruns the arm ARM of the archive (its directory name) with its config at seeds A-B, none of "
-                    "them archived, into OUT, then compares each metric's median and a Mann-Whitney rank test "
-                    "with the archive's runs (OUT/REPLICATE.md).")
+        "them archived, into OUT, then compares each metric's median and a Mann-Whitney rank test "
+        "with the archive's runs (OUT/REPLICATE.md).",
+    )
     rep2.add_argument("arm", help="an arm's directory name in the archive, e.g. cartpole-bootstrap-bayes")
     rep2.add_argument("--seeds", required=True, help="A-B: the fresh seeds, inclusive")
     rep2.add_argument("--out", required=True, help="directory of the reruns")
     rep2.add_argument("--archive", default="docs/data/results.tar.xz", help="default: docs/data/results.tar.xz")
     rep2.add_argument("--workers", type=positive_int, default=2, help="runs at once (default 2: one per core)")
     eff = commands.add_parser(
-        "efficiency", help="sample efficiency: interactions to the threshold, ours against SB3's DQN",
+        "efficiency",
+        help="sample efficiency: interactions to the threshold, ours against SB3's DQN",
         description="Runs the efficiency suite's arms and Stable-Baselines3's DQN as rl-zoo3 runs it (both evaluated "
-                    "on one grid), prints each arm's steps to the threshold and writes OUT/efficiency.json "
-                    "(dqfd_bc_keras/experiments/baselines.py).")
+        "on one grid), prints each arm's steps to the threshold and writes OUT/efficiency.json "
+        "(dqfd_bc_keras/experiments/baselines.py).",
+    )
     eff.add_argument("--seeds", type=positive_int, default=10)
     eff.add_argument("--workers", type=positive_int, default=2)
-    eff.add_argument("--out", default="results", help="suite directory (runs are reused; the table is written "
-                     "there as efficiency.json)")
-    eff.add_argument("--parts", type=comma_list(("ours", "sb3"), "part"), default=["ours", "sb3"],
-                     help="what to run: ours, sb3 or both (default)")
-    eff.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs "
-                     "(writes no efficiency.json)")
-    eff.add_argument("--no-run", action="store_true", help="run nothing: summarise the complete runs and SB3 files "
-                     "under --out, over the seeds each arm has")
-    eff.add_argument("--tasks", type=comma_list(EFFICIENCY_TASKS, "task"), default=list(EFFICIENCY_TASKS),
-                     help=f"the tasks to run (default: all of {', '.join(EFFICIENCY_TASKS)})")
+    eff.add_argument(
+        "--out",
+        default="results",
+        help="suite directory (runs are reused; the table is written there as efficiency.json)",
+    )
+    eff.add_argument(
+        "--parts",
+        type=comma_list(("ours", "sb3"), "part"),
+        default=["ours", "sb3"],
+        help="what to run: ours, sb3 or both (default)",
+    )
+    eff.add_argument(
+        "--quick",
+        action="store_true",
+        help="one seed, tiny budgets: checks the command runs (writes no efficiency.json)",
+    )
+    eff.add_argument(
+        "--no-run",
+        action="store_true",
+        help="run nothing: summarise the complete runs and SB3 files under --out, over the seeds each arm has",
+    )
+    eff.add_argument(
+        "--tasks",
+        type=comma_list(EFFICIENCY_TASKS, "task"),
+        default=list(EFFICIENCY_TASKS),
+        help=f"the tasks to run (default: all of {', '.join(EFFICIENCY_TASKS)})",
+    )
     eff.add_argument("--json", action="store_true", help="one JSON list with every arm's row (∞ as Infinity)")
     args = parser.parse_args(argv)
     if args.command == "efficiency":
         if "sb3" in args.parts and find_spec("stable_baselines3") is None:
             eff.error("--parts sb3 needs Stable-Baselines3: pip install -r benchmarks/requirements.txt")
-        from .baselines import measure
-        from .efficiency import rows, table, teacher_table
+        from dqfd_bc_keras.experiments.baselines import measure
+        from dqfd_bc_keras.experiments.efficiency import rows, table, teacher_table
 
-        steps = measure(args.parts, args.tasks, args.seeds, args.workers, Path(args.out), args.quick, args.no_run,
-                        progress=(lambda line: None) if args.json else print)
+        steps = measure(
+            args.parts,
+            args.tasks,
+            args.seeds,
+            args.workers,
+            Path(args.out),
+            args.quick,
+            args.no_run,
+            progress=(lambda line: None) if args.json else print,
+        )
         print(json.dumps(rows(steps)) if args.json else "\n".join([*table(steps), "", *teacher_table(steps)]))
     elif args.command == "replicate":
-        from .replicate import parse_seeds, replicate
+        from dqfd_bc_keras.experiments.replicate import parse_seeds, replicate
 
-        replicate(args.arm, parse_seeds(args.seeds), args.out, args.archive, args.workers,
-                  progress=lambda line: print(line, flush=True))
+        replicate(
+            args.arm,
+            parse_seeds(args.seeds),
+            args.out,
+            args.archive,
+            args.workers,
+            progress=lambda line: print(line, flush=True),
+        )
     elif args.command == "grid":
-        from .grid import run_grid
+        from dqfd_bc_keras.experiments.grid import run_grid
 
-        run_grid(args.out, args.quick, args.seeds, args.workers, progress=lambda line: print(line, flush=True),
-                 tasks=tuple(args.task) if args.task else None)
+        run_grid(
+            args.out,
+            args.quick,
+            args.seeds,
+            args.workers,
+            progress=lambda line: print(line, flush=True),
+            tasks=tuple(args.task) if args.task else None,
+        )
     elif args.command == "calibrate":
-        from .estimators import main as calibrate
+        from dqfd_bc_keras.experiments.estimators import main as calibrate
 
         calibrate(args.out, args.figure, args.quick)
     elif args.command == "run":
-        assignments = [*(f"{key}={json.dumps(value) if isinstance(value, dict) else value}"
-                         for key, value in env_settings(args).items()), *args.set]
+        assignments = [
+            *(
+                f"{key}={json.dumps(value) if isinstance(value, dict) else value}"
+                for key, value in env_settings(args).items()
+            ),
+            *args.set,
+        ]
         task, moved = chosen_task(args), chosen_task(args) is not None or assignments
         suites = {suite: suite_arms(suite) for suite in (ALL if args.suite == "all" else (args.suite,))}
-        from .sweep import run_suite  # after the suites are found: a wrong module:NAME is refused before TF loads
+        from dqfd_bc_keras.experiments.sweep import (
+            run_suite,  # after the suites are found: a wrong module:NAME is refused before TF loads
+        )
 
         for suite, arms in suites.items():
             arms = on_task(arms, task, assignments) if moved else arms
-            run_suite(arms, args.seeds, args.out, args.workers, args.backend, args.address,
-                      progress=lambda line: print(line, flush=True), name=f"{suite} on {task}" if task else suite,
-                      restart_broken=args.restart_broken, runs_per_worker=args.runs_per_worker)
+            run_suite(
+                arms,
+                args.seeds,
+                args.out,
+                args.workers,
+                args.backend,
+                args.address,
+                progress=lambda line: print(line, flush=True),
+                name=f"{suite} on {task}" if task else suite,
+                restart_broken=args.restart_broken,
+                runs_per_worker=args.runs_per_worker,
+            )
     elif args.command == "export":
-        from .data import export_archive
+        from dqfd_bc_keras.experiments.data import export_archive
 
         names = export_archive(args.directory, args.out)
         print(f"wrote {args.out}: {len(names)} files")
     else:
-        from .report import PER_SEED, default_location, report, warn
+        from dqfd_bc_keras.experiments.report import PER_SEED, default_location, report, warn
 
         results = Path(args.results or (Path("docs") if args.docs else default_location(args.source)) / "RESULTS.md")
         figures = Path(args.figures or results.parent / "figures")

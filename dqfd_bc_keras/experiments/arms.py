@@ -13,13 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config
-from ..methods import METHODS, get_method, method_fields
-from .data import FinishedRun
-from .metrics import PER_RUN
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import METHODS, get_method, method_fields
+from dqfd_bc_keras.experiments.data import FinishedRun
+from dqfd_bc_keras.experiments.metrics import PER_RUN
 
 BAYES_ONLY = tuple(sorted(set(METHODS["bayes"].reads) - set(METHODS["ce"].reads)))
 """Config fields only the bayes loss reads (methods.py): a bayes arm pairs with the ce arm equal in every other field."""
+
 
 @dataclass
 class ArmRuns:
@@ -51,8 +52,9 @@ def common_seeds(first: ArmRuns, second: ArmRuns) -> tuple[ArmRuns, ArmRuns]:
     """The two arms restricted to the seeds both ran: a comparison the pre-registration plans
     within one suite stays the same when one of its arms gets more seeds in another suite."""
     seeds = {r.config.seed for r in first.runs} & {r.config.seed for r in second.runs}
-    return tuple(dataclasses.replace(arm, runs=[r for r in arm.runs if r.config.seed in seeds])
-                 for arm in (first, second))
+    return tuple(
+        dataclasses.replace(arm, runs=[r for r in arm.runs if r.config.seed in seeds]) for arm in (first, second)
+    )
 
 
 def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
@@ -67,9 +69,13 @@ def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
     for arm in arms.values():
         arm.runs.sort(key=lambda r: r.config.seed)
         peers = [a.config for a in arms.values() if a.setting == arm.setting]
-        varying = [k for k in arm.config if k not in ("task", "timeout", "expert_loss")
-                   and len({json.dumps(p[k]) for p in peers}) > 1
-                   and not (k in method_fields() and k not in get_method(arm.config["expert_loss"]).reads)]
+        varying = [
+            k
+            for k in arm.config
+            if k not in ("task", "timeout", "expert_loss")
+            and len({json.dumps(p[k]) for p in peers}) > 1
+            and not (k in method_fields() and k not in get_method(arm.config["expert_loss"]).reads)
+        ]
         arm.name = " ".join([arm.config["expert_loss"], *(f"{k}={arm.config[k]}" for k in varying)])
     return sorted(arms.values(), key=lambda a: a.label)
 
@@ -81,22 +87,29 @@ def preset_distance(arm: ArmRuns, overrides: tuple[tuple[str, object], ...] = ()
     return sum(v != preset[k] for k, v in arm.config.items() if k not in ("expert_loss", "timeout"))
 
 
-def bayes_ce_pairs(arms: list[ArmRuns], task: str, timeout: str | None,
-                   overrides: tuple[tuple[str, object], ...] = ()) -> list[tuple[ArmRuns, ArmRuns | None]]:
+def bayes_ce_pairs(
+    arms: list[ArmRuns], task: str, timeout: str | None, overrides: tuple[tuple[str, object], ...] = ()
+) -> list[tuple[ArmRuns, ArmRuns | None]]:
     """Each bayes arm of the setting (`task`, `timeout` or any if None, and the config fields of
     `overrides`) with its ce arm (equal in every field but the Bayes-only ones and the loss), the
     reference pair first: the one closest to the task preset with `overrides`."""
+
     def strip(arm: ArmRuns) -> dict:
         return {k: v for k, v in arm.config.items() if k not in ("expert_loss", *BAYES_ONLY)}
 
     def selected(arm: ArmRuns) -> bool:
-        return (arm.config["task"] == task and timeout in (None, arm.config["timeout"])
-                and all(arm.config[k] == v for k, v in overrides))
+        return (
+            arm.config["task"] == task
+            and timeout in (None, arm.config["timeout"])
+            and all(arm.config[k] == v for k, v in overrides)
+        )
 
-    pairs = [(b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
-             for b in arms if b.config["expert_loss"] == "bayes" and selected(b)]
-    return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0], overrides), -len(p[0].runs),
-                                        p[0].label))
+    pairs = [
+        (b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
+        for b in arms
+        if b.config["expert_loss"] == "bayes" and selected(b)
+    ]
+    return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0], overrides), -len(p[0].runs), p[0].label))
 
 
 @dataclass(frozen=True)

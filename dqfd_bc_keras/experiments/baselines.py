@@ -37,16 +37,16 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import NamedTuple
 
-from ..config import QUICK
-from ..envs import get_task
-from ..evaluation import evaluate
-from ..files import write_text
-from ..seeds import eval_seed
-from .metrics import first_reaching
-from .data import load_runs
-from .efficiency import EFFICIENCY_FILE, SB3_METHOD, ArmSteps, interaction_evals, load, save
-from .suites import PROTOCOL, SUITES, Arm
-from .sweep import run_suite
+from dqfd_bc_keras.core.config import QUICK
+from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.evaluation import evaluate
+from dqfd_bc_keras.experiments.data import load_runs
+from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, ArmSteps, interaction_evals, load, save
+from dqfd_bc_keras.experiments.metrics import first_reaching
+from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES, Arm
+from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.seeds import eval_seed
 
 PARTS = ("ours", "sb3")
 """What the benchmark runs: our arms, SB3's DQN, or both."""
@@ -58,20 +58,64 @@ QUICK_PROTOCOL, QUICK_SB3_STEPS = {**PROTOCOL, "eval_every": 300}, 1500
 # at 22e3ff24 (2026-04-23; these two entries unchanged since 2020). `n_timesteps` is rl-zoo3's one
 # `learn()` budget, so it also sets the length of the ε schedule (exploration_fraction × n_timesteps).
 ZOO = {
-    "cartpole": {"env": "CartPole-v1", "policy": "MlpPolicy", "n_timesteps": 50_000, "kwargs": dict(
-        learning_rate=2.3e-3, batch_size=64, buffer_size=100_000, learning_starts=1000, gamma=0.99,
-        target_update_interval=10, train_freq=256, gradient_steps=128, exploration_fraction=0.16,
-        exploration_final_eps=0.04, policy_kwargs={"net_arch": [256, 256]})},
-    "mountaincar": {"env": "MountainCar-v0", "policy": "MlpPolicy", "n_timesteps": 120_000, "kwargs": dict(
-        learning_rate=4e-3, batch_size=128, buffer_size=10_000, learning_starts=1000, gamma=0.98,
-        target_update_interval=600, train_freq=16, gradient_steps=8, exploration_fraction=0.2,
-        exploration_final_eps=0.07, policy_kwargs={"net_arch": [256, 256]})},
+    "cartpole": {
+        "env": "CartPole-v1",
+        "policy": "MlpPolicy",
+        "n_timesteps": 50_000,
+        "kwargs": dict(
+            learning_rate=2.3e-3,
+            batch_size=64,
+            buffer_size=100_000,
+            learning_starts=1000,
+            gamma=0.99,
+            target_update_interval=10,
+            train_freq=256,
+            gradient_steps=128,
+            exploration_fraction=0.16,
+            exploration_final_eps=0.04,
+            policy_kwargs={"net_arch": [256, 256]},
+        ),
+    },
+    "mountaincar": {
+        "env": "MountainCar-v0",
+        "policy": "MlpPolicy",
+        "n_timesteps": 120_000,
+        "kwargs": dict(
+            learning_rate=4e-3,
+            batch_size=128,
+            buffer_size=10_000,
+            learning_starts=1000,
+            gamma=0.98,
+            target_update_interval=600,
+            train_freq=16,
+            gradient_steps=8,
+            exploration_fraction=0.2,
+            exploration_final_eps=0.07,
+            policy_kwargs={"net_arch": [256, 256]},
+        ),
+    },
     # rl-zoo3 tunes these two entries identically (its LunarLander entry is for v2; v3 fixed bugs in v2).
-    **{task: {"env": env, "policy": "MlpPolicy", "n_timesteps": 100_000, "kwargs": dict(
-        learning_rate=6.3e-4, batch_size=128, buffer_size=50_000, learning_starts=0, gamma=0.99,
-        target_update_interval=250, train_freq=4, gradient_steps=-1, exploration_fraction=0.12,
-        exploration_final_eps=0.1, policy_kwargs={"net_arch": [256, 256]})}
-       for task, env in (("acrobot", "Acrobot-v1"), ("lunarlander", "LunarLander-v3"))},
+    **{
+        task: {
+            "env": env,
+            "policy": "MlpPolicy",
+            "n_timesteps": 100_000,
+            "kwargs": dict(
+                learning_rate=6.3e-4,
+                batch_size=128,
+                buffer_size=50_000,
+                learning_starts=0,
+                gamma=0.99,
+                target_update_interval=250,
+                train_freq=4,
+                gradient_steps=-1,
+                exploration_fraction=0.12,
+                exploration_final_eps=0.1,
+                policy_kwargs={"net_arch": [256, 256]},
+            ),
+        }
+        for task, env in (("acrobot", "Acrobot-v1"), ("lunarlander", "LunarLander-v3"))
+    },
 }
 ANCHOR = {"cartpole": 28_000, "mountaincar": 90_000}
 """An independent check of this baseline (one `learn()`, an evaluation callback): SB3's DQN with the
@@ -99,8 +143,15 @@ def ours(suite: list[Arm], seeds: int, out: Path, complete_only: bool = False) -
         runs = [r for d in dirs if not complete_only or (d / "eval.json").is_file() for r in load_runs(d)]
         if not runs:
             continue
-        steps.append(ArmSteps.of(a.task, a.expert_loss, map(interaction_evals, runs),
-                                 [r.final["mean_return"] for r in runs], get_task(a.task).solved_return))
+        steps.append(
+            ArmSteps.of(
+                a.task,
+                a.expert_loss,
+                map(interaction_evals, runs),
+                [r.final["mean_return"] for r in runs],
+                get_task(a.task).solved_return,
+            )
+        )
     return steps
 
 
@@ -138,17 +189,32 @@ def sb3_run(task: str, seed: int, budget: int, every: int, path: Path) -> None:
     env = make_vec_env(spec["env"], n_envs=1, seed=seed)  # as rl-zoo3: DummyVecEnv of a Monitor
     model = DQN(spec["policy"], env, seed=seed, verbose=0, **spec["kwargs"])
     model.learn(total_timesteps=budget, callback=grid)
-    write_text(path, json.dumps({
-        **sb3_settings(task, seed, budget, every), "evals": grid.evals, "seconds": time.perf_counter() - started,
-        "versions": {name: version(name) for name in ("stable-baselines3", "torch", "gymnasium")}}))
+    write_text(
+        path,
+        json.dumps(
+            {
+                **sb3_settings(task, seed, budget, every),
+                "evals": grid.evals,
+                "seconds": time.perf_counter() - started,
+                "versions": {name: version(name) for name in ("stable-baselines3", "torch", "gymnasium")},
+            }
+        ),
+    )
 
 
 def sb3_settings(task: str, seed: int, budget: int, every: int) -> dict:
     """What an SB3 run's file records of how it was run, and must match for it to be reused."""
     spec = ZOO[task]
-    return {"task": task, "env": spec["env"], "seed": seed, "n_timesteps": budget, "eval_every": every,
-            "eval_episodes": PROTOCOL["eval_episodes"], "eval_seed": eval_seed(seed),
-            "hyperparameters": {"policy": spec["policy"], **spec["kwargs"]}}
+    return {
+        "task": task,
+        "env": spec["env"],
+        "seed": seed,
+        "n_timesteps": budget,
+        "eval_every": every,
+        "eval_episodes": PROTOCOL["eval_episodes"],
+        "eval_seed": eval_seed(seed),
+        "hyperparameters": {"policy": spec["policy"], **spec["kwargs"]},
+    }
 
 
 class SB3Job(NamedTuple):
@@ -165,14 +231,29 @@ class SB3Job(NamedTuple):
         return self.path.is_file() and wanted.items() <= json.loads(self.path.read_text()).items()
 
 
-def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool,
-        progress: Callable[[str], None] = print, complete_only: bool = False) -> list[ArmSteps]:
+def sb3(
+    tasks: list[str],
+    seeds: int,
+    workers: int,
+    out: Path,
+    quick: bool,
+    progress: Callable[[str], None] = print,
+    complete_only: bool = False,
+) -> list[ArmSteps]:
     """Every (task, seed) of SB3's DQN whose file under `out/sb3-dqn/` is missing or stale, on a
     process pool (with `complete_only`, none: the current files only); then each task's seeds."""
     every = (QUICK_PROTOCOL if quick else PROTOCOL)["eval_every"]
-    jobs = {(task, seed): SB3Job(task, seed, QUICK_SB3_STEPS if quick else ZOO[task]["n_timesteps"], every,
-                                 out / "sb3-dqn" / task / f"seed{seed}{'-quick' if quick else ''}.json")
-            for task in tasks for seed in range(seeds)}
+    jobs = {
+        (task, seed): SB3Job(
+            task,
+            seed,
+            QUICK_SB3_STEPS if quick else ZOO[task]["n_timesteps"],
+            every,
+            out / "sb3-dqn" / task / f"seed{seed}{'-quick' if quick else ''}.json",
+        )
+        for task in tasks
+        for seed in range(seeds)
+    }
     todo = [] if complete_only else [job for job in jobs.values() if not job.current]
     current = sum(job.current for job in jobs.values())
     progress(f"SB3 DQN: {len(jobs)} runs, {current} complete, {len(todo)} to run on {workers} worker(s)")
@@ -183,21 +264,41 @@ def sb3(tasks: list[str], seeds: int, workers: int, out: Path, quick: bool,
             job = futures[future]
             run = json.loads(job.path.read_text())
             first = first_reaching(run["evals"], get_task(job.task).solved_return)
-            progress(f"[{done}/{len(todo)}] sb3 {job.task} seed{job.seed}: threshold first reached at "
-                     f"{'never' if first is None else f'{first:,.0f}'} ({run['seconds']:.0f} s)")
+            progress(
+                f"[{done}/{len(todo)}] sb3 {job.task} seed{job.seed}: threshold first reached at "
+                f"{'never' if first is None else f'{first:,.0f}'} ({run['seconds']:.0f} s)"
+            )
     steps = []
     for task in tasks:
-        evals = [json.loads(jobs[task, seed].path.read_text())["evals"] for seed in range(seeds)
-                 if jobs[task, seed].current]
+        evals = [
+            json.loads(jobs[task, seed].path.read_text())["evals"] for seed in range(seeds) if jobs[task, seed].current
+        ]
         if not evals:
             continue
-        steps.append(ArmSteps.of(task, SB3_METHOD, evals, [e[-1][1] for e in evals], get_task(task).solved_return,
-                                 anchor=ANCHOR.get(task), anchor_final=ANCHOR_FINAL.get(task)))
+        steps.append(
+            ArmSteps.of(
+                task,
+                SB3_METHOD,
+                evals,
+                [e[-1][1] for e in evals],
+                get_task(task).solved_return,
+                anchor=ANCHOR.get(task),
+                anchor_final=ANCHOR_FINAL.get(task),
+            )
+        )
     return steps
 
 
-def measure(parts: Collection[str], tasks: Sequence[str], seeds: int, workers: int, out: Path, quick: bool = False,
-            no_run: bool = False, progress: Callable[[str], None] = print) -> list[ArmSteps]:
+def measure(
+    parts: Collection[str],
+    tasks: Sequence[str],
+    seeds: int,
+    workers: int,
+    out: Path,
+    quick: bool = False,
+    no_run: bool = False,
+    progress: Callable[[str], None] = print,
+) -> list[ArmSteps]:
     """Run the missing runs of `parts` on `tasks` (with `no_run`, none) and return every arm's
     steps; unless `quick`, also write them to `out`/EFFICIENCY_FILE, keeping the arms of a part not
     run this time (`parts={"sb3"}` leaves ours as they were)."""

@@ -13,12 +13,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import Config
-from .arms import ArmRuns, Setting, common_seeds
-from .lab_settings import lab_settings
-from .metrics import CENSORED, SHARES
-from .stats import (CensoredSummary, Summary, beyond, bootstrap_diff_ci, bound_power, equivalence_power, equivalent,
-                    fisher_exact, mann_whitney, pooled_sd, tost_ci)
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.experiments.arms import ArmRuns, Setting, common_seeds
+from dqfd_bc_keras.experiments.lab_settings import lab_settings
+from dqfd_bc_keras.experiments.metrics import CENSORED, SHARES
+from dqfd_bc_keras.experiments.stats import (
+    CensoredSummary,
+    Summary,
+    beyond,
+    bootstrap_diff_ci,
+    bound_power,
+    equivalence_power,
+    equivalent,
+    fisher_exact,
+    mann_whitney,
+    pooled_sd,
+    tost_ci,
+)
 
 ALPHA = 0.05
 """Significance level of every test: two-sided tests at ALPHA, and TOST at ALPHA."""
@@ -32,6 +43,7 @@ GOALS_MARGIN = 0.25
 """C4: flags per episode within ±0.25 are no difference; "markedly more" has to clear +0.25."""
 PAPER_READING_STEPS = 60_000
 """C2's paper reading runs without early stop for this budget: ≥ 300 episodes of at most 200 steps."""
+
 
 # --- the claims -----------------------------------------------------------------------------
 @dataclass
@@ -51,8 +63,10 @@ class Comparison:
         """`low … high (90%: low … high)` for a table cell; — when a mean is undefined."""
         if self.diff is None or self.tost is None:
             return "—"
-        return (f"{self.diff[0]:.{digits}f} … {self.diff[1]:.{digits}f} "
-                f"({TOST_LEVEL:.0%}: {self.tost[0]:.{digits}f} … {self.tost[1]:.{digits}f})")
+        return (
+            f"{self.diff[0]:.{digits}f} … {self.diff[1]:.{digits}f} "
+            f"({TOST_LEVEL:.0%}: {self.tost[0]:.{digits}f} … {self.tost[1]:.{digits}f})"
+        )
 
 
 def compare(metric: str, bayes: ArmRuns, ce: ArmRuns) -> Comparison:
@@ -86,8 +100,9 @@ class Verdict:
     power: float | None = None
 
 
-def _verdict(verdict: str, comparisons: list[Comparison], bayes: ArmRuns, ce: ArmRuns, margin: float,
-             one_sided: bool = False) -> Verdict:
+def _verdict(
+    verdict: str, comparisons: list[Comparison], bayes: ArmRuns, ce: ArmRuns, margin: float, one_sided: bool = False
+) -> Verdict:
     metric = comparisons[0].metric
     sd = pooled_sd(bayes.values(metric), ce.values(metric))
     return Verdict(verdict, comparisons, sd, rule_power(sd, margin, min(len(bayes.runs), len(ce.runs)), one_sided))
@@ -109,8 +124,9 @@ def judge_c1(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     advance, and its censored runs leave a difference of means undefined."""
     margin = RETURN_MARGIN * bayes.runs[0].config.limit
     returns = compare("mean_train_return", bayes, ce)
-    return _verdict(_equivalence(returns, margin), [returns, compare("episodes_to_solve", bayes, ce)],
-                    bayes, ce, margin)
+    return _verdict(
+        _equivalence(returns, margin), [returns, compare("episodes_to_solve", bayes, ce)], bayes, ce, margin
+    )
 
 
 def judge_c2(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
@@ -157,9 +173,15 @@ def judge_c4(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     return _verdict(verdict, [early, whole], bayes, ce, GOALS_MARGIN, one_sided=True)
 
 
-RULE_CONSTANTS = {"ALPHA": f"{ALPHA:g}", "TOST_LEVEL": f"{TOST_LEVEL:.0%}", "RETURN_MARGIN": f"{RETURN_MARGIN:g}",
-                  "SHARE_MARGIN": f"{SHARE_MARGIN:g}", "GOALS_MARGIN": f"{GOALS_MARGIN:g}",
-                  "ABLATION_METRIC": "metric", "DYNAMIC_TIE": "`episodes`"}
+RULE_CONSTANTS = {
+    "ALPHA": f"{ALPHA:g}",
+    "TOST_LEVEL": f"{TOST_LEVEL:.0%}",
+    "RETURN_MARGIN": f"{RETURN_MARGIN:g}",
+    "SHARE_MARGIN": f"{SHARE_MARGIN:g}",
+    "GOALS_MARGIN": f"{GOALS_MARGIN:g}",
+    "ABLATION_METRIC": "metric",
+    "DYNAMIC_TIE": "`episodes`",
+}
 """How each constant named in a rule's docstring reads in RESULTS.md."""
 
 
@@ -184,20 +206,44 @@ def rule_text(judge: Callable) -> str:
 
 
 _WINDOW = Config.for_task("cartpole-200").early_stop_window
-TODAY = Setting("cartpole-200", "naive", (("early_stop_window", _WINDOW),),
-                "today's reading: training stops once the early-stopping rule fires")
-PAPER = Setting("cartpole-200", "naive", (("early_stop_window", 0), ("total_steps", PAPER_READING_STEPS)),
-                "the paper's reading: its rule (average ≥ 490, 10 times in a row), kept with 200-step episodes, "
-                "never fires: no early stop, a fixed budget")
+TODAY = Setting(
+    "cartpole-200",
+    "naive",
+    (("early_stop_window", _WINDOW),),
+    "today's reading: training stops once the early-stopping rule fires",
+)
+PAPER = Setting(
+    "cartpole-200",
+    "naive",
+    (("early_stop_window", 0), ("total_steps", PAPER_READING_STEPS)),
+    "the paper's reading: its rule (average ≥ 490, 10 times in a row), kept with 200-step episodes, "
+    "never fires: no early stop, a fixed budget",
+)
 CLAIMS = (
-    Claim("C1", "bayes and ce do not differ significantly in best or average case",
-          (Setting("cartpole", "naive"), Setting("cartpole-200", "naive")), judge_c1),
-    Claim("C2", "with the 200-step limit both suffer perturbations; unfinished runs about equally frequent",
-          (TODAY, PAPER), judge_c2),
-    Claim("C3", "with the time-limit bootstrap fix bayes and ce give the same average reward",
-          (Setting("cartpole", "bootstrap"),), judge_c3),
-    Claim("C4", "bayes reaches the flag markedly more often per episode than ce, especially early",
-          (Setting("mountaincar-goals", None),), judge_c4),
+    Claim(
+        "C1",
+        "bayes and ce do not differ significantly in best or average case",
+        (Setting("cartpole", "naive"), Setting("cartpole-200", "naive")),
+        judge_c1,
+    ),
+    Claim(
+        "C2",
+        "with the 200-step limit both suffer perturbations; unfinished runs about equally frequent",
+        (TODAY, PAPER),
+        judge_c2,
+    ),
+    Claim(
+        "C3",
+        "with the time-limit bootstrap fix bayes and ce give the same average reward",
+        (Setting("cartpole", "bootstrap"),),
+        judge_c3,
+    ),
+    Claim(
+        "C4",
+        "bayes reaches the flag markedly more often per episode than ce, especially early",
+        (Setting("mountaincar-goals", None),),
+        judge_c4,
+    ),
 )
 
 
@@ -233,12 +279,18 @@ margin: a fraction of the limit, or None for GOALS_MARGIN."""
 def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
     """(switched-off part, ablated arm, full arm): arms equal in every field but one part of ABLATED,
     which the ablated arm switches off and the full arm has as the preset does."""
+
     def without(arm: ArmRuns, key: str) -> dict:
         return {k: v for k, v in arm.config.items() if k != key}
 
-    return [(key, *common_seeds(ablated, full)) for key, off in ABLATED.items() for ablated in arms
-            if ablated.config[key] == off and lab_settings(ablated.config["task"]).ablation_metric
-            for full in arms if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)]
+    return [
+        (key, *common_seeds(ablated, full))
+        for key, off in ABLATED.items()
+        for ablated in arms
+        if ablated.config[key] == off and lab_settings(ablated.config["task"]).ablation_metric
+        for full in arms
+        if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)
+    ]
 
 
 def _preset(arm: ArmRuns, key: str) -> object:
@@ -274,6 +326,7 @@ def dynamic_default(arms: list[ArmRuns]) -> tuple[str | None, list[tuple[ArmRuns
     arms equal but for the mode, on the seeds both ran, the mode with the lower median interactions_to_threshold (∞ for
     never) wins (a tie wins for neither); the mode winning ≥ 3 of the 4 pairs is the default, else
     DYNAMIC_TIE."""
+
     # Returns the default (None until all 4 pairs have run) and each pair with its winner.
     def rest(arm: ArmRuns) -> dict:
         return {k: v for k, v in arm.config.items() if k != "dynamic_demos"}

@@ -21,17 +21,24 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from ..config import Config
-from ..errors import ConfigError
-from ..files import atomic_path
-from ..records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.files import atomic_path
+from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
 
 SWEEP_LOG = "sweeps.jsonl"
 """One line per sweep in the suite directory: what ran, on how many workers, in how many seconds, from
 which commits."""
 
-RUN_FILES = ("config.json", "metrics.csv", "evals.csv", "eval.json", "dynamic_demos.json", "demonstrations.json",
-             "provenance.json")
+RUN_FILES = (
+    "config.json",
+    "metrics.csv",
+    "evals.csv",
+    "eval.json",
+    "dynamic_demos.json",
+    "demonstrations.json",
+    "provenance.json",
+)
 """What the lab reads of a run directory; the first four are in every complete run (eval.json,
 written last, marks a run complete), the others only where they apply."""
 REQUIRED = RUN_FILES[:4]
@@ -56,8 +63,12 @@ class Provenance:
     @classmethod
     def of(cls, fields: dict) -> Provenance:
         """Keys it lacks are unknown (None), or clean."""
-        return cls(fields.get("code_commit"), fields.get("rules_commit"), bool(fields.get("dirty", False)),
-                   dict(fields.get("versions") or {}))
+        return cls(
+            fields.get("code_commit"),
+            fields.get("rules_commit"),
+            bool(fields.get("dirty", False)),
+            dict(fields.get("versions") or {}),
+        )
 
 
 @dataclass
@@ -128,7 +139,7 @@ def _read_csv(path: Path, file: PurePosixPath) -> list[EpisodeRow] | list[EvalRo
         if len(values) != len(header):
             raise RunFileError(file, f"line {line} has {len(values)} of {len(header)} fields (truncated?)")
         try:
-            rows.append(record.from_row(dict(zip(header, values))))
+            rows.append(record.from_row(dict(zip(header, values, strict=True))))
         except ValueError as error:
             raise RunFileError(file, f"line {line}: {error}") from None
     return rows
@@ -147,6 +158,7 @@ def _read_json(path: Path, file: PurePosixPath, kind: type) -> dict | list:
 
 def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> FinishedRun:
     """The complete run in `directory` (`relative` to its suite); RunFileError names a bad file."""
+
     def read(name: str, kind: type, parse: Callable = lambda value: value):
         if not (directory / name).is_file():
             return None
@@ -167,11 +179,16 @@ def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> Finished
     final = read("eval.json", dict)
     if "mean_return" not in final:
         raise RunFileError(relative / "eval.json", "no mean_return")
-    return FinishedRun(shown, read("config.json", dict, Config.from_dict), metrics,
-                       _read_csv(directory / "evals.csv", relative / "evals.csv"), final,
-                       read("demonstrations.json", dict, DemoSummary.from_row),
-                       read("dynamic_demos.json", list, lambda updates: [DemoUpdate.from_row(u) for u in updates]) or [],
-                       read("provenance.json", dict, Provenance.of))
+    return FinishedRun(
+        shown,
+        read("config.json", dict, Config.from_dict),
+        metrics,
+        _read_csv(directory / "evals.csv", relative / "evals.csv"),
+        final,
+        read("demonstrations.json", dict, DemoSummary.from_row),
+        read("dynamic_demos.json", list, lambda updates: [DemoUpdate.from_row(u) for u in updates]) or [],
+        read("provenance.json", dict, Provenance.of),
+    )
 
 
 REPLICATIONS = "replications"
@@ -192,16 +209,25 @@ def _run_dirs(directory: Path) -> list[Path]:
 
 def _unfinished(directory: Path) -> list[Path]:
     """Run directories below `directory` that have started (config.json, checkpoints/) but hold no eval.json."""
-    return sorted(config.parent for config in directory.rglob("config.json") if _own(directory, config)
-                  and (config.parent / "checkpoints").is_dir() and not (config.parent / "eval.json").is_file())
+    return sorted(
+        config.parent
+        for config in directory.rglob("config.json")
+        if _own(directory, config)
+        and (config.parent / "checkpoints").is_dir()
+        and not (config.parent / "eval.json").is_file()
+    )
 
 
 def _load(directory: Path, shown: Path, skipped: list[RunFileError] | None) -> list[FinishedRun]:
     runs = []
     if skipped is not None:  # the report names them; an export leaves them out as it always did
-        skipped.extend(RunFileError(PurePosixPath(run_dir.relative_to(directory).as_posix()) / "eval.json",
-                                    "missing: the run has not finished (still running, or cut off: run the suite "
-                                    "again to resume it)") for run_dir in _unfinished(directory))
+        skipped.extend(
+            RunFileError(
+                PurePosixPath(run_dir.relative_to(directory).as_posix()) / "eval.json",
+                "missing: the run has not finished (still running, or cut off: run the suite again to resume it)",
+            )
+            for run_dir in _unfinished(directory)
+        )
     for run_dir in _run_dirs(directory):
         relative = PurePosixPath(run_dir.relative_to(directory).as_posix())
         try:

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import write_text
-from .metrics import first_reaching
-from .data import FinishedRun
-from .lab_settings import LAB_SETTINGS, lab_settings
-from .stats import bootstrap_ci
+from dqfd_bc_keras.experiments.data import FinishedRun
+from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS, lab_settings
+from dqfd_bc_keras.experiments.metrics import first_reaching
+from dqfd_bc_keras.experiments.stats import bootstrap_ci
+from dqfd_bc_keras.files import write_text
 
 SB3_METHOD = "SB3 DQN (rl-zoo3)"
 """The method name of the Stable-Baselines3 arms."""
@@ -53,11 +53,26 @@ class ArmSteps:
     """SB3 arms without such a check: a published final return of the same baseline."""
 
     @classmethod
-    def of(cls, task: str, method: str, evals: Iterable[Iterable[tuple[float, float]]], final: Sequence[float],
-           threshold: float, anchor: float | None = None, anchor_final: float | None = None) -> ArmSteps:
+    def of(
+        cls,
+        task: str,
+        method: str,
+        evals: Iterable[Iterable[tuple[float, float]]],
+        final: Sequence[float],
+        threshold: float,
+        anchor: float | None = None,
+        anchor_final: float | None = None,
+    ) -> ArmSteps:
         """From each seed's (step, mean return) evaluations."""
-        return cls(task, method, [first_reaching(e, threshold) for e in evals], [float(f) for f in final],
-                   threshold, anchor, anchor_final)
+        return cls(
+            task,
+            method,
+            [first_reaching(e, threshold) for e in evals],
+            [float(f) for f in final],
+            threshold,
+            anchor,
+            anchor_final,
+        )
 
     @property
     def target(self) -> float:
@@ -87,14 +102,19 @@ def summarise(arm: ArmSteps) -> dict:
     """What the table shows of one arm: the median over seeds with its 95% bootstrap CI
     (inf where not reached), how many seeds reached the threshold, how many end above it."""
     steps = arm.steps
-    return {"arm": arm.label, "seeds": steps.size, "reached": int(np.isfinite(steps).sum()),
-            "median_steps": float(np.median(steps)),
-            "ci": list(bootstrap_ci(steps, np.median, LEVEL, RESAMPLES, RNG_SEED)),
-            "above_at_end": sum(f >= arm.threshold for f in arm.final)}
+    return {
+        "arm": arm.label,
+        "seeds": steps.size,
+        "reached": int(np.isfinite(steps).sum()),
+        "median_steps": float(np.median(steps)),
+        "ci": list(bootstrap_ci(steps, np.median, LEVEL, RESAMPLES, RNG_SEED)),
+        "above_at_end": sum(f >= arm.threshold for f in arm.final),
+    }
 
 
-def ratio_ci(theirs: np.ndarray, ours: np.ndarray, resamples: int = RESAMPLES,
-             seed: int = RNG_SEED) -> tuple[float, float, float]:
+def ratio_ci(
+    theirs: np.ndarray, ours: np.ndarray, resamples: int = RESAMPLES, seed: int = RNG_SEED
+) -> tuple[float, float, float]:
     """median(theirs) ÷ median(ours) and its 95% percentile-bootstrap CI: (point, low, high).
 
     The two arms are independent runs, so each side's seeds are resampled on their own.
@@ -144,11 +164,13 @@ def table(arms: list[ArmSteps]) -> list[str]:
     """The arms as a markdown table: each of ours with SB3's median ÷ its median (95% CI) and
     whether that reaches the task's `target_ratio` (lab_settings.py); each SB3 arm with its independent check beside
     the median; then a note on any open-ended or undefined interval."""
-    lines = ["| arm | median steps to threshold | 95% CI | seeds that reached it | above it at the end "
-             "(median final return) | SB3's median ÷ this median [95% CI] | goal |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines = [
+        "| arm | median steps to threshold | 95% CI | seeds that reached it | above it at the end "
+        "(median final return) | SB3's median ÷ this median [95% CI] | goal |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
     notes = set()
-    for arm, row in zip(arms, rows(arms)):
+    for arm, row in zip(arms, rows(arms), strict=True):
         median = _steps(row["median_steps"]) + ("" if np.isfinite(row["median_steps"]) else " (not reached)")
         if arm.anchor is not None:
             median += f"; independent check ≈ {arm.anchor:,.0f}"
@@ -161,14 +183,21 @@ def table(arms: list[ArmSteps]) -> list[str]:
             notes.add("undefined" if np.isnan(low) else "open" if high == np.inf else "")
         final = f"{row['above_at_end']}/{row['seeds']} ({np.median(arm.final):.1f}"
         final += f"; published ≈ {arm.anchor_final:g})" if arm.anchor_final is not None else ")"
-        lines.append(f"| {row['arm']} | {median} | [{_steps(row['ci'][0])}, {_steps(row['ci'][1])}] | "
-                     f"{row['reached']}/{row['seeds']} | {final} | {ratio} | {goal} |")
+        lines.append(
+            f"| {row['arm']} | {median} | [{_steps(row['ci'][0])}, {_steps(row['ci'][1])}] | "
+            f"{row['reached']}/{row['seeds']} | {final} | {ratio} | {goal} |"
+        )
     if "open" in notes:
-        lines += ["", "A ratio interval ending at ∞ is open-ended: in some resamples SB3's median is ∞ (at least "
-                  "half its seeds never reached the threshold) or ours is 0, so the data set no upper bound."]
+        lines += [
+            "",
+            "A ratio interval ending at ∞ is open-ended: in some resamples SB3's median is ∞ (at least "
+            "half its seeds never reached the threshold) or ours is 0, so the data set no upper bound.",
+        ]
     if "undefined" in notes:
-        lines += ["", "Undefined: neither side's median reached the threshold (∞ ÷ ∞), in the data or in some "
-                  "resamples."]
+        lines += [
+            "",
+            "Undefined: neither side's median reached the threshold (∞ ÷ ∞), in the data or in some resamples.",
+        ]
     return lines
 
 
@@ -187,8 +216,10 @@ def teacher_table(arms: list[ArmSteps]) -> list[str]:
     ours = [a for a in arms if a.method != SB3_METHOD and a.task in TEACHER]
     if not ours:
         return []
-    lines = ["| arm | imperfect teacher (100 episodes) | median final return [95% CI] | verdict |",
-             "| --- | --- | --- | --- |"]
+    lines = [
+        "| arm | imperfect teacher (100 episodes) | median final return [95% CI] | verdict |",
+        "| --- | --- | --- | --- |",
+    ]
     for arm in ours:
         median, low, high, verdict = teacher_verdict(arm.final, TEACHER[arm.task])
         lines.append(f"| {arm.label} | {TEACHER[arm.task]:g} | {median:.1f} [{low:.1f}, {high:.1f}] | {verdict} |")
@@ -214,19 +245,33 @@ def efficiency_section(suite_dir: Path) -> list[str]:
     path = suite_dir / EFFICIENCY_FILE
     loaded = load(path)
     if loaded is None:
-        return [f"Not run (or {EFFICIENCY_FILE} predates the current protocol): `python -m dqfd_bc_keras.experiments efficiency "
-                f"--out {suite_dir}` writes {EFFICIENCY_FILE}."]
+        return [
+            f"Not run (or {EFFICIENCY_FILE} predates the current protocol): `python -m dqfd_bc_keras.experiments efficiency "
+            f"--out {suite_dir}` writes {EFFICIENCY_FILE}."
+        ]
     protocol, arms = loaded
     thresholds = ", ".join(f"{task} {threshold:g}" for task, threshold in {a.task: a.threshold for a in arms}.items())
-    return [f"Environment interactions until the mean of a {protocol['eval_episodes']}-episode greedy evaluation "
-            f"on the plain env (fixed seeds, the same for every method; at step 0 and every "
-            f"{protocol['eval_every']:,} steps) first reaches the threshold ({thresholds}). Ours count every "
-            "interaction that produced training data (dynamic-demonstration roll-outs included); SB3 runs "
-            "rl-zoo3's tuned DQN in one `learn()` call per seed and counts its own `num_timesteps`. Median and "
-            "95% percentile-bootstrap CI over seeds, a seed that never reaches the threshold counted as ∞; the "
-            f"ratio's CI resamples each side's seeds independently ({RESAMPLES:,} resamples). *Above it at the "
-            "end*: the final evaluation (ours: eval.json after the run; SB3: the last grid point). *Independent "
-            "check*: SB3's median from a separate check of the same baseline; *published*: rl-zoo3's benchmark "
-            "(one run, final evaluation after its budget).", "", *table(arms),
-            *(["", "Against the imperfect teacher (docs/PREREGISTRATION.md §7; final evaluation: eval.json, 20 "
-                "episodes):", "", *teacher_table(arms)] if teacher_table(arms) else [])]
+    return [
+        f"Environment interactions until the mean of a {protocol['eval_episodes']}-episode greedy evaluation "
+        f"on the plain env (fixed seeds, the same for every method; at step 0 and every "
+        f"{protocol['eval_every']:,} steps) first reaches the threshold ({thresholds}). Ours count every "
+        "interaction that produced training data (dynamic-demonstration roll-outs included); SB3 runs "
+        "rl-zoo3's tuned DQN in one `learn()` call per seed and counts its own `num_timesteps`. Median and "
+        "95% percentile-bootstrap CI over seeds, a seed that never reaches the threshold counted as ∞; the "
+        f"ratio's CI resamples each side's seeds independently ({RESAMPLES:,} resamples). *Above it at the "
+        "end*: the final evaluation (ours: eval.json after the run; SB3: the last grid point). *Independent "
+        "check*: SB3's median from a separate check of the same baseline; *published*: rl-zoo3's benchmark "
+        "(one run, final evaluation after its budget).",
+        "",
+        *table(arms),
+        *(
+            [
+                "",
+                "Against the imperfect teacher (docs/PREREGISTRATION.md §7; final evaluation: eval.json, 20 episodes):",
+                "",
+                *teacher_table(arms),
+            ]
+            if teacher_table(arms)
+            else []
+        ),
+    ]

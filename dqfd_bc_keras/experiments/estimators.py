@@ -30,21 +30,21 @@ import keras
 import numpy as np
 import tensorflow as tf
 
-from ..bc import build_bc_model
-from ..choices import UNCERTAINTIES
-from ..config import Config
-from ..demos import record, rollout
-from ..envs import make_task
-from ..evaluation import GreedyPolicy, load_model
-from ..files import write_text
-from ..seeds import demo_seed
-from ..uncertainty import max_policy_variance
-from .arms import ArmRuns, find_arm
-from .claims import CLAIMS, judge
-from .efficiency import ratio_ci
-from .lab_settings import LAB_SETTINGS
-from .stats import CensoredSummary, Summary
-from .suites import SUITES
+from dqfd_bc_keras.choices import UNCERTAINTIES
+from dqfd_bc_keras.core.bc import build_bc_model
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.uncertainty import max_policy_variance
+from dqfd_bc_keras.demos import record, rollout
+from dqfd_bc_keras.envs.make import make_task
+from dqfd_bc_keras.evaluation import GreedyPolicy, load_model
+from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm
+from dqfd_bc_keras.experiments.claims import CLAIMS, judge
+from dqfd_bc_keras.experiments.efficiency import ratio_ci
+from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS
+from dqfd_bc_keras.experiments.stats import CensoredSummary, Summary
+from dqfd_bc_keras.experiments.suites import SUITES
+from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.seeds import demo_seed
 
 TASKS = tuple(task for task, lab in LAB_SETTINGS.items() if lab.calibrate)
 """The tasks the estimators are calibrated on (each task's `calibrate`, lab_settings.py)."""
@@ -66,14 +66,15 @@ def state_sets(task: str, demos, episodes: int, seed: int) -> dict[str, np.ndarr
     agent = GreedyPolicy.from_model(load_model(MODELS / task / "q_network.keras"))
     agent_states = rollout(env, agent, seeds, task=task, source="agent").obs
     rng = np.random.default_rng(seed)
-    random_states = rollout(env, lambda obs: int(rng.integers(env.action_space.n)), seeds, task=task,
-                            source="random").obs
+    random_states = rollout(
+        env, lambda obs: int(rng.integers(env.action_space.n)), seeds, task=task, source="random"
+    ).obs
     env.close()
     mean, std = demos.obs_scale()
     directions = rng.normal(size=held.shape)
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     far = held + directions * rng.uniform(3.0, 6.0, size=(len(held), 1)) * np.maximum(std, 1e-3)
-    return dict(zip(STATE_SETS, (held, agent_states, random_states, far.astype(np.float32))))
+    return dict(zip(STATE_SETS, (held, agent_states, random_states, far.astype(np.float32)), strict=True))
 
 
 def measure(task: str, seed: int, episodes: int, bc_epochs: int | None = None) -> dict[str, dict[str, float]]:
@@ -87,8 +88,9 @@ def measure(task: str, seed: int, episodes: int, bc_epochs: int | None = None) -
         keras.utils.set_random_seed(seed)
         bc = build_bc_model(c, demos.meta.obs_dim, demos.meta.n_actions, demos.obs_scale())
         bc.fit_demos(demos.obs, demos.actions, epochs=bc_epochs or c.bc_epochs, batch_size=c.batch_size, seed=seed)
-        result[uncertainty] = {name: float(np.mean(bc.predictive(tf.constant(states))[1] - c.sigma0_sq))
-                               for name, states in sets.items()}
+        result[uncertainty] = {
+            name: float(np.mean(bc.predictive(tf.constant(states))[1] - c.sigma0_sq)) for name, states in sets.items()
+        }
     return result
 
 
@@ -123,6 +125,7 @@ def meets_goal(entry: dict) -> bool:
 def best_other(summary: dict) -> str:
     """The pre-registered pick (docs/PREREGISTRATION.md §8) of the estimator besides the paper's:
     the larger geometric mean of the off-demo ratios over both sets and all tasks."""
+
     def score(uncertainty: str) -> float:
         ratios = [summary["tasks"][t][uncertainty]["ratio"][name] for t in summary["tasks"] for name in OFF_DEMO]
         return float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
@@ -132,31 +135,35 @@ def best_other(summary: dict) -> str:
 
 def table(summary: dict) -> list[str]:
     """Markdown: per task and estimator, mean σ² − σ0² per state set and the off/on ratios."""
-    lines = ["| task | estimator | " + " | ".join(STATE_SETS) + " | ratio random ÷ on | ratio far ÷ on | goal ≥ 5 |",
-             "| --- | --- | " + " | ".join("---:" for _ in STATE_SETS) + " | ---: | ---: | --- |"]
+    lines = [
+        "| task | estimator | " + " | ".join(STATE_SETS) + " | ratio random ÷ on | ratio far ÷ on | goal ≥ 5 |",
+        "| --- | --- | " + " | ".join("---:" for _ in STATE_SETS) + " | ---: | ---: | --- |",
+    ]
     for task, entries in summary["tasks"].items():
         for uncertainty, entry in entries.items():
             means = " | ".join(f"{entry['mean'][name]:.2g}" for name in STATE_SETS)
             ratio = entry["ratio"]
-            lines.append(f"| {task} | {uncertainty} | {means} | {ratio['random policy']:.3g} | "
-                         f"{ratio['3–6 std away']:.3g} | {'met' if meets_goal(entry) else 'not met'} |")
+            lines.append(
+                f"| {task} | {uncertainty} | {means} | {ratio['random policy']:.3g} | "
+                f"{ratio['3–6 std away']:.3g} | {'met' if meets_goal(entry) else 'not met'} |"
+            )
     return lines
 
 
 def figure(summary: dict, path: Path) -> None:
     """Grouped bars (log scale): σ² − σ0² per state set, one group per estimator, one panel per task."""
-    from .figures import _colors, _figure
+    from dqfd_bc_keras.experiments.figures import _colors, _figure
 
     tasks = list(summary["tasks"])
     with _figure(path, nrows=1, ncols=len(tasks), figsize=(5.5 * len(tasks), 4.2), squeeze=False) as (fig, axes):
-        for ax, task in zip(axes[0], tasks):
+        for ax, task in zip(axes[0], tasks, strict=True):
             colors, width = _colors(), 0.8 / len(STATE_SETS)
             for i, name in enumerate(STATE_SETS):
                 values = [max(summary["tasks"][task][u]["mean"][name], 1e-6) for u in UNCERTAINTIES]
-                ax.bar(np.arange(len(UNCERTAINTIES)) + (i - 1.5) * width, values, width, label=name,
-                       color=next(colors))
-            ax.axhline(max_policy_variance(summary["n_actions"][task]), color="grey", ls="--", lw=1,
-                       label="largest possible")
+                ax.bar(np.arange(len(UNCERTAINTIES)) + (i - 1.5) * width, values, width, label=name, color=next(colors))
+            ax.axhline(
+                max_policy_variance(summary["n_actions"][task]), color="grey", ls="--", lw=1, label="largest possible"
+            )
             ax.set_yscale("log")
             ax.set_xticks(range(len(UNCERTAINTIES)), UNCERTAINTIES)
             ax.set_title(f"{task}: σ² − σ0² by kind of state ({summary['seeds']} fits each)")
@@ -167,7 +174,7 @@ def figure(summary: dict, path: Path) -> None:
 def main(out: str, figure_path: str | None = None, quick: bool = False) -> dict:
     """Measure, write the JSON to `out` (and the figure), print the table; `quick`: one seed,
     one episode per set, 5 BC epochs, CartPole only (seconds, for the tests)."""
-    summary = (calibrate(("cartpole",), seeds=1, episodes=1, bc_epochs=5) if quick else calibrate())
+    summary = calibrate(("cartpole",), seeds=1, episodes=1, bc_epochs=5) if quick else calibrate()
     summary["best_other"] = best_other(summary)
     write_text(Path(out), json.dumps(summary, indent=1) + "\n")
     if figure_path:
@@ -194,17 +201,24 @@ def verdict_rows(arms: list[ArmRuns]) -> list[str]:
         mc = find_arm(arms, dataclasses.replace(config, uncertainty="mc_dropout"))
         ce = find_arm(arms, dataclasses.replace(config, expert_loss="ce", uncertainty="mc_dropout"))
         claim = next((c for c in CLAIMS for s in c.settings if c.id in ("C3", "C4") and s.task == config.task), None)
-        verdicts = ["—", "—"] if claim is None else [
-            judge(claim, bayes, ce).verdict if bayes is not None else "not run" for bayes in (found, mc)]
+        verdicts = (
+            ["—", "—"]
+            if claim is None
+            else [judge(claim, bayes, ce).verdict if bayes is not None else "not run" for bayes in (found, mc)]
+        )
         steps = CensoredSummary.of(found.values("interactions_to_threshold")).format(0)
         if ce is not None:
-            point, low, high = ratio_ci(ce.values("interactions_to_threshold"), found.values("interactions_to_threshold"))
+            point, low, high = ratio_ci(
+                ce.values("interactions_to_threshold"), found.values("interactions_to_threshold")
+            )
             ratio = f"{point:.2f} [{low:.2f}, {high:.2f}]"
         else:
             ratio = "—"
-        rows.append(f"| {found.setting} | {config.uncertainty} | {len(found.runs)}, {len(ce.runs) if ce else 0} | "
-                    f"{claim.id if claim else 'efficiency'}: **{verdicts[0]}** | {verdicts[1]} | {steps} | {ratio} | "
-                    f"{Summary.of(found.values('final_eval')).format()} |")
+        rows.append(
+            f"| {found.setting} | {config.uncertainty} | {len(found.runs)}, {len(ce.runs) if ce else 0} | "
+            f"{claim.id if claim else 'efficiency'}: **{verdicts[0]}** | {verdicts[1]} | {steps} | {ratio} | "
+            f"{Summary.of(found.values('final_eval')).format()} |"
+        )
     return rows
 
 
@@ -212,22 +226,33 @@ def estimators_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, 
     """Calibration (table, figure, the goal) and the verdicts with each estimator."""
     path = suite_dir / CALIBRATION_FILE
     if not path.is_file():
-        return [f"Not run: `python -m dqfd_bc_keras.experiments calibrate --out SUITE/{CALIBRATION_FILE}` measures "
-                "the estimators into the suite directory SUITE, `run estimators --out SUITE` trains with them."]
+        return [
+            f"Not run: `python -m dqfd_bc_keras.experiments calibrate --out SUITE/{CALIBRATION_FILE}` measures "
+            "the estimators into the suite directory SUITE, `run estimators --out SUITE` trains with them."
+        ]
     summary = json.loads(path.read_text())
     figure(summary, figures_dir / "calibration.png")
     link = os.path.relpath(figures_dir / "calibration.png", markdown_dir)
     rows = verdict_rows(arms)
-    return [f"σ²(s) − σ0² of the bayes BC model with each estimator (uncertainty.py), mean over {summary['seeds']} "
-            f"fits on each task's demonstrations, on {summary['episodes']} episodes of each kind of state; the goal "
-            f"(docs/PREREGISTRATION.md §8) is ≥ {summary['goal_ratio']:g} × the held-out value on random-policy "
-            "states and on states 3–6 std away. The largest value any estimator can take is (1 − 1/A)/A "
-            "(0.25 for CartPole's two actions, 0.22 for MountainCar's three).", "", *table(summary), "",
-            f"Best other estimator (the pre-registered pick): **{summary['best_other']}**.", "",
-            f"![calibration]({link})", "",
-            "With each estimator, bayes against ce under the claims' rules (§4) and the seeds of §5, and on the "
-            "sample-efficiency protocol (§3): interactions to threshold median [95% CI] (∞ = never), ce's median ÷ "
-            "this arm's [95% CI] (> 1: this arm is faster), final evaluation.", "",
-            "| setting | estimator | seeds (bayes, ce) | verdict | MC dropout's verdict | interactions to threshold "
-            "| ce ÷ it | final eval |", "| --- | --- | --- | --- | --- | --- | --- | --- |",
-            *(rows or ["| — | no estimator arms have run | | | | | | |"])]
+    return [
+        f"σ²(s) − σ0² of the bayes BC model with each estimator (uncertainty.py), mean over {summary['seeds']} "
+        f"fits on each task's demonstrations, on {summary['episodes']} episodes of each kind of state; the goal "
+        f"(docs/PREREGISTRATION.md §8) is ≥ {summary['goal_ratio']:g} × the held-out value on random-policy "
+        "states and on states 3–6 std away. The largest value any estimator can take is (1 − 1/A)/A "
+        "(0.25 for CartPole's two actions, 0.22 for MountainCar's three).",
+        "",
+        *table(summary),
+        "",
+        f"Best other estimator (the pre-registered pick): **{summary['best_other']}**.",
+        "",
+        f"![calibration]({link})",
+        "",
+        "With each estimator, bayes against ce under the claims' rules (§4) and the seeds of §5, and on the "
+        "sample-efficiency protocol (§3): interactions to threshold median [95% CI] (∞ = never), ce's median ÷ "
+        "this arm's [95% CI] (> 1: this arm is faster), final evaluation.",
+        "",
+        "| setting | estimator | seeds (bayes, ce) | verdict | MC dropout's verdict | interactions to threshold "
+        "| ce ÷ it | final eval |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        *(rows or ["| — | no estimator arms have run | | | | | | |"]),
+    ]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_path
+from dqfd_bc_keras.files import atomic_path
 
 STYLE = {"font.family": "DejaVu Sans", "font.size": 10, "savefig.dpi": 100}
 """DejaVu Sans ships with matplotlib, so the text is drawn the same wherever the report runs."""
@@ -65,8 +65,9 @@ def seeds_text(counts: list[int]) -> str:
     return f"{low} seed{'s' * (high > 1)}" if low == high else f"{low}–{high} seeds"
 
 
-def mean_band(curves: list[np.ndarray], level: float = 0.95, resamples: int = 1_000, seed: int = 0
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def mean_band(
+    curves: list[np.ndarray], level: float = 0.95, resamples: int = 1_000, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per episode: the mean over the runs that have it, its percentile-bootstrap band, and how
     many runs have it.
 
@@ -78,11 +79,12 @@ def mean_band(curves: list[np.ndarray], level: float = 0.95, resamples: int = 1_
     values = np.zeros((len(curves), length))
     present = np.zeros((len(curves), length))
     for j, curve in enumerate(curves):
-        values[j, :len(curve)], present[j, :len(curve)] = curve, 1.0
+        values[j, : len(curve)], present[j, : len(curve)] = curve, 1.0
     mean = values.sum(axis=0) / present.sum(axis=0)
     rng = np.random.default_rng(seed)
-    weights = np.stack([np.bincount(rng.integers(0, len(curves), len(curves)), minlength=len(curves))
-                        for _ in range(resamples)]).astype(float)
+    weights = np.stack(
+        [np.bincount(rng.integers(0, len(curves), len(curves)), minlength=len(curves)) for _ in range(resamples)]
+    ).astype(float)
     sums, counts = weights @ values, weights @ present
     boot = np.divide(sums, counts, out=np.full_like(sums, np.nan), where=counts > 0)
     tail = 100.0 * (1.0 - level) / 2.0
@@ -109,7 +111,7 @@ def held(trace: Trace, window: int, length: int) -> np.ndarray:
 def _draw_mean(ax, arms: dict[str, list[Trace]], window: int, length: int) -> None:
     """Each arm's mean over seeds with its 95% band; dotted, without band, once fewer than half its
     runs reach the episode (runs that ended at their budget, not stopped early, drop out)."""
-    for color, (name, traces) in zip(_colors(), arms.items()):
+    for color, (name, traces) in zip(_colors(), arms.items(), strict=False):
         mean, low, high, running = mean_band([held(t, window, length) for t in traces])
         episodes = np.arange(1, len(mean) + 1)
         most = running >= len(traces) / 2  # a prefix: runs only ever drop out
@@ -121,8 +123,9 @@ def _draw_mean(ax, arms: dict[str, list[Trace]], window: int, length: int) -> No
     ax.legend(loc="best", fontsize=8)
 
 
-def learning_curves(title: str, arms: dict[str, list[Trace]], ylabel: str, path: Path, window: int = 1,
-                    zoom: int | None = None) -> None:
+def learning_curves(
+    title: str, arms: dict[str, list[Trace]], ylabel: str, path: Path, window: int = 1, zoom: int | None = None
+) -> None:
     """Each arm's mean per-episode curve over seeds with its 95% bootstrap band.
 
     `window` > 1 draws trailing means (said on the axis); `zoom` adds a panel of the first `zoom`
@@ -132,13 +135,20 @@ def learning_curves(title: str, arms: dict[str, list[Trace]], ylabel: str, path:
     length = max(len(t.curve) for t in traces)
     notes = [f"mean over seeds ({seeds_text([len(r) for r in arms.values()])} per arm), 95% bootstrap band"]
     if any(t.stopped for t in traces):
-        notes.append(f"a run stopped early (solved) holds its {'last value' if window == 1 else 'last trailing mean'} "
-                     f"to episode {length}, so every seed counts at every episode")
+        notes.append(
+            f"a run stopped early (solved) holds its {'last value' if window == 1 else 'last trailing mean'} "
+            f"to episode {length}, so every seed counts at every episode"
+        )
     if any(not t.stopped and len(t.curve) < length for t in traces):
         notes.append("dotted: fewer than half the seeds ran that long")
     smoothed = ylabel + (f"\n(trailing mean of {window} episodes)" if window > 1 else "")
-    with _figure(path, ncols=2 if zoom else 1, figsize=(12 if zoom else 8, 4.5), squeeze=False,
-                 gridspec_kw={"width_ratios": [2, 1]} if zoom else None) as (fig, axes):
+    with _figure(
+        path,
+        ncols=2 if zoom else 1,
+        figsize=(12 if zoom else 8, 4.5),
+        squeeze=False,
+        gridspec_kw={"width_ratios": [2, 1]} if zoom else None,
+    ) as (fig, axes):
         _draw_mean(axes[0][0], arms, window, length)
         axes[0][0].set_ylabel(smoothed)
         if zoom:
@@ -152,20 +162,27 @@ def learning_curves(title: str, arms: dict[str, list[Trace]], ylabel: str, path:
 def pick_cases(runs: list[Trace]) -> dict[str, Trace]:
     """The paper's three cases: best (highest score), average (closest to the median), worst."""
     scores = np.array([t.score for t in runs])
-    return {"best": runs[int(np.argmax(scores))], "average": runs[int(np.argmin(np.abs(scores - np.median(scores))))],
-            "worst": runs[int(np.argmin(scores))]}
+    return {
+        "best": runs[int(np.argmax(scores))],
+        "average": runs[int(np.argmin(np.abs(scores - np.median(scores))))],
+        "worst": runs[int(np.argmin(scores))],
+    }
 
 
-def case_runs(title: str, cases: dict[str, dict[str, Trace]], seeds: dict[str, int], ylabel: str,
-              path: Path) -> None:
+def case_runs(title: str, cases: dict[str, dict[str, Trace]], seeds: dict[str, int], ylabel: str, path: Path) -> None:
     """The paper's picture: per case (best, average, worst) one panel with one run of each arm,
     unsmoothed as the paper draws them. `cases[case][arm]` is the run drawn, picked among the
     `seeds[arm]` runs of that arm."""
     with _figure(path, ncols=len(cases), figsize=(5 * len(cases), 4), sharey=True, squeeze=False) as (fig, axes):
-        for ax, (case, runs) in zip(axes[0], cases.items()):
-            for color, (arm, trace) in zip(_colors(), runs.items()):
-                ax.plot(np.arange(1, len(trace.curve) + 1), trace.curve, color=color, lw=1,
-                        label=f"{arm} ({trace.label} of {seeds[arm]})")
+        for ax, (case, runs) in zip(axes[0], cases.items(), strict=True):
+            for color, (arm, trace) in zip(_colors(), runs.items(), strict=False):
+                ax.plot(
+                    np.arange(1, len(trace.curve) + 1),
+                    trace.curve,
+                    color=color,
+                    lw=1,
+                    label=f"{arm} ({trace.label} of {seeds[arm]})",
+                )
             ax.set_title(f"{case} run")
             ax.set_xlabel("training episode")
             ax.legend(loc="best", fontsize=7)
@@ -173,14 +190,26 @@ def case_runs(title: str, cases: dict[str, dict[str, Trace]], seeds: dict[str, i
         fig.suptitle(f"{title} ({seeds_text(list(seeds.values()))} per arm)")
 
 
-def setting_figures(setting: str, arms: dict[str, list[Trace]], case_arms: list[str], score: str, ylabel: str,
-                    stem: Path, window: int = 1, zoom: int | None = None) -> list[Path]:
+def setting_figures(
+    setting: str,
+    arms: dict[str, list[Trace]],
+    case_arms: list[str],
+    score: str,
+    ylabel: str,
+    stem: Path,
+    window: int = 1,
+    zoom: int | None = None,
+) -> list[Path]:
     """A setting's two figures, `<stem>-curves.png` (every arm of `arms`) and `<stem>-cases.png`
     (the arms `case_arms`, runs ranked by `score`); returns their paths."""
     curves, cases = stem.with_name(f"{stem.name}-curves.png"), stem.with_name(f"{stem.name}-cases.png")
     learning_curves(setting, arms, ylabel, curves, window, zoom)
     picked = {name: pick_cases(arms[name]) for name in case_arms}
-    case_runs(f"{setting}: best, average and worst run by {score}",
-              {case: {name: picked[name][case] for name in case_arms} for case in ("best", "average", "worst")},
-              {name: len(arms[name]) for name in case_arms}, ylabel, cases)
+    case_runs(
+        f"{setting}: best, average and worst run by {score}",
+        {case: {name: picked[name][case] for name in case_arms} for case in ("best", "average", "worst")},
+        {name: len(arms[name]) for name in case_arms},
+        ylabel,
+        cases,
+    )
     return [curves, cases]

@@ -24,16 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..envs import get_task
-from ..files import write_text
-from .arms import ArmRuns, group_arms
-from .metrics import interactions_to_threshold
-from .data import load_runs
-from .efficiency import ratio_ci, teacher_verdict
-from .imitation import imitation_arms, load_imitation, run_imitation
-from .lab_settings import lab_settings
-from .suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
-from .sweep import run_suite
+from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.experiments.arms import ArmRuns, group_arms
+from dqfd_bc_keras.experiments.data import load_runs
+from dqfd_bc_keras.experiments.efficiency import ratio_ci, teacher_verdict
+from dqfd_bc_keras.experiments.imitation import imitation_arms, load_imitation, run_imitation
+from dqfd_bc_keras.experiments.lab_settings import lab_settings
+from dqfd_bc_keras.experiments.metrics import interactions_to_threshold
+from dqfd_bc_keras.experiments.suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
+from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.files import write_text
 
 BC_ALONE, DQN = "BC alone", "DQN (no demos)"
 GRID_FILE = "GRID.md"
@@ -84,8 +84,9 @@ def _cell(a: Arm) -> Cell:
     return Cell(config.task, config.expert, config.expert_epsilon, config.demo_episodes)
 
 
-def collect(arms: list[ArmRuns], suite_dir: Path, task: str,
-            quick: bool = False) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
+def collect(
+    arms: list[ArmRuns], suite_dir: Path, task: str, quick: bool = False
+) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
     """`task`'s cells and {method: {cell: Entry}} from the suite's arms and BC alone's files."""
     cells = [Cell(task, c["expert"], float(c["expert_epsilon"]), int(c["demo_episodes"])) for c in grid_cells(quick)]
     by_config = {_key(a.config): a for a in arms}
@@ -95,8 +96,10 @@ def collect(arms: list[ArmRuns], suite_dir: Path, task: str,
         runs = [r for r in found.runs if r.config.seed < a.seeds] if found else []  # the grid's seeds only
         if not runs:
             continue
-        entry = Entry(np.array([interactions_to_threshold(r) for r in runs], float),
-                      np.array([r.final["mean_return"] for r in runs], float))
+        entry = Entry(
+            np.array([interactions_to_threshold(r) for r in runs], float),
+            np.array([r.final["mean_return"] for r in runs], float),
+        )
         targets = cells if a.expert_loss == "none" else [_cell(a)]
         for cell in targets:
             table.setdefault(method_name(a), {})[cell] = entry
@@ -155,17 +158,25 @@ def tables(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]:
             if method not in (DQN, BC_ALONE) and cell in dqn:
                 mark = {"helps": " ↑", "hurts": " ↓", "unclear": ""}[effect(entry, dqn[cell])]
             reached = int(np.isfinite(entry.steps).sum())
-            row_steps.append("—" if method == BC_ALONE else f"{_steps(np.median(entry.steps))}{mark} ({reached}/{entry.steps.size})")
+            row_steps.append(
+                "—" if method == BC_ALONE else f"{_steps(np.median(entry.steps))}{mark} ({reached}/{entry.steps.size})"
+            )
             escape = " ✓" if cell.teacher_return < cell.threshold and escapes(entry, cell) else ""
             row_final.append(f"{np.median(entry.final) - cell.teacher_return:+.0f}{escape}")
         steps.append(f"| {method} | " + " | ".join(row_steps) + " |")
         final.append(f"| {method} | " + " | ".join(row_final) + " |")
-    return ["Median counted interactions to the threshold (seeds that reached it / seeds); 0: the evaluation "
-            "after pre-training, before any interaction, already reached it; ↑ helps, ↓ hurts against plain DQN:",
-            "", *steps, "",
-            "Median final return (eval.json, 20 episodes) minus the teacher's 100-episode mean "
-            f"({', '.join(f'{c.teacher} {c.teacher_return:g}' for c in _teachers(cells))}); ✓ escapes a teacher "
-            "below the threshold:", "", *final]
+    return [
+        "Median counted interactions to the threshold (seeds that reached it / seeds); 0: the evaluation "
+        "after pre-training, before any interaction, already reached it; ↑ helps, ↓ hurts against plain DQN:",
+        "",
+        *steps,
+        "",
+        "Median final return (eval.json, 20 episodes) minus the teacher's 100-episode mean "
+        f"({', '.join(f'{c.teacher} {c.teacher_return:g}' for c in _teachers(cells))}); ✓ escapes a teacher "
+        "below the threshold:",
+        "",
+        *final,
+    ]
 
 
 def _teachers(cells: list[Cell]) -> list[Cell]:
@@ -184,10 +195,15 @@ def answers(cells: list[Cell], table: dict[str, dict[Cell, Entry]]) -> list[str]
         helps = [c.name for c in judged if verdicts.get(c) == "helps"]
         hurts = [c.name for c in judged if verdicts.get(c) == "hurts"]
         escaped = [c.name for c in bad if c in entries and escapes(entries[c], c)]
-        speed = (f"helps in {len(helps)} of {len(judged)} cells{_list(helps)}, hurts in {len(hurts)}{_list(hurts)}; "
-                 if method != BC_ALONE else "")
-        lines.append(f"- **{method}**: {speed}escapes a teacher below {threshold:g} in "
-                     f"{len(escaped)} of {sum(c in entries for c in bad)} cells{_list(escaped)}.")
+        speed = (
+            f"helps in {len(helps)} of {len(judged)} cells{_list(helps)}, hurts in {len(hurts)}{_list(hurts)}; "
+            if method != BC_ALONE
+            else ""
+        )
+        lines.append(
+            f"- **{method}**: {speed}escapes a teacher below {threshold:g} in "
+            f"{len(escaped)} of {sum(c in entries for c in bad)} cells{_list(escaped)}."
+        )
     return lines
 
 
@@ -195,40 +211,81 @@ def _list(names: list[str]) -> str:
     return f" ({', '.join(names)})" if names else ""
 
 
-def heatmaps(cells: list[Cell], table: dict[str, dict[Cell, Entry]], path_steps: Path, path_final: Path,
-             seeds: int) -> None:
+def heatmaps(
+    cells: list[Cell], table: dict[str, dict[Cell, Entry]], path_steps: Path, path_final: Path, seeds: int
+) -> None:
     """The two tables as heatmaps: log10 interactions (blank: never, or BC alone) and final − teacher."""
     methods = list(table)
-    steps = np.array([[np.median(table[m][c].steps) if c in table[m] and m != BC_ALONE else np.nan for c in cells]
-                      for m in methods])
-    final = np.array([[np.median(table[m][c].final) - c.teacher_return if c in table[m] else np.nan for c in cells]
-                      for m in methods])
+    steps = np.array(
+        [[np.median(table[m][c].steps) if c in table[m] and m != BC_ALONE else np.nan for c in cells] for m in methods]
+    )
+    final = np.array(
+        [[np.median(table[m][c].final) - c.teacher_return if c in table[m] else np.nan for c in cells] for m in methods]
+    )
     bound = float(np.nanmax(np.abs(final))) if np.isfinite(final).any() else 1.0
-    _heatmap(path_steps, cells, methods, steps, np.log10(np.maximum(np.where(np.isfinite(steps), steps, np.nan), 1.0)),
-             dict(cmap="viridis_r"), "log10 interactions", _steps,
-             f"median counted interactions to {cells[0].threshold:g} ({seeds} seeds per cell)")
-    _heatmap(path_final, cells, methods, final, final, dict(cmap="RdBu", vmin=-bound, vmax=bound), "return − teacher",
-             lambda v: f"{v:+.0f}", f"median final return − the teacher's mean ({seeds} seeds per cell)")
+    _heatmap(
+        path_steps,
+        cells,
+        methods,
+        steps,
+        np.log10(np.maximum(np.where(np.isfinite(steps), steps, np.nan), 1.0)),
+        dict(cmap="viridis_r"),
+        "log10 interactions",
+        _steps,
+        f"median counted interactions to {cells[0].threshold:g} ({seeds} seeds per cell)",
+    )
+    _heatmap(
+        path_final,
+        cells,
+        methods,
+        final,
+        final,
+        dict(cmap="RdBu", vmin=-bound, vmax=bound),
+        "return − teacher",
+        lambda v: f"{v:+.0f}",
+        f"median final return − the teacher's mean ({seeds} seeds per cell)",
+    )
 
 
-def _heatmap(path: Path, cells: list[Cell], methods: list[str], values: np.ndarray, shown: np.ndarray, colors: dict,
-             label: str, text: Callable[[float], str], title: str) -> None:
+def _heatmap(
+    path: Path,
+    cells: list[Cell],
+    methods: list[str],
+    values: np.ndarray,
+    shown: np.ndarray,
+    colors: dict,
+    label: str,
+    text: Callable[[float], str],
+    title: str,
+) -> None:
     """`shown` coloured, `values` written in each square (∞: never; nan: —)."""
-    from .figures import _figure
+    from dqfd_bc_keras.experiments.figures import _figure
 
     with _figure(path, figsize=(1.1 * len(cells) + 3, 0.55 * len(methods) + 2)) as (fig, ax):
         fig.colorbar(ax.imshow(shown, aspect="auto", **colors), ax=ax, label=label)
         for i, j in np.ndindex(values.shape):
             v = values[i, j]
-            ax.text(j, i, text(v) if np.isfinite(v) else "never" if v == np.inf else "—", ha="center", va="center",
-                    fontsize=7)
+            ax.text(
+                j,
+                i,
+                text(v) if np.isfinite(v) else "never" if v == np.inf else "—",
+                ha="center",
+                va="center",
+                fontsize=7,
+            )
         ax.set_xticks(range(len(cells)), [c.name.replace(" × ", "\n× ") for c in cells], fontsize=7)
         ax.set_yticks(range(len(methods)), methods, fontsize=8)
         ax.set_title(f"{cells[0].task}, teacher × demonstrated episodes: {title}")
 
 
-def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdown_dir: Path,
-                 quick: bool = False, tasks: tuple[str, ...] | None = None) -> list[str]:
+def grid_section(
+    arms: list[ArmRuns],
+    suite_dir: Path,
+    figures_dir: Path,
+    markdown_dir: Path,
+    quick: bool = False,
+    tasks: tuple[str, ...] | None = None,
+) -> list[str]:
     """The section of RESULTS.md (and GRID.md): per task (default: every task of the grid), tables,
     heatmaps and the per-method answers."""
     lines = []
@@ -237,8 +294,9 @@ def grid_section(arms: list[ArmRuns], suite_dir: Path, figures_dir: Path, markdo
     return lines[:-1]
 
 
-def _task_section(arms: list[ArmRuns], suite_dir: Path, task: str, figures_dir: Path, markdown_dir: Path,
-                  quick: bool) -> list[str]:
+def _task_section(
+    arms: list[ArmRuns], suite_dir: Path, task: str, figures_dir: Path, markdown_dir: Path, quick: bool
+) -> list[str]:
     cells, table = collect(arms, suite_dir, task, quick)
     if len(table) < 2:
         return [f"Not run: `python -m dqfd_bc_keras.experiments grid --task {task} --out results` runs it."]
@@ -248,26 +306,45 @@ def _task_section(arms: list[ArmRuns], suite_dir: Path, task: str, figures_dir: 
     links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
     config = grid_arms(task)[0].config(0)
     stop = "early stop" if config.early_stop_window else "no early stop"
-    budget = ("the QUICK budget (a test, not a result)" if quick else
-              f"preset defaults ({config.total_steps // 1000}k steps, {stop}, the sample-efficiency protocol)")
-    return [f"{task}, {budget}; every method with demonstrations "
-            f"has up to {seeds} seeds per cell, plain DQN one set for all cells; BC alone is the MLE BC model on the "
-            "cell's demonstrations, played greedily without RL (no interaction beyond the demonstrations). "
-            "Rules: docs/PREREGISTRATION.md §8 (§12 on MountainCar).", "", *tables(cells, table), "", *links, "",
-            "Per method, by those rules:", "", *answers(cells, table)]
+    budget = (
+        "the QUICK budget (a test, not a result)"
+        if quick
+        else f"preset defaults ({config.total_steps // 1000}k steps, {stop}, the sample-efficiency protocol)"
+    )
+    return [
+        f"{task}, {budget}; every method with demonstrations "
+        f"has up to {seeds} seeds per cell, plain DQN one set for all cells; BC alone is the MLE BC model on the "
+        "cell's demonstrations, played greedily without RL (no interaction beyond the demonstrations). "
+        "Rules: docs/PREREGISTRATION.md §8 (§12 on MountainCar).",
+        "",
+        *tables(cells, table),
+        "",
+        *links,
+        "",
+        "Per method, by those rules:",
+        "",
+        *answers(cells, table),
+    ]
 
 
-def run_grid(out: str | Path, quick: bool = False, seeds: int | None = None, workers: int = 2,
-             progress: Callable[[str], None] = print, tasks: tuple[str, ...] | None = None) -> Path:
+def run_grid(
+    out: str | Path,
+    quick: bool = False,
+    seeds: int | None = None,
+    workers: int = 2,
+    progress: Callable[[str], None] = print,
+    tasks: tuple[str, ...] | None = None,
+) -> Path:
     """Every missing run of the grid on `tasks` (default: all) and of BC alone into `out`, then
     OUT/GRID.md and its heatmaps (every task's, whatever ran)."""
     out = Path(out)
     tasks = tasks or grid_tasks(quick)
     arms = [a for task in tasks for a in grid_arms(task, quick)]
-    run_suite(arms, seeds, out, workers, progress=progress, name="demos (quick)" if quick else f"demos ({', '.join(tasks)})")
+    run_suite(
+        arms, seeds, out, workers, progress=progress, name="demos (quick)" if quick else f"demos ({', '.join(tasks)})"
+    )
     run_imitation(out, quick, progress, tasks)
     section = grid_section(group_arms(load_runs(out)), out, out / "figures", out, quick, tasks if quick else None)
     write_text(out / GRID_FILE, "\n".join(["# Demonstration quality × quantity", "", *section, ""]))
     progress(f"wrote {out / GRID_FILE}")
     return out / GRID_FILE
-

@@ -21,13 +21,13 @@ from pathlib import Path
 import keras
 import numpy as np
 
-from ..bc import build_bc_model
-from ..evaluation import GreedyPolicy, evaluate
-from ..files import write_text
-from ..seeds import final_eval_seed
-from ..training import demonstrations, fit_bc
-from .suites import Arm, grid_arms, grid_tasks
-from ..provenance import provenance
+from dqfd_bc_keras.core.bc import build_bc_model
+from dqfd_bc_keras.evaluation import GreedyPolicy, evaluate
+from dqfd_bc_keras.experiments.suites import Arm, grid_arms, grid_tasks
+from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.runs.provenance import provenance
+from dqfd_bc_keras.seeds import final_eval_seed
+from dqfd_bc_keras.training.loop import demonstrations, fit_bc
 
 IMITATION_DIR = "bc-alone"
 """The folder of the suite directory that holds BC alone's results (exported with the runs)."""
@@ -35,8 +35,12 @@ IMITATION_DIR = "bc-alone"
 
 def imitation_arms(quick_budget: bool = False, tasks: tuple[str, ...] | None = None) -> list[Arm]:
     """One arm per grid cell of each task, named as its `ce` arm with `bc-alone` for the loss."""
-    return [dataclasses.replace(a, expert_loss="bc-alone") for task in tasks or grid_tasks(quick_budget)
-            for a in grid_arms(task, quick_budget) if a.expert_loss == "ce"]
+    return [
+        dataclasses.replace(a, expert_loss="bc-alone")
+        for task in tasks or grid_tasks(quick_budget)
+        for a in grid_arms(task, quick_budget)
+        if a.expert_loss == "ce"
+    ]
 
 
 def imitate(a: Arm, seed: int) -> dict:
@@ -46,17 +50,35 @@ def imitate(a: Arm, seed: int) -> dict:
     keras.utils.set_random_seed(config.seed)
     bc = build_bc_model(config, data.meta.obs_dim, data.meta.n_actions, data.obs_scale())
     accuracy = fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
-    result = evaluate(GreedyPolicy.from_model(bc), config.task, config.final_eval_episodes,
-                      final_eval_seed(seed), config.timeout, config.max_steps,
-                      config.env_kwargs)
-    return {"config": {k: v for k, v in config.to_dict().items() if k in ("task", "expert", "expert_epsilon",
-                                                                          "demo_episodes", "bc_epochs", "seed")},
-            "demo_transitions": len(data.obs), "demonstrator_return": float(np.mean(data.meta.plain_returns)),
-            "train_accuracy": accuracy, **result.to_dict(), "provenance": provenance()}
+    result = evaluate(
+        GreedyPolicy.from_model(bc),
+        config.task,
+        config.final_eval_episodes,
+        final_eval_seed(seed),
+        config.timeout,
+        config.max_steps,
+        config.env_kwargs,
+    )
+    return {
+        "config": {
+            k: v
+            for k, v in config.to_dict().items()
+            if k in ("task", "expert", "expert_epsilon", "demo_episodes", "bc_epochs", "seed")
+        },
+        "demo_transitions": len(data.obs),
+        "demonstrator_return": float(np.mean(data.meta.plain_returns)),
+        "train_accuracy": accuracy,
+        **result.to_dict(),
+        "provenance": provenance(),
+    }
 
 
-def run_imitation(out: str | Path, quick_budget: bool = False, progress: Callable[[str], None] = print,
-                  tasks: tuple[str, ...] | None = None) -> int:
+def run_imitation(
+    out: str | Path,
+    quick_budget: bool = False,
+    progress: Callable[[str], None] = print,
+    tasks: tuple[str, ...] | None = None,
+) -> int:
     """Every missing (cell, seed) of BC alone on `tasks` (default: all the grid's) into `out`; returns how many ran."""
     ran = 0
     for a in imitation_arms(quick_budget, tasks):
@@ -66,8 +88,10 @@ def run_imitation(out: str | Path, quick_budget: bool = False, progress: Callabl
                 continue
             result = imitate(a, seed)
             write_text(path, json.dumps(result, indent=1) + "\n")
-            progress(f"{a.name} seed{seed}: {result['demo_transitions']} demo transitions, "
-                     f"accuracy {result['train_accuracy']:.3f}, return {result['mean_return']:.1f}")
+            progress(
+                f"{a.name} seed{seed}: {result['demo_transitions']} demo transitions, "
+                f"accuracy {result['train_accuracy']:.3f}, return {result['mean_return']:.1f}"
+            )
             ran += 1
     return ran
 
@@ -77,5 +101,8 @@ def load_imitation(suite_dir: Path) -> dict[str, list[dict]]:
     root = suite_dir / IMITATION_DIR
     if not root.is_dir():
         return {}
-    return {d.name: [json.loads(p.read_text()) for p in sorted(d.glob("seed*.json"), key=lambda p: int(p.stem[4:]))]
-            for d in sorted(root.iterdir()) if d.is_dir()}
+    return {
+        d.name: [json.loads(p.read_text()) for p in sorted(d.glob("seed*.json"), key=lambda p: int(p.stem[4:]))]
+        for d in sorted(root.iterdir())
+        if d.is_dir()
+    }

@@ -13,8 +13,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ..errors import ConfigError
-from ..tasks import find_preset
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.tasks import find_preset
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class LabSettings:
     report compares our final returns with; pinned by tests/test_efficiency.py."""
     grid_teachers: Mapping[tuple[str, float], float] = field(default_factory=dict)
     """(expert, ε) → mean plain return over 100 episodes of each teacher of the quality × quantity
-    grid (`python -m dqfd_bc_keras.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
+    grid (`python -m dqfd_bc_keras.demos.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
     ablation_metric: str | None = None
     """The metric the ablations are judged on (claims.py's ABLATION_MARGINS); None: no ablations."""
     calibrate: bool = False
@@ -39,17 +39,33 @@ class LabSettings:
 
 NO_SETTINGS = LabSettings()
 LAB_SETTINGS: dict[str, LabSettings] = {
-    "cartpole": LabSettings(efficiency_demos=5, target_ratio=10.0, ablation_metric="mean_train_return",
-                            calibrate=True, grid_teachers={("strong", 0.0): 500.0, ("imperfect", 0.0): 198.06,
-                                                           ("strong", 0.2): 495.54, ("strong", 0.5): 169.67}),
-    "mountaincar": LabSettings(efficiency_demos=10, target_ratio=10.0, calibrate=True,
-                               grid_teachers={("strong", 0.0): -106.39, ("imperfect", 0.0): -120.02,
-                                              ("strong", 0.2): -145.22, ("strong", 0.5): -189.23}),
+    "cartpole": LabSettings(
+        efficiency_demos=5,
+        target_ratio=10.0,
+        ablation_metric="mean_train_return",
+        calibrate=True,
+        grid_teachers={
+            ("strong", 0.0): 500.0,
+            ("imperfect", 0.0): 198.06,
+            ("strong", 0.2): 495.54,
+            ("strong", 0.5): 169.67,
+        },
+    ),
+    "mountaincar": LabSettings(
+        efficiency_demos=10,
+        target_ratio=10.0,
+        calibrate=True,
+        grid_teachers={
+            ("strong", 0.0): -106.39,
+            ("imperfect", 0.0): -120.02,
+            ("strong", 0.2): -145.22,
+            ("strong", 0.5): -189.23,
+        },
+    ),
     "mountaincar-goals": LabSettings(ablation_metric="goals_first30"),
     "acrobot": LabSettings(efficiency_demos=10, target_ratio=5.0, teacher_return=-112.68),
     "lunarlander": LabSettings(efficiency_demos=10, target_ratio=5.0, teacher_return=129.03),
-    "minatar-breakout": LabSettings(target_ratio=5.0,
-                                    grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
+    "minatar-breakout": LabSettings(target_ratio=5.0, grid_teachers={("strong", 0.0): 79.93, ("imperfect", 0.0): 8.58}),
     "minatar-freeway": LabSettings(grid_teachers={("strong", 0.0): 65.85, ("imperfect", 0.0): 15.72}),
 }
 """Every task with settings by name, the package's presets first, in the order they are registered."""

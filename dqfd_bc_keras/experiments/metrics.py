@@ -10,8 +10,8 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
-from ..envs import get_task
-from .data import FinishedRun
+from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.experiments.data import FinishedRun
 
 EARLY_EPISODES = 30
 """C4's "early in training": the first 30 training episodes."""
@@ -19,22 +19,21 @@ PEAK_FRACTION, COLLAPSE_FRACTION = 0.98, 0.5
 """A collapse (the paper's perturbation): plain return < 0.5 × limit after the first episode ≥ 0.98 × limit."""
 METRICS = {
     "episodes_to_solve": "training episodes until the early-stopping rule fired (the last `early_stop_window` "
-                         "task returns all ≥ `early_stop_fraction` × limit); a run in which it never fired is "
-                         "censored as ∞, so it ranks after every finished run (medians and rank tests, never a mean)",
+    "task returns all ≥ `early_stop_fraction` × limit); a run in which it never fired is "
+    "censored as ∞, so it ranks after every finished run (medians and rank tests, never a mean)",
     "unfinished": "1 if the early-stopping rule never fired within the step budget, else 0",
     "mean_train_return": "mean plain-env return over all training episodes",
     "collapses": f"episodes with plain return < {COLLAPSE_FRACTION} × limit after the first episode whose task "
-                 f"return ≥ {PEAK_FRACTION} × limit",
+    f"return ≥ {PEAK_FRACTION} × limit",
     "collapsed": "1 if the run has at least one collapse, else 0",
     "goals_first30": f"mean flags reached per episode over the first {EARLY_EPISODES} training episodes "
-                     "(all, if fewer)",
+    "(all, if fewer)",
     "goals_all": "mean flags reached per episode over all training episodes",
     "final_eval": "mean return of the final greedy evaluation (eval.json) on the plain env",
     "interactions_to_threshold": "interactions (every env step the learner's data came from, roll-outs included) "
-                                 "at the first grid evaluation whose mean return ≥ the plain env's solved "
-                                 "threshold; ∞ if none did (medians and rank tests)",
+    "at the first grid evaluation whose mean return ≥ the plain env's solved "
+    "threshold; ∞ if none did (medians and rank tests)",
 }
-
 
 
 def episodes_to_solve(run: FinishedRun) -> int | None:
@@ -67,7 +66,7 @@ def collapses(run: FinishedRun) -> int:
     peaks = np.flatnonzero(run.column("return") >= PEAK_FRACTION * run.config.limit)
     if peaks.size == 0:
         return 0
-    return int(np.sum(run.column("plain_return")[peaks[0] + 1:] < COLLAPSE_FRACTION * run.config.limit))
+    return int(np.sum(run.column("plain_return")[peaks[0] + 1 :] < COLLAPSE_FRACTION * run.config.limit))
 
 
 def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> float | None:
@@ -78,8 +77,9 @@ def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> fl
 def interactions_to_threshold(run: FinishedRun) -> float:
     """Counted interactions at the first evaluation that reaches the plain env's threshold; inf if
     none did."""
-    step = first_reaching(((e["interactions"], e["mean_return"]) for e in run.evals),
-                          get_task(run.config.task).solved_return)
+    step = first_reaching(
+        ((e["interactions"], e["mean_return"]) for e in run.evals), get_task(run.config.task).solved_return
+    )
     return np.inf if step is None else step
 
 

@@ -30,16 +30,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import ArgumentParser, positive_int, run
-from ..config import QUICK
-from ..envs import get_task
-from ..files import write_text
-from ..errors import ConfigError
-from .data import ARCHIVE_SUFFIX, load_runs, open_suite
-from .efficiency import SB3_METHOD, ArmSteps, interaction_evals, save, table
-from .stats import bootstrap_ci
-from .suites import Arm, arm
-from .sweep import run_suite
+from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.core.config import QUICK
+from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, load_runs, open_suite
+from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, ArmSteps, interaction_evals, save, table
+from dqfd_bc_keras.experiments.stats import bootstrap_ci
+from dqfd_bc_keras.experiments.suites import Arm, arm
+from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.files import write_text
 
 TASK, ENV_ID = "minatar-breakout", "MinAtar/Breakout-v1"
 THRESHOLD = 10.0
@@ -62,24 +62,38 @@ QUICK_STEPS = {"ours": 300, "sb3": 500, "every": 150}
 def arms(quick: bool = False) -> list[Arm]:
     """Our arms of the study (with `quick`: one, on the QUICK budget)."""
     if quick:
-        budget = {"total_steps": QUICK_STEPS["ours"], "eval_every": QUICK_STEPS["every"],
-                  "checkpoint_every": QUICK_STEPS["every"]}
+        budget = {
+            "total_steps": QUICK_STEPS["ours"],
+            "eval_every": QUICK_STEPS["every"],
+            "checkpoint_every": QUICK_STEPS["every"],
+        }
         return [Arm(TASK, "bootstrap", "bayes", tuple({**QUICK, **budget}.items()), "pixels-quick", 1)]
     return [arm(TASK, "bootstrap", loss, SEEDS, total_steps=OURS_STEPS, **PROTOCOL) for loss in LOSSES]
 
 
-def sb3(seeds: int, workers: int, out: Path, quick: bool, no_run: bool,
-        progress: Callable[[str], None] = print) -> Curves | None:
+def sb3(
+    seeds: int, workers: int, out: Path, quick: bool, no_run: bool, progress: Callable[[str], None] = print
+) -> Curves | None:
     """SB3's seeds whose files under `out/sb3-dqn/` are missing or stale, on a process pool (none
     with `no_run`), then the arm of every current file."""
-    from . import sb3_pixels
+    from dqfd_bc_keras.experiments import sb3_pixels
 
     budget = QUICK_STEPS["sb3"] if quick else SB3_STEPS
     every = QUICK_STEPS["every"] if quick else PROTOCOL["eval_every"]
     episodes = 2 if quick else PROTOCOL["eval_episodes"]
     limit = get_task(TASK).max_steps
-    jobs = {seed: (ENV_ID, seed, budget, every, episodes, limit,
-                   out / "sb3-dqn" / f"seed{seed}{'-quick' if quick else ''}.json") for seed in range(seeds)}
+    jobs = {
+        seed: (
+            ENV_ID,
+            seed,
+            budget,
+            every,
+            episodes,
+            limit,
+            out / "sb3-dqn" / f"seed{seed}{'-quick' if quick else ''}.json",
+        )
+        for seed in range(seeds)
+    }
     wanted = {seed: sb3_pixels.settings(*job[:6]) for seed, job in jobs.items()}
     todo = [] if no_run else [job for seed, job in jobs.items() if not sb3_pixels.current(job[6], wanted[seed])]
     progress(f"SB3 DQN on {ENV_ID}: {len(jobs)} runs, {len(jobs) - len(todo)} current, {len(todo)} to run")
@@ -88,8 +102,10 @@ def sb3(seeds: int, workers: int, out: Path, quick: bool, no_run: bool,
             futures = [pool.submit(sb3_pixels.sb3_minatar_run, *job) for job in todo]
             for done, future in enumerate(as_completed(futures), start=1):
                 record = future.result()
-                progress(f"[{done}/{len(todo)}] sb3 seed{record['seed']}: final mean return "
-                         f"{record['evaluations'][-1]['mean_return']:.2f} ({record['seconds']:.0f} s)")
+                progress(
+                    f"[{done}/{len(todo)}] sb3 seed{record['seed']}: final mean return "
+                    f"{record['evaluations'][-1]['mean_return']:.2f} ({record['seconds']:.0f} s)"
+                )
     records = [json.loads(job[6].read_text()) for seed, job in jobs.items() if sb3_pixels.current(job[6], wanted[seed])]
     if not records:
         return None
@@ -97,8 +113,14 @@ def sb3(seeds: int, workers: int, out: Path, quick: bool, no_run: bool,
     return SB3_METHOD, evals, [e[-1][1] for e in evals]
 
 
-def measure(seeds: int, workers: int, out: Path, quick: bool = False, no_run: bool = False,
-            progress: Callable[[str], None] = print) -> list[Curves]:
+def measure(
+    seeds: int,
+    workers: int,
+    out: Path,
+    quick: bool = False,
+    no_run: bool = False,
+    progress: Callable[[str], None] = print,
+) -> list[Curves]:
     """Run what is missing (with `no_run`, nothing), then every arm's curves; their steps to
     THRESHOLD are saved to out/pixels.json."""
     seeds = 1 if quick else seeds
@@ -108,8 +130,11 @@ def measure(seeds: int, workers: int, out: Path, quick: bool = False, no_run: bo
     curves = ours(suite, seeds, out)
     baseline = sb3(seeds, workers, out, quick, no_run, progress)
     curves += [baseline] if baseline is not None else []
-    save(out / "pixels.json", {**PROTOCOL, "threshold": THRESHOLD, "ours_steps": OURS_STEPS, "sb3_steps": SB3_STEPS},
-         at(curves, THRESHOLD))
+    save(
+        out / "pixels.json",
+        {**PROTOCOL, "threshold": THRESHOLD, "ours_steps": OURS_STEPS, "sb3_steps": SB3_STEPS},
+        at(curves, THRESHOLD),
+    )
     return curves
 
 
@@ -122,8 +147,12 @@ def ours(suite: Sequence[Arm], seeds: int, out: Path) -> list[Curves]:
     """Each arm's complete runs under `out`, stepped by `interactions` (every one counted)."""
     steps = []
     for a in suite:
-        runs = [r for seed in range(seeds) if (out / a.name / f"seed{seed}" / "eval.json").is_file()
-                for r in load_runs(out / a.name / f"seed{seed}")]
+        runs = [
+            r
+            for seed in range(seeds)
+            if (out / a.name / f"seed{seed}" / "eval.json").is_file()
+            for r in load_runs(out / a.name / f"seed{seed}")
+        ]
         if runs:
             steps.append((a.expert_loss, [interaction_evals(r) for r in runs], [r.final["mean_return"] for r in runs]))
     return steps
@@ -134,8 +163,9 @@ def final_table(steps: Sequence[ArmSteps]) -> list[str]:
     lines = ["| arm | final return, mean [95% CI] | per seed |", "| --- | --- | --- |"]
     for s in steps:
         low, high = bootstrap_ci(np.array(s.final), np.mean, 0.95, 10_000, 0)
-        lines.append(f"| {s.label} | {np.mean(s.final):.2f} [{low:.2f}, {high:.2f}] | "
-                     f"{', '.join(f'{f:.1f}' for f in s.final)} |")
+        lines.append(
+            f"| {s.label} | {np.mean(s.final):.2f} [{low:.2f}, {high:.2f}] | {', '.join(f'{f:.1f}' for f in s.final)} |"
+        )
     return lines
 
 
@@ -156,37 +186,60 @@ def goal_verdict(steps: Sequence[ArmSteps]) -> str:
     if met:
         return f"met by {', '.join(met)}."
     if not np.isfinite(sb3_median) and all(not np.isfinite(np.median(s.steps)) for s in ours_):
-        return (f"not met: neither SB3 (in {SB3_STEPS:,} steps) nor any of our arms (in {OURS_STEPS:,}) has a median "
-                f"that reaches {THRESHOLD:g}, so no ratio exists.")
+        return (
+            f"not met: neither SB3 (in {SB3_STEPS:,} steps) nor any of our arms (in {OURS_STEPS:,}) has a median "
+            f"that reaches {THRESHOLD:g}, so no ratio exists."
+        )
     return "not met."
 
 
 def report(curves: Sequence[Curves]) -> str:
     """The study as markdown: protocol, interactions to the threshold, final returns, the anchor."""
     steps = at(curves, THRESHOLD)
-    from .sb3_pixels import MINATAR_DQN_RETURNS
+    from dqfd_bc_keras.experiments.sb3_pixels import MINATAR_DQN_RETURNS
 
     verdict = goal_verdict(steps)
-    anchor = ", ".join(f"{frames:,} frames ≈ {value:g}" for frames, value in MINATAR_DQN_RETURNS["MinAtar/Breakout"].items())
-    return "\n".join([
-        "# MinAtar Breakout: DQfD on frames against SB3's DQN", "",
-        "Generated by `python -m dqfd_bc_keras.experiments.pixels --out docs/data/pixels.tar.xz --no-run --report "
-        "docs/PIXELS.md` from the per-run files in docs/data/pixels.tar.xz (rules: docs/PREREGISTRATION.md §9).", "",
-        f"Protocol: {TASK} (MinAtar/Breakout-v1, minimal actions, sticky actions 0.1, at most "
-        f"{get_task(TASK).max_steps} steps), evaluations of {PROTOCOL['eval_episodes']} greedy episodes at 0 and "
-        f"every {PROTOCOL['eval_every']:,} interactions, threshold {THRESHOLD:g}; ours {OURS_STEPS:,} interactions "
-        f"per run (10 demonstrated episodes of the imperfect expert, 8.58 over 100 episodes, are interactions of the "
-        f"expert, not the learner's), SB3 {SB3_STEPS:,}. Exploratory: {SEEDS} seeds per arm, no power plan.", "",
-        f"**The 5× goal (pre-registered): {verdict}**", "",
-        "## Interactions to the threshold", "", *table(list(steps)), "",
-        "## Final greedy returns", "", *final_table(steps), "",
-        f"## Post hoc: interactions to {POST_HOC_THRESHOLD:g}", "",
-        f"Not pre-registered: {POST_HOC_THRESHOLD:g} (the published DQN's level after 100,000 frames) was chosen after "
-        f"the runs had shown that no arm's median reaches {THRESHOLD:g}. Descriptive only; the goal column applies "
-        "the same 5× rule.", "", *table(at(curves, POST_HOC_THRESHOLD)), "",
-        "## Second anchor", "",
-        f"MinAtar's own DQN on Breakout (Young & Tian 2019; read off the MinAtar README's curves, ε = 0.1 training "
-        f"returns, 30 seeds, 6 actions): {anchor}. The threshold is its 5M-frame level.", ""])
+    anchor = ", ".join(
+        f"{frames:,} frames ≈ {value:g}" for frames, value in MINATAR_DQN_RETURNS["MinAtar/Breakout"].items()
+    )
+    return "\n".join(
+        [
+            "# MinAtar Breakout: DQfD on frames against SB3's DQN",
+            "",
+            "Generated by `python -m dqfd_bc_keras.experiments.pixels --out docs/data/pixels.tar.xz --no-run --report "
+            "docs/PIXELS.md` from the per-run files in docs/data/pixels.tar.xz (rules: docs/PREREGISTRATION.md §9).",
+            "",
+            f"Protocol: {TASK} (MinAtar/Breakout-v1, minimal actions, sticky actions 0.1, at most "
+            f"{get_task(TASK).max_steps} steps), evaluations of {PROTOCOL['eval_episodes']} greedy episodes at 0 and "
+            f"every {PROTOCOL['eval_every']:,} interactions, threshold {THRESHOLD:g}; ours {OURS_STEPS:,} interactions "
+            f"per run (10 demonstrated episodes of the imperfect expert, 8.58 over 100 episodes, are interactions of the "
+            f"expert, not the learner's), SB3 {SB3_STEPS:,}. Exploratory: {SEEDS} seeds per arm, no power plan.",
+            "",
+            f"**The 5× goal (pre-registered): {verdict}**",
+            "",
+            "## Interactions to the threshold",
+            "",
+            *table(list(steps)),
+            "",
+            "## Final greedy returns",
+            "",
+            *final_table(steps),
+            "",
+            f"## Post hoc: interactions to {POST_HOC_THRESHOLD:g}",
+            "",
+            f"Not pre-registered: {POST_HOC_THRESHOLD:g} (the published DQN's level after 100,000 frames) was chosen after "
+            f"the runs had shown that no arm's median reaches {THRESHOLD:g}. Descriptive only; the goal column applies "
+            "the same 5× rule.",
+            "",
+            *table(at(curves, POST_HOC_THRESHOLD)),
+            "",
+            "## Second anchor",
+            "",
+            f"MinAtar's own DQN on Breakout (Young & Tian 2019; read off the MinAtar README's curves, ε = 0.1 training "
+            f"returns, 30 seeds, 6 actions): {anchor}. The threshold is its 5M-frame level.",
+            "",
+        ]
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -27,15 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..files import write_text
-from .metrics import PER_RUN, interactions_to_threshold
-from .arms import ArmRuns, find_arm, group_arms
-from .claims import CLAIMS, judge
-from .data import REPLICATIONS, FinishedRun, load_runs
-from .stats import mann_whitney
-from .suites import arm
-from .sweep import Job, run_jobs
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm, group_arms
+from dqfd_bc_keras.experiments.claims import CLAIMS, judge
+from dqfd_bc_keras.experiments.data import REPLICATIONS, FinishedRun, load_runs
+from dqfd_bc_keras.experiments.metrics import PER_RUN, interactions_to_threshold
+from dqfd_bc_keras.experiments.stats import mann_whitney
+from dqfd_bc_keras.experiments.suites import arm
+from dqfd_bc_keras.experiments.sweep import Job, run_jobs
+from dqfd_bc_keras.files import write_text
 
 DEFAULT_ARCHIVE = "docs/data/results.tar.xz"
 METRICS: dict[str, Callable[[FinishedRun], float]] = {
@@ -57,8 +57,11 @@ def claim_metrics(arms: list[ArmRuns], archived: ArmRuns) -> dict[str, Callable[
         for setting in claim.settings:
             pairs = setting.pairs(arms)
             if pairs and pairs[0][1] is not None and any(archived is side for side in pairs[0]):
-                found |= {c.metric: PER_RUN[c.metric] for c in judge(claim, *pairs[0]).comparisons
-                          if c.metric not in SAME_AS_METRICS}
+                found |= {
+                    c.metric: PER_RUN[c.metric]
+                    for c in judge(claim, *pairs[0]).comparisons
+                    if c.metric not in SAME_AS_METRICS
+                }
     return found
 
 
@@ -83,8 +86,10 @@ class Comparison:
             value = float(np.median(values))
             return "∞" if np.isinf(value) else f"{value:g}"
 
-        return (f"| {self.metric} | {len(self.archived)} | {median(self.archived)} | {len(self.fresh)} | "
-                f"{median(self.fresh)} | {self.p:.2f} |")
+        return (
+            f"| {self.metric} | {len(self.archived)} | {median(self.archived)} | {len(self.fresh)} | "
+            f"{median(self.fresh)} | {self.p:.2f} |"
+        )
 
 
 def parse_seeds(text: str) -> range:
@@ -107,22 +112,33 @@ def archived_runs(archive: str | Path, name: str) -> tuple[list[FinishedRun], li
     if not found:
         names = sorted({run.path.parent.name for run in runs})
         near = difflib.get_close_matches(name, names, n=1)
-        raise ConfigError(f"{archive} has no arm {name!r}" + (f"; did you mean {near[0]!r}?" if near else
-                                                               f" ({len(names)} arms, e.g. {names[0]!r})"))
-    configs = {json.dumps({k: v for k, v in run.config.to_dict().items() if k != "seed"}, sort_keys=True)
-               for run in found}
+        raise ConfigError(
+            f"{archive} has no arm {name!r}"
+            + (f"; did you mean {near[0]!r}?" if near else f" ({len(names)} arms, e.g. {names[0]!r})")
+        )
+    configs = {
+        json.dumps({k: v for k, v in run.config.to_dict().items() if k != "seed"}, sort_keys=True) for run in found
+    }
     if len(configs) > 1:
         raise ConfigError(f"{archive}: the runs of {name!r} do not share one config")
     return found, runs
 
 
-def replicate(name: str, seeds: range, out: str | Path, archive: str | Path = DEFAULT_ARCHIVE, workers: int = 2,
-              progress: Callable[[str], None] = print) -> list[Comparison]:
+def replicate(
+    name: str,
+    seeds: range,
+    out: str | Path,
+    archive: str | Path = DEFAULT_ARCHIVE,
+    workers: int = 2,
+    progress: Callable[[str], None] = print,
+) -> list[Comparison]:
     """Rerun arm `name` of `archive` at `seeds` (none of them archived) into `out`; compare."""
     runs, everything = archived_runs(archive, name)
     taken = sorted(set(seeds) & {run.config.seed for run in runs})
     if taken:
-        raise ConfigError(f"--seeds: the archive already has seed(s) {taken} of {name!r}; fresh seeds are ones it has not")
+        raise ConfigError(
+            f"--seeds: the archive already has seed(s) {taken} of {name!r}; fresh seeds are ones it has not"
+        )
     config = runs[0].config.to_dict()
     fields = {k: v for k, v in config.items() if k not in ("task", "timeout", "expert_loss", "seed")}
     rerun = arm(config["task"], config["timeout"], config["expert_loss"], len(seeds), **fields)
@@ -135,13 +151,19 @@ def replicate(name: str, seeds: range, out: str | Path, archive: str | Path = DE
     fresh = [run for run in load_runs(out / rerun.name) if run.config.seed in seeds]
     arms = group_arms(everything)
     comparisons = compare(next(a for a in arms if a.runs[0].path.parent.name == name), fresh, arms)
-    table = "\n".join([
-        f"# Replication of {name}", "",
-        f"Archive: {archive} ({len(runs)} runs, seeds {min(r.config.seed for r in runs)}–"
-        f"{max(r.config.seed for r in runs)}). Fresh: seeds {seeds.start}–{seeds.stop - 1} on this machine.", "",
-        "| metric | archived runs | archived median | fresh runs | fresh median | rank test p |",
-        "| --- | ---: | ---: | ---: | ---: | ---: |", *(c.row() for c in comparisons), "",
-    ])
+    table = "\n".join(
+        [
+            f"# Replication of {name}",
+            "",
+            f"Archive: {archive} ({len(runs)} runs, seeds {min(r.config.seed for r in runs)}–"
+            f"{max(r.config.seed for r in runs)}). Fresh: seeds {seeds.start}–{seeds.stop - 1} on this machine.",
+            "",
+            "| metric | archived runs | archived median | fresh runs | fresh median | rank test p |",
+            "| --- | ---: | ---: | ---: | ---: | ---: |",
+            *(c.row() for c in comparisons),
+            "",
+        ]
+    )
     write_text(out / "REPLICATE.md", table)
     progress(table)
     return comparisons
@@ -160,14 +182,23 @@ def replicated(arms: list[ArmRuns], directory: Path) -> list[tuple[ArmRuns, ArmR
 
 def replication_section(arms: list[ArmRuns], directory: Path) -> list[str]:
     """Each arm rerun under the suite's REPLICATIONS against the suite's runs of the same config."""
-    rows = [f"| {archived.label} | seeds {rerun.runs[0].config.seed}–{rerun.runs[-1].config.seed} {c.row()}"
-            for archived, rerun, comparisons in replicated(arms, directory) for c in comparisons]
+    rows = [
+        f"| {archived.label} | seeds {rerun.runs[0].config.seed}–{rerun.runs[-1].config.seed} {c.row()}"
+        for archived, rerun, comparisons in replicated(arms, directory)
+        for c in comparisons
+    ]
     if not rows:
-        return [f"Not run: `python -m dqfd_bc_keras.experiments replicate ARM --seeds 100-107 --out "
-                f"SUITE/{REPLICATIONS}` reruns an arm at fresh seeds."]
-    return ["Arms rerun at fresh seeds (`experiments replicate`), against the archive's runs of the same config: "
-            "medians, and a two-sided Mann–Whitney test per metric (a small p says the two samples differ; a "
-            "large one does not prove they agree). The reruns are of newer code than most archived runs "
-            "(*Provenance*), so they check the distributions, not the bits.", "",
-            "| arm | fresh | metric | archived runs | archived median | fresh runs | fresh median | rank test p |",
-            "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |", *rows]
+        return [
+            f"Not run: `python -m dqfd_bc_keras.experiments replicate ARM --seeds 100-107 --out "
+            f"SUITE/{REPLICATIONS}` reruns an arm at fresh seeds."
+        ]
+    return [
+        "Arms rerun at fresh seeds (`experiments replicate`), against the archive's runs of the same config: "
+        "medians, and a two-sided Mann–Whitney test per metric (a small p says the two samples differ; a "
+        "large one does not prove they agree). The reruns are of newer code than most archived runs "
+        "(*Provenance*), so they check the distributions, not the bits.",
+        "",
+        "| arm | fresh | metric | archived runs | archived median | fresh runs | fresh median | rank test p |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |",
+        *rows,
+    ]

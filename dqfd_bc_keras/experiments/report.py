@@ -18,32 +18,43 @@ from pathlib import Path
 
 import numpy as np
 
-from . import figures
-from .arms import ArmRuns, bayes_ce_pairs, group_arms, preset_distance
-from .claims import (ALPHA, CLAIMS, Comparison, ablation_pairs, dynamic_default, flips, judge, judge_ablation,
-                     rule_text, too_few)
-from .metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
-from ..envs import get_task
-from ..files import write_text
-from .plans import PLANNED_SEEDS
-from .baselines_table import baselines_section, demos_text
-from .data import ARCHIVE_SUFFIX, RunFileError, load_runs, open_suite
-from .efficiency import efficiency_section
-from .estimators import estimators_section
-from .grid import grid_only, grid_section
-from .replicate import replication_section
-from .summary import summary
-from .stats import CensoredSummary, Summary
-
+from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.experiments import figures
+from dqfd_bc_keras.experiments.arms import ArmRuns, bayes_ce_pairs, group_arms, preset_distance
+from dqfd_bc_keras.experiments.baselines_table import baselines_section, demos_text
+from dqfd_bc_keras.experiments.claims import (
+    ALPHA,
+    CLAIMS,
+    Comparison,
+    ablation_pairs,
+    dynamic_default,
+    flips,
+    judge,
+    judge_ablation,
+    rule_text,
+    too_few,
+)
+from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, RunFileError, load_runs, open_suite
+from dqfd_bc_keras.experiments.efficiency import efficiency_section
+from dqfd_bc_keras.experiments.estimators import estimators_section
+from dqfd_bc_keras.experiments.grid import grid_only, grid_section
+from dqfd_bc_keras.experiments.metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
+from dqfd_bc_keras.experiments.plans import PLANNED_SEEDS
+from dqfd_bc_keras.experiments.replicate import replication_section
+from dqfd_bc_keras.experiments.stats import CensoredSummary, Summary
+from dqfd_bc_keras.experiments.summary import summary
+from dqfd_bc_keras.files import write_text
 
 ARCHIVE = "docs/data/results.tar.xz"
 """Where the per-run data behind docs/RESULTS.md are committed."""
-REGENERATE = (f"python -m dqfd_bc_keras.experiments report {ARCHIVE} --docs",
-              "python -m dqfd_bc_keras.experiments run all --out results && "
-              "python -m dqfd_bc_keras.experiments calibrate --out results/calibration.json && "
-              "python -m dqfd_bc_keras.experiments grid --out results && "
-              "python -m dqfd_bc_keras.experiments efficiency --out results && "
-              f"python -m dqfd_bc_keras.experiments export results --out {ARCHIVE}")
+REGENERATE = (
+    f"python -m dqfd_bc_keras.experiments report {ARCHIVE} --docs",
+    "python -m dqfd_bc_keras.experiments run all --out results && "
+    "python -m dqfd_bc_keras.experiments calibrate --out results/calibration.json && "
+    "python -m dqfd_bc_keras.experiments grid --out results && "
+    "python -m dqfd_bc_keras.experiments efficiency --out results && "
+    f"python -m dqfd_bc_keras.experiments export results --out {ARCHIVE}",
+)
 """This report from the committed per-run data (no training), and every run, the benchmark and the
 archive behind it (finished runs are skipped, so the second also resumes a cut-off sweep)."""
 
@@ -76,17 +87,26 @@ def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
             reference = judge(claim, *pairs[0]).verdict
             for i, (bayes, ce) in enumerate(pairs):
                 result = judge(claim, bayes, ce)
-                per_arm = (too_few(bayes, ce) if ce is not None and not result.comparisons else _cell(
-                    result.comparisons, lambda c: f"{c.metric}: bayes {c.bayes.format(2)} · ce {c.ce.format(2)}"))
+                per_arm = (
+                    too_few(bayes, ce)
+                    if ce is not None and not result.comparisons
+                    else _cell(
+                        result.comparisons, lambda c: f"{c.metric}: bayes {c.bayes.format(2)} · ce {c.ce.format(2)}"
+                    )
+                )
                 if i == 0:
                     diff = _cell(result.comparisons, lambda c: c.interval())
                     test = _cell(result.comparisons, lambda c: f"{c.test} p = {c.p:.3g}")
                     power = "—" if result.power is None else f"sd {result.sd:.3g} · power {result.power:.2f}"
-                    claims.append(f"| {claim.id} | {where} | {claim.statement} | {per_arm} | {diff} | {test} | "
-                                  f"{len(bayes.runs)}, {len(ce.runs)} · {power} | **{result.verdict}** |")
+                    claims.append(
+                        f"| {claim.id} | {where} | {claim.statement} | {per_arm} | {diff} | {test} | "
+                        f"{len(bayes.runs)}, {len(ce.runs)} · {power} | **{result.verdict}** |"
+                    )
                 else:
-                    sensitivity.append(f"| {claim.id} | {bayes.label} | {ce.name if ce else '—'} | {per_arm} | "
-                                       f"{result.verdict} | {flips(result.verdict, reference)} |")
+                    sensitivity.append(
+                        f"| {claim.id} | {bayes.label} | {ce.name if ce else '—'} | {per_arm} | "
+                        f"{result.verdict} | {flips(result.verdict, reference)} |"
+                    )
     return claims, sensitivity
 
 
@@ -99,8 +119,16 @@ def _per_seed(arms: list[ArmRuns]) -> str:
     for arm in arms:
         for run in arm.runs:
             transitions = run.demo_transitions
-            writer.writerow([arm.name, arm.setting, run.config.seed, *(f"{PER_RUN[m](run):.10g}" for m in PER_RUN),
-                             "" if transitions is None else transitions, len(run.dynamic_demos)])
+            writer.writerow(
+                [
+                    arm.name,
+                    arm.setting,
+                    run.config.seed,
+                    *(f"{PER_RUN[m](run):.10g}" for m in PER_RUN),
+                    "" if transitions is None else transitions,
+                    len(run.dynamic_demos),
+                ]
+            )
     return buffer.getvalue()
 
 
@@ -119,14 +147,17 @@ def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list
         ylabel = "flags reached per episode" if goals else "plain-env return per episode"
         window = SMOOTH_WINDOW if max(len(r.metrics) for a in members for r in a.runs) > SMOOTH_ABOVE else 1
         zoom = EARLY_EPISODES if goals else None
-        runs = {a.name: [figures.Trace(f"seed {r.config.seed}", r.column(column), PER_RUN[score](r), finished(r))
-                         for r in a.runs] for a in members}
+        runs = {
+            a.name: [
+                figures.Trace(f"seed {r.config.seed}", r.column(column), PER_RUN[score](r), finished(r)) for r in a.runs
+            ]
+            for a in members
+        }
         pair = next((p for p in bayes_ce_pairs(members, task, timeout) if p[1] is not None), members)
         main = [a.name for a in members if preset_distance(a) == 0] or list(runs)
         stem = figures_dir / setting.replace("/", "-")
         cases = [a.name for a in pair if a.name in main] or main
-        paths = figures.setting_figures(setting, {n: runs[n] for n in main}, cases, score, ylabel, stem, window,
-                                        zoom)
+        paths = figures.setting_figures(setting, {n: runs[n] for n in main}, cases, score, ylabel, stem, window, zoom)
         variants = [a.name for a in members if a.name not in main and not grid_only(a.config)]
         if variants:
             path = stem.with_name(f"{stem.name}-variants.png")
@@ -143,18 +174,29 @@ def _commit(commit: str | None, dirty: bool = False) -> str:
 
 def _sweeps(suite_dir: Path) -> list[str]:
     """The sweeps that produced the runs (experiments.SWEEP_LOG): suite, runs, workers, wall time, code."""
-    entries = [json.loads(line) for log in sorted(suite_dir.rglob("sweeps.jsonl"))
-               for line in log.read_text().splitlines() if line.strip()]
+    entries = [
+        json.loads(line)
+        for log in sorted(suite_dir.rglob("sweeps.jsonl"))
+        for line in log.read_text().splitlines()
+        if line.strip()
+    ]
     if not entries:
         return ["No sweep log (sweeps.jsonl) under the suite directory."]
-    rows = [f"| {e['suite']}{' (interrupted)' if e.get('interrupted') else ''} | {e['seeds']} | {e['runs']} | "
-            f"{e['workers']} × {e['backend']} | "
-            f"{e['seconds'] / 60:.1f} min | {e['ended']} | {_commit(e.get('code_commit'), e.get('dirty', False))} |"
-            for e in entries]
-    return ["Each sweep as logged by the runner (runs it ran, not those it found complete).", "",
-            "| suite | seeds | runs | workers | wall time | ended | code commit |",
-            "| --- | --- | --- | --- | --- | --- | --- |", *rows,
-            "", f"Sum: {sum(e['seconds'] for e in entries) / 60:.1f} min of wall time."]
+    rows = [
+        f"| {e['suite']}{' (interrupted)' if e.get('interrupted') else ''} | {e['seeds']} | {e['runs']} | "
+        f"{e['workers']} × {e['backend']} | "
+        f"{e['seconds'] / 60:.1f} min | {e['ended']} | {_commit(e.get('code_commit'), e.get('dirty', False))} |"
+        for e in entries
+    ]
+    return [
+        "Each sweep as logged by the runner (runs it ran, not those it found complete).",
+        "",
+        "| suite | seeds | runs | workers | wall time | ended | code commit |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+        *rows,
+        "",
+        f"Sum: {sum(e['seconds'] for e in entries) / 60:.1f} min of wall time.",
+    ]
 
 
 def _provenance(arms: list[ArmRuns]) -> str:
@@ -166,21 +208,33 @@ def _provenance(arms: list[ArmRuns]) -> str:
 
     def commits(key: str) -> str:
         counts = Counter(getattr(r.provenance, key) if r.provenance else None for r in runs)
-        return ", ".join(f"{_commit(c)} ({n} run{'s' * (n > 1)})"
-                         for c, n in sorted(counts.items(), key=lambda item: (item[0] is None, item[0] or "")))
+        return ", ".join(
+            f"{_commit(c)} ({n} run{'s' * (n > 1)})"
+            for c, n in sorted(counts.items(), key=lambda item: (item[0] is None, item[0] or ""))
+        )
 
     dirty = [f"{a.label} seed {r.config.seed}" for a in arms for r in a.runs if r.provenance and r.provenance.dirty]
-    flag = (f" **{len(dirty)} run(s) trained from uncommitted changes** (their commit does not reproduce them): "
-            f"{', '.join(dirty)}." if dirty else "")
-    return f"Provenance (provenance.json of each run): code {commits('code_commit')}; claims rules " \
-           f"{commits('rules_commit')}.{flag}"
+    flag = (
+        f" **{len(dirty)} run(s) trained from uncommitted changes** (their commit does not reproduce them): "
+        f"{', '.join(dirty)}."
+        if dirty
+        else ""
+    )
+    return (
+        f"Provenance (provenance.json of each run): code {commits('code_commit')}; claims rules "
+        f"{commits('rules_commit')}.{flag}"
+    )
 
 
 def _skipped(errors: list[RunFileError]) -> list[str]:
     if not errors:
         return []
-    return [f"**{len(errors)} run(s) skipped**, a file missing or unreadable:", "",
-            *(f"- `{e.file}`: {e.problem}" for e in errors), ""]
+    return [
+        f"**{len(errors)} run(s) skipped**, a file missing or unreadable:",
+        "",
+        *(f"- `{e.file}`: {e.problem}" for e in errors),
+        "",
+    ]
 
 
 NOTES = ("<!-- notes: hand-written, kept when the report is regenerated -->", "<!-- /notes -->")
@@ -190,7 +244,7 @@ def _notes(out_markdown: Path) -> list[str]:
     """The hand-written block (between the NOTES markers) of the file being replaced, if any."""
     text = out_markdown.read_text() if out_markdown.is_file() else ""
     start, end = text.find(NOTES[0]), text.find(NOTES[1])
-    return [text[start:end + len(NOTES[1])], ""] if 0 <= start < end else []
+    return [text[start : end + len(NOTES[1])], ""] if 0 <= start < end else []
 
 
 def default_location(source: str | os.PathLike) -> Path:
@@ -214,18 +268,29 @@ def _dynamic(arms: list[ArmRuns]) -> list[str]:
         cells = []
         for arm in (episodes, rollouts):
             steps = CensoredSummary.of(arm.values("interactions_to_threshold"))
-            extra = np.mean([sum(u.new_transitions or 0 for u in r.dynamic_demos) for r in arm.runs]
-                            ) if arm.config["dynamic_demos"] == "rollouts" else 0.0
+            extra = (
+                np.mean([sum(u.new_transitions or 0 for u in r.dynamic_demos) for r in arm.runs])
+                if arm.config["dynamic_demos"] == "rollouts"
+                else 0.0
+            )
             cells.append(f"{steps.format(0)} · {extra:,.0f} · {Summary.of(arm.values('final_eval')).format()}")
-        rows.append(f"| {episodes.setting} {episodes.config['expert_loss']} | {len(episodes.runs)}, "
-                    f"{len(rollouts.runs)} | {cells[0]} | {cells[1]} | {winner} |")
-    verdict = (f"**default: `{choice}`**" if choice else
-               f"not decided yet: {len(pairs)} of the rule's 4 pairs have run")
-    return [f"Rule (docs/PREREGISTRATION.md §2): {rule_text(dynamic_default)}", "",
-            "Per mode: interactions to threshold (median [95% CI], ∞ = never) · mean roll-out interactions per "
-            "run · final evaluation.", "",
-            "| setting, loss | seeds (episodes, rollouts) | `episodes` | `rollouts` | lower median |",
-            "| --- | --- | --- | --- | --- |", *rows, "", f"Verdict: {verdict}."]
+        rows.append(
+            f"| {episodes.setting} {episodes.config['expert_loss']} | {len(episodes.runs)}, "
+            f"{len(rollouts.runs)} | {cells[0]} | {cells[1]} | {winner} |"
+        )
+    verdict = f"**default: `{choice}`**" if choice else f"not decided yet: {len(pairs)} of the rule's 4 pairs have run"
+    return [
+        f"Rule (docs/PREREGISTRATION.md §2): {rule_text(dynamic_default)}",
+        "",
+        "Per mode: interactions to threshold (median [95% CI], ∞ = never) · mean roll-out interactions per "
+        "run · final evaluation.",
+        "",
+        "| setting, loss | seeds (episodes, rollouts) | `episodes` | `rollouts` | lower median |",
+        "| --- | --- | --- | --- | --- |",
+        *rows,
+        "",
+        f"Verdict: {verdict}.",
+    ]
 
 
 def _ablations(arms: list[ArmRuns]) -> list[str]:
@@ -237,22 +302,35 @@ def _ablations(arms: list[ArmRuns]) -> list[str]:
     for key, ablated, full in pairs:
         result = judge_ablation(ablated, full)
         if not result.comparisons:
-            rows.append(f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
-                        f"{len(full.runs)}, {len(ablated.runs)} | {too_few(full, ablated)} | — | — | — | "
-                        f"**{result.verdict}** |")
+            rows.append(
+                f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
+                f"{len(full.runs)}, {len(ablated.runs)} | {too_few(full, ablated)} | — | — | — | "
+                f"**{result.verdict}** |"
+            )
             continue
         [c] = result.comparisons
-        rows.append(f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
-                    f"{len(full.runs)}, {len(ablated.runs)} | {c.metric}: full {c.bayes.format(2)} · ablated "
-                    f"{c.ce.format(2)} | {c.interval()} | {c.test} p = {c.p:.3g} | {result.power:.2f} | "
-                    f"**{result.verdict}** |")
-    return [f"Rule (docs/PREREGISTRATION.md §6): {rule_text(judge_ablation)}", "",
-            "| setting, loss | switched off | seeds (full, ablated) | metric per arm | Δ full − ablated | test "
-            "| power | verdict |", "| --- | --- | --- | --- | --- | --- | --- | --- |", *rows]
+        rows.append(
+            f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
+            f"{len(full.runs)}, {len(ablated.runs)} | {c.metric}: full {c.bayes.format(2)} · ablated "
+            f"{c.ce.format(2)} | {c.interval()} | {c.test} p = {c.p:.3g} | {result.power:.2f} | "
+            f"**{result.verdict}** |"
+        )
+    return [
+        f"Rule (docs/PREREGISTRATION.md §6): {rule_text(judge_ablation)}",
+        "",
+        "| setting, loss | switched off | seeds (full, ablated) | metric per arm | Δ full − ablated | test "
+        "| power | verdict |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        *rows,
+    ]
 
 
-def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_dir: str | os.PathLike,
-           warn: Callable[[str], None] = warn) -> str:
+def report(
+    source: str | os.PathLike,
+    out_markdown: str | os.PathLike,
+    figures_dir: str | os.PathLike,
+    warn: Callable[[str], None] = warn,
+) -> str:
     """Write the RESULTS-style markdown for every complete run of `source` (a suite directory or
     an archive of one), its figures into `figures_dir` (linked relative to `out_markdown`) and
     PER_SEED beside it; return the markdown. A run with a missing or unreadable file is skipped:
@@ -271,40 +349,102 @@ def report(source: str | os.PathLike, out_markdown: str | os.PathLike, figures_d
         warn(f"{Path(source) / error.file}: {error.problem}; run skipped")
     claims, sensitivity = _claim_rows(arms)
     wall = sum(r.metrics[-1]["wall_time"] for a in arms for r in a.runs)
-    doc = ["# Results: the paper's claims over seeds", "", *opening,
-           f"{sum(len(a.runs) for a in arms)} complete runs in {len(arms)} arms of `{suite_name}`; total training "
-           f"wall time {wall / 60:.1f} min (sum over runs); every run's metrics in [{PER_SEED}]({PER_SEED}). "
-           "Regenerate it from the committed per-run data, without training:", "", f"    {REGENERATE[0]}", "",
-           "and the data themselves (then the line above):", "", f"    {REGENERATE[1]}", "", _provenance(arms), "", *_skipped(skipped),
-           *_notes(out_markdown), "## Claims", "",
-           "Metrics and rules were fixed before the runs (docs/PREREGISTRATION.md, `dqfd_bc_keras/experiments/"
-           "claims.py`; their commit is printed above). Per arm: mean "
-           "[95% percentile-bootstrap CI] (IQM: the mean of the middle half of the seeds) over seeds; Δ is the "
-           f"95% CI of the difference of means bayes − ce; tests are two-sided at α = {ALPHA}.", ""]
+    doc = [
+        "# Results: the paper's claims over seeds",
+        "",
+        *opening,
+        f"{sum(len(a.runs) for a in arms)} complete runs in {len(arms)} arms of `{suite_name}`; total training "
+        f"wall time {wall / 60:.1f} min (sum over runs); every run's metrics in [{PER_SEED}]({PER_SEED}). "
+        "Regenerate it from the committed per-run data, without training:",
+        "",
+        f"    {REGENERATE[0]}",
+        "",
+        "and the data themselves (then the line above):",
+        "",
+        f"    {REGENERATE[1]}",
+        "",
+        _provenance(arms),
+        "",
+        *_skipped(skipped),
+        *_notes(out_markdown),
+        "## Claims",
+        "",
+        "Metrics and rules were fixed before the runs (docs/PREREGISTRATION.md, `dqfd_bc_keras/experiments/"
+        "claims.py`; their commit is printed above). Per arm: mean "
+        "[95% percentile-bootstrap CI] (IQM: the mean of the middle half of the seeds) over seeds; Δ is the "
+        f"95% CI of the difference of means bayes − ce; tests are two-sided at α = {ALPHA}.",
+        "",
+    ]
     doc += [f"- `{name}`: {text}." for name, text in METRICS.items()]
     doc += [f"- {c.id} ({'; '.join(s.name for s in c.settings)}): {c.rule}" for c in CLAIMS]
-    doc += [f"- Seeds planned for {claim} on {setting}: {plan.describe()}." for (claim, setting), plan in
-            PLANNED_SEEDS.items()]
-    doc += ["- Δ: the 95% CI of the difference of means and, in parentheses, the CI whose ends are one-sided "
-            f"bounds at α = {ALPHA} (TOST's). *n · sd · power*: seeds per arm, the judged metric's pooled sd over "
-            "seeds and the power its rule has at that spread and n when bayes and ce truly do not differ.", "",
-            "| claim | setting | the paper | metric per arm | Δ bayes − ce | test | n · sd · power | verdict |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- |", *claims, "", "## Figures", "",
-            *_figures(arms, figures_dir, out_markdown.parent), "", "## Baselines", "",
-            *baselines_section(arms), "",
-            "## Sensitivity", "",
-            "Each further bayes arm of a claim's setting (σ0², demonstrator, …) judged against its ce arm "
-            "with the same rule; *flips*: holds ↔ does not hold against the reference pair's verdict (yes), the "
-            "same verdict (no), or a change to or from inconclusive (unclear).", "",
-            "| claim | bayes arm | ce arm | metric per arm | verdict | flips |",
-            "| --- | --- | --- | --- | --- | --- |",
-            *(sensitivity or ["| — | no sensitivity arms | | | | |"]), ""]
-    doc += ["## Replications", "", *replications, "",
-            "## Dynamic demonstrations: the default", "", *_dynamic(arms), "",
-            "## Ablations", "", *_ablations(arms), ""]
-    doc += ["## Sample efficiency", "", *efficiency, "", "## Uncertainty estimators", "", *estimators,
-            "", "## Demonstration quality × quantity", "", *grid, "",
-            "## Demonstrations", "", demos_text(), "", "## Wall time", "", *sweeps, ""]
+    doc += [
+        f"- Seeds planned for {claim} on {setting}: {plan.describe()}."
+        for (claim, setting), plan in PLANNED_SEEDS.items()
+    ]
+    doc += [
+        "- Δ: the 95% CI of the difference of means and, in parentheses, the CI whose ends are one-sided "
+        f"bounds at α = {ALPHA} (TOST's). *n · sd · power*: seeds per arm, the judged metric's pooled sd over "
+        "seeds and the power its rule has at that spread and n when bayes and ce truly do not differ.",
+        "",
+        "| claim | setting | the paper | metric per arm | Δ bayes − ce | test | n · sd · power | verdict |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        *claims,
+        "",
+        "## Figures",
+        "",
+        *_figures(arms, figures_dir, out_markdown.parent),
+        "",
+        "## Baselines",
+        "",
+        *baselines_section(arms),
+        "",
+        "## Sensitivity",
+        "",
+        "Each further bayes arm of a claim's setting (σ0², demonstrator, …) judged against its ce arm "
+        "with the same rule; *flips*: holds ↔ does not hold against the reference pair's verdict (yes), the "
+        "same verdict (no), or a change to or from inconclusive (unclear).",
+        "",
+        "| claim | bayes arm | ce arm | metric per arm | verdict | flips |",
+        "| --- | --- | --- | --- | --- | --- |",
+        *(sensitivity or ["| — | no sensitivity arms | | | | |"]),
+        "",
+    ]
+    doc += [
+        "## Replications",
+        "",
+        *replications,
+        "",
+        "## Dynamic demonstrations: the default",
+        "",
+        *_dynamic(arms),
+        "",
+        "## Ablations",
+        "",
+        *_ablations(arms),
+        "",
+    ]
+    doc += [
+        "## Sample efficiency",
+        "",
+        *efficiency,
+        "",
+        "## Uncertainty estimators",
+        "",
+        *estimators,
+        "",
+        "## Demonstration quality × quantity",
+        "",
+        *grid,
+        "",
+        "## Demonstrations",
+        "",
+        demos_text(),
+        "",
+        "## Wall time",
+        "",
+        *sweeps,
+        "",
+    ]
     # A section naming the directory it read (the benchmark's "not run" hint) names the suite as above.
     text = "\n".join(doc).replace(str(directory), suite_name)
     write_text(out_markdown.with_name(PER_SEED), _per_seed(arms))

@@ -46,11 +46,11 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 from torch.nn import functional as F
 
-from ..cli import ArgumentParser, positive_int, run
-from ..episodes import play
-from ..errors import ConfigError
-from ..files import write_text
-from ..seeds import eval_seed
+from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.envs.episodes import play
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.seeds import eval_seed
 
 CONV_CHANNELS, HIDDEN_UNITS = 16, 128
 """MinAtar's network (Young & Tian 2019, examples/dqn.py): one 3×3 stride-1 convolution of 16
@@ -69,8 +69,10 @@ class MinAtarCNN(BaseFeaturesExtractor):
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 3:
             raise ConfigError(f"MinAtarCNN takes (H, W, C) frames, got the observation space {observation_space}")
         if is_image_space(observation_space):
-            raise ConfigError(f"MinAtarCNN takes MinAtar's 0/1 frames, got the 8-bit image space {observation_space}, "
-                              "which SB3 would transpose to channel-first and divide by 255")
+            raise ConfigError(
+                f"MinAtarCNN takes MinAtar's 0/1 frames, got the 8-bit image space {observation_space}, "
+                "which SB3 would transpose to channel-first and divide by 255"
+            )
         super().__init__(observation_space, features_dim)
         height, width, channels = observation_space.shape
         self.conv = nn.Conv2d(channels, CONV_CHANNELS, kernel_size=3, stride=1)
@@ -101,42 +103,64 @@ class MinAtarCNN(BaseFeaturesExtractor):
 #     # If True, you need to deactivate handle_timeout_termination
 #     # in the replay_buffer_kwargs
 #     optimize_memory_usage: False
-ZOO_ATARI = {"policy": "CnnPolicy", "n_timesteps": 10_000_000, "kwargs": dict(
-    buffer_size=100_000, learning_rate=1e-4, batch_size=32, learning_starts=100_000, target_update_interval=1000,
-    train_freq=4, gradient_steps=1, exploration_fraction=0.1, exploration_final_eps=0.01,
-    optimize_memory_usage=False)}
+ZOO_ATARI = {
+    "policy": "CnnPolicy",
+    "n_timesteps": 10_000_000,
+    "kwargs": dict(
+        buffer_size=100_000,
+        learning_rate=1e-4,
+        batch_size=32,
+        learning_starts=100_000,
+        target_update_interval=1000,
+        train_freq=4,
+        gradient_steps=1,
+        exploration_fraction=0.1,
+        exploration_final_eps=0.01,
+        optimize_memory_usage=False,
+    ),
+}
 
 CHANGES = {
     "env_wrapper": "dropped: AtariWrapper's no-op starts, frame skip 4, 84×84 grey frames, life loss and reward "
-                   "clipping belong to the ALE; a MinAtar step is one frame of a 10×10 object grid, its env has its "
-                   "own sticky actions (p = 0.1), and MinAtar's DQN learns from its raw rewards",
+    "clipping belong to the ALE; a MinAtar step is one frame of a 10×10 object grid, its env has its "
+    "own sticky actions (p = 0.1), and MinAtar's DQN learns from its raw rewards",
     "frame_stack": "dropped (1): MinAtar's trail channels carry the motion, and Young & Tian stack no frames",
     "policy_kwargs": "NatureCNN (for 84×84×4) → MinAtarCNN with net_arch=[] (MinAtar's conv 16 + dense 128 + "
-                     "linear head) and normalize_images=False (its frames are 0/1)",
+    "linear head) and normalize_images=False (its frames are 0/1)",
     "n_timesteps": "1e7 → the budget: one learn() per seed, so the ε schedule (exploration_fraction × budget) "
-                   "follows it as in rl-zoo3",
+    "follows it as in rl-zoo3",
     "learning_starts": "100,000 of 1e7 (1%) → 1% of the budget: the tuned schedule's shape at a shorter budget "
-                       "(100,000 would be most or all of it; MinAtar's own is 5,000 of 5e6)",
+    "(100,000 would be most or all of it; MinAtar's own is 5,000 of 5e6)",
 }
 """What MinAtar's setup changes in the zoo's entry, and why. Kept as tuned: the replay (100,000,
 MinAtar's size too), Adam at 1e-4, batch 32, target every 1,000 steps, one update every 4 steps,
 ε 1 → 0.01 over the first 10%; SB3's defaults γ = 0.99 and the Huber loss (MinAtar's too)."""
 
-MINATAR_DQN = {"source": "kenjyoung/MinAtar examples/dqn.py at 4241f246 (2024-12-19)", "batch_size": 32,
-               "replay_buffer_size": 100_000, "target_network_update_freq": 1000, "training_freq": 1,
-               "num_frames": 5_000_000, "replay_start_size": 5000, "epsilon": "1.0 → 0.1 linearly over the "
-               "100,000 frames after the replay start, then 0.1", "optimizer": "centered RMSprop, lr 0.00025, "
-               "α (squared-gradient momentum) 0.95, eps 0.01", "gamma": 0.99, "loss": "smooth L1 (Huber)",
-               "network": "Conv2d(C, 16, 3, stride 1) + ReLU → Linear(1024, 128) + ReLU → Linear(128, A)",
-               "actions": "the full set of 6 (MinAtar/<Game>-v0)"}
+MINATAR_DQN = {
+    "source": "kenjyoung/MinAtar examples/dqn.py at 4241f246 (2024-12-19)",
+    "batch_size": 32,
+    "replay_buffer_size": 100_000,
+    "target_network_update_freq": 1000,
+    "training_freq": 1,
+    "num_frames": 5_000_000,
+    "replay_start_size": 5000,
+    "epsilon": "1.0 → 0.1 linearly over the 100,000 frames after the replay start, then 0.1",
+    "optimizer": "centered RMSprop, lr 0.00025, α (squared-gradient momentum) 0.95, eps 0.01",
+    "gamma": 0.99,
+    "loss": "smooth L1 (Huber)",
+    "network": "Conv2d(C, 16, 3, stride 1) + ReLU → Linear(1024, 128) + ReLU → Linear(128, A)",
+    "actions": "the full set of 6 (MinAtar/<Game>-v0)",
+}
 """MinAtar's published DQN settings (Young & Tian 2019), the second anchor's; not this baseline's
 schedule (it runs the zoo's, as the comparison asks)."""
 
-MINATAR_DQN_RETURNS = {"MinAtar/Breakout": {100_000: 5, 500_000: 8.5, 1_000_000: 9.5, 5_000_000: 10},
-                       "MinAtar/Seaquest": {1_000_000: 1, 5_000_000: 20},
-                       "MinAtar/Asterix": {1_000_000: 9, 5_000_000: 17},
-                       "MinAtar/Freeway": {1_000_000: 48, 5_000_000: 50},
-                       "MinAtar/SpaceInvaders": {1_000_000: 35, 5_000_000: 43}}
+MINATAR_DQN_RETURNS = {
+    "MinAtar/Breakout": {100_000: 5, 500_000: 8.5, 1_000_000: 9.5, 5_000_000: 10},
+    "MinAtar/Seaquest": {1_000_000: 1, 5_000_000: 20},
+    "MinAtar/Asterix": {1_000_000: 9, 5_000_000: 17},
+    "MinAtar/Freeway": {1_000_000: 48, 5_000_000: 50},
+    "MinAtar/SpaceInvaders": {1_000_000: 35, 5_000_000: 43},
+}
 """Young & Tian's DQN (with replay) by frames, read off the learning curves of the MinAtar README
 (img/learning_curves.gif at 4241f246, the paper's figure; no table of numbers is published): the
 moving average of the last 100 training returns (ε-greedy at 0.1, not greedy), mean of 30 seeds,
@@ -186,11 +210,24 @@ def sb3_model(env_id: str, seed: int, budget: int, max_steps: int) -> DQN:
 
 def settings(env_id: str, seed: int, budget: int, every: int, eval_episodes: int, max_steps: int) -> dict:
     """What a run's file records of how it was run, and must match for it to be kept."""
-    return {"env": env_id, "seed": seed, "budget": budget, "eval_every": every, "eval_episodes": eval_episodes,
-            "max_steps": max_steps, "eval_seed": eval_seed(seed),
-            "hyperparameters": {"policy": ZOO_ATARI["policy"], **hyperparameters(budget),
-                                "policy_kwargs": {"features_extractor_class": MinAtarCNN.__name__, "net_arch": [],
-                                                  "normalize_images": False}}}
+    return {
+        "env": env_id,
+        "seed": seed,
+        "budget": budget,
+        "eval_every": every,
+        "eval_episodes": eval_episodes,
+        "max_steps": max_steps,
+        "eval_seed": eval_seed(seed),
+        "hyperparameters": {
+            "policy": ZOO_ATARI["policy"],
+            **hyperparameters(budget),
+            "policy_kwargs": {
+                "features_extractor_class": MinAtarCNN.__name__,
+                "net_arch": [],
+                "normalize_images": False,
+            },
+        },
+    }
 
 
 class Grid(BaseCallback):
@@ -207,8 +244,9 @@ class Grid(BaseCallback):
             return int(self.model.predict(obs, deterministic=True)[0])
 
         returns = play(self.env, greedy, range(self.seed, self.seed + self.episodes)).returns
-        self.evaluations.append({"interactions": self.num_timesteps, "mean_return": float(np.mean(returns)),
-                                 "returns": returns})
+        self.evaluations.append(
+            {"interactions": self.num_timesteps, "mean_return": float(np.mean(returns)), "returns": returns}
+        )
 
     def _on_training_start(self) -> None:
         self._evaluate()
@@ -219,8 +257,9 @@ class Grid(BaseCallback):
         return True
 
 
-def sb3_minatar_run(env_id: str, seed: int, budget: int, every: int, eval_episodes: int, max_steps: int,
-                    path: Path) -> dict:
+def sb3_minatar_run(
+    env_id: str, seed: int, budget: int, every: int, eval_episodes: int, max_steps: int, path: Path
+) -> dict:
     """One seed: one `learn()` of `budget` steps, the greedy policy evaluated at 0, every, 2·every, …
     ≤ budget; writes `path` (atomically) and returns what it holds."""
     started = time.perf_counter()
@@ -229,12 +268,20 @@ def sb3_minatar_run(env_id: str, seed: int, budget: int, every: int, eval_episod
     grid = Grid(eval_env, every, budget, eval_episodes, eval_seed(seed))
     model.learn(total_timesteps=budget, callback=grid)
     eval_env.close()
-    record = {**settings(env_id, seed, budget, every, eval_episodes, max_steps),
-              "sb3_defaults": {"gamma": model.gamma, "tau": model.tau, "max_grad_norm": model.max_grad_norm,
-                               "optimizer": type(model.policy.optimizer).__name__, "loss": "smooth_l1 (Huber)"},
-              "changes_from_zoo": CHANGES, "evaluations": grid.evaluations,
-              "seconds": round(time.perf_counter() - started, 1),
-              "versions": {name: version(name) for name in SB3_VERSIONS}}
+    record = {
+        **settings(env_id, seed, budget, every, eval_episodes, max_steps),
+        "sb3_defaults": {
+            "gamma": model.gamma,
+            "tau": model.tau,
+            "max_grad_norm": model.max_grad_norm,
+            "optimizer": type(model.policy.optimizer).__name__,
+            "loss": "smooth_l1 (Huber)",
+        },
+        "changes_from_zoo": CHANGES,
+        "evaluations": grid.evaluations,
+        "seconds": round(time.perf_counter() - started, 1),
+        "versions": {name: version(name) for name in SB3_VERSIONS},
+    }
     write_text(path, json.dumps(record, indent=1))
     return record
 
@@ -249,19 +296,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--env", required=True, help="a MinAtar env id, e.g. MinAtar/Breakout-v1")
     parser.add_argument("--seeds", type=positive_int, default=1, help="seeds 0 … N-1 (default %(default)s)")
     parser.add_argument("--budget", type=positive_int, help=f"env steps of each learn() (--quick: {QUICK['budget']})")
-    parser.add_argument("--every", type=positive_int, help=f"env steps between evaluations (default {DEFAULTS['every']})")
-    parser.add_argument("--eval-episodes", type=positive_int,
-                        help=f"greedy episodes per evaluation (default {DEFAULTS['eval_episodes']})")
-    parser.add_argument("--max-steps", type=positive_int,
-                        help=f"step limit of every episode, training and evaluation (default {DEFAULTS['max_steps']})")
+    parser.add_argument(
+        "--every", type=positive_int, help=f"env steps between evaluations (default {DEFAULTS['every']})"
+    )
+    parser.add_argument(
+        "--eval-episodes",
+        type=positive_int,
+        help=f"greedy episodes per evaluation (default {DEFAULTS['eval_episodes']})",
+    )
+    parser.add_argument(
+        "--max-steps",
+        type=positive_int,
+        help=f"step limit of every episode, training and evaluation (default {DEFAULTS['max_steps']})",
+    )
     parser.add_argument("--out", type=Path, required=True, help="directory of the per-seed json files")
-    parser.add_argument("--quick", action="store_true",
-                        help="one seed, tiny budget and evaluations (given options still win): checks the command runs")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="one seed, tiny budget and evaluations (given options still win): checks the command runs",
+    )
     args = parser.parse_args(argv)
     fallback = QUICK if args.quick else DEFAULTS
     budget, every, eval_episodes, max_steps = (
         getattr(args, name) if getattr(args, name) is not None else fallback.get(name)
-        for name in ("budget", "every", "eval_episodes", "max_steps"))
+        for name in ("budget", "every", "eval_episodes", "max_steps")
+    )
     if budget is None:
         raise ConfigError("--budget is required (env steps of each learn()), unless --quick")
     env_id = minatar_env_id(args.env)
@@ -272,8 +331,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             continue
         record = sb3_minatar_run(env_id, seed, budget, every, eval_episodes, max_steps, path)
         last = record["evaluations"][-1]
-        print(f"{env_id} seed {seed}: mean return {last['mean_return']:.2f} at {last['interactions']:,} steps "
-              f"({record['seconds']:.0f} s) -> {path}")
+        print(
+            f"{env_id} seed {seed}: mean return {last['mean_return']:.2f} at {last['interactions']:,} steps "
+            f"({record['seconds']:.0f} s) -> {path}"
+        )
     return 0
 
 

@@ -21,15 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import ArgumentParser, run
-from ..config import Config
-from ..files import write_text
-from .arms import ArmRuns, common_seeds, find_arm, group_arms
-from .claims import ALPHA, RETURN_MARGIN, compare
-from .data import load_runs, open_suite
-from .efficiency import ratio_ci
-from .stats import beyond, equivalent, holm, mann_whitney
-from .suites import SIGMA0_ESTIMATORS, SIGMA0_VALUES, sigma0_settings
+from dqfd_bc_keras.commands.cli import ArgumentParser, run
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.experiments.arms import ArmRuns, common_seeds, find_arm, group_arms
+from dqfd_bc_keras.experiments.claims import ALPHA, RETURN_MARGIN, compare
+from dqfd_bc_keras.experiments.data import load_runs, open_suite
+from dqfd_bc_keras.experiments.efficiency import ratio_ci
+from dqfd_bc_keras.experiments.stats import beyond, equivalent, holm, mann_whitney
+from dqfd_bc_keras.experiments.suites import SIGMA0_ESTIMATORS, SIGMA0_VALUES, sigma0_settings
+from dqfd_bc_keras.files import write_text
 
 FAMILY = len(SIGMA0_ESTIMATORS) * len(SIGMA0_VALUES) * len(sigma0_settings())
 """The pre-registered comparisons (32): Holm adjusts over all of them, those not run as p = 1."""
@@ -71,9 +71,13 @@ class Result:
             comparison = compare(self.metric, self.bayes, self.ce)
             margin = RETURN_MARGIN * self.bayes.runs[0].config.limit
             low, high = comparison.tost
-            verdict = ("equivalent" if equivalent(comparison.tost, margin) else
-                       ("markedly better" if low > 0 else "markedly worse") if beyond(comparison.tost, margin)
-                       else "inconclusive")
+            verdict = (
+                "equivalent"
+                if equivalent(comparison.tost, margin)
+                else ("markedly better" if low > 0 else "markedly worse")
+                if beyond(comparison.tost, margin)
+                else "inconclusive"
+            )
             return f"Δ {comparison.interval(1)}: {verdict}"
         point, low, high = ratio_ci(self.ce.values(self.metric), self.bayes.values(self.metric))
         if np.isnan(point):
@@ -99,8 +103,17 @@ def results(arms: list[ArmRuns]) -> list[Result]:
         ce = find_arm(arms, Config.for_task(task, timeout="bootstrap", expert_loss="ce", **fields))
         for uncertainty in SIGMA0_ESTIMATORS:
             for sigma0_sq in SIGMA0_VALUES:
-                bayes = find_arm(arms, Config.for_task(task, timeout="bootstrap", expert_loss="bayes",
-                                                       uncertainty=uncertainty, sigma0_sq=sigma0_sq, **fields))
+                bayes = find_arm(
+                    arms,
+                    Config.for_task(
+                        task,
+                        timeout="bootstrap",
+                        expert_loss="bayes",
+                        uncertainty=uncertainty,
+                        sigma0_sq=sigma0_sq,
+                        **fields,
+                    ),
+                )
                 if bayes is None or ce is None:
                     continue
                 pair = common_seeds(_seeds(bayes, seeds), _seeds(ce, seeds))
@@ -108,7 +121,7 @@ def results(arms: list[ArmRuns]) -> list[Result]:
                     continue
                 p = mann_whitney(*(a.values(metric) for a in pair))[1]
                 found.append(Result(setting, uncertainty, sigma0_sq, *pair, metric, p))
-    for result, adjusted in zip(found, holm([r.p for r in found], FAMILY)):
+    for result, adjusted in zip(found, holm([r.p for r in found], FAMILY), strict=True):
         result.p_holm = adjusted
     return found
 
@@ -116,8 +129,12 @@ def results(arms: list[ArmRuns]) -> list[Result]:
 def weights(arm: ArmRuns) -> tuple[float, float] | None:
     """The median over seeds of each run's mean weight on D_demo and on D_replay; None if the
     runs predate the logging."""
-    per_run = np.array([[np.nanmean(run.column(w)) if np.isfinite(run.column(w)).any() else np.nan
-                         for w in WEIGHTS] for run in arm.runs])
+    per_run = np.array(
+        [
+            [np.nanmean(run.column(w)) if np.isfinite(run.column(w)).any() else np.nan for w in WEIGHTS]
+            for run in arm.runs
+        ]
+    )
     if np.isnan(per_run).any():
         return None
     on, off = np.median(per_run, axis=0)
@@ -137,17 +154,24 @@ def sigma0_section(arms: list[ArmRuns]) -> list[str]:
     rows = []
     for r in found:
         w = weights(r.bayes)
-        mechanism = "—" if w is None else (f"{w[0]:.2f} · {w[1]:.2f} · ×{w[0] / w[1]:.2f}"
-                                           f"{' (acts)' if w[0] / w[1] >= ACTS else ''}")
-        rows.append(f"| {r.setting} | {r.uncertainty} | {r.sigma0_sq:g} | {len(r.bayes.runs)} | "
-                    f"{_median(r.bayes, r.metric)} · {_median(r.ce, r.metric)} | {r.margin_rule()} | "
-                    f"{r.p:.3g} · {r.p_holm:.3g} | **{r.verdict}** | {mechanism} |")
-    acts = {u: [r for r in found if r.uncertainty == u and (w := weights(r.bayes)) and w[0] / w[1] >= ACTS]
-            for u in SIGMA0_ESTIMATORS}
+        mechanism = (
+            "—"
+            if w is None
+            else (f"{w[0]:.2f} · {w[1]:.2f} · ×{w[0] / w[1]:.2f}{' (acts)' if w[0] / w[1] >= ACTS else ''}")
+        )
+        rows.append(
+            f"| {r.setting} | {r.uncertainty} | {r.sigma0_sq:g} | {len(r.bayes.runs)} | "
+            f"{_median(r.bayes, r.metric)} · {_median(r.ce, r.metric)} | {r.margin_rule()} | "
+            f"{r.p:.3g} · {r.p_holm:.3g} | **{r.verdict}** | {mechanism} |"
+        )
+    acts = {
+        u: [r for r in found if r.uncertainty == u and (w := weights(r.bayes)) and w[0] / w[1] >= ACTS]
+        for u in SIGMA0_ESTIMATORS
+    }
     mechanism = "; ".join(f"{u} {len(acts[u])} of {sum(r.uncertainty == u for r in found)}" for u in SIGMA0_ESTIMATORS)
     better = [r for r in found if r.verdict == "better"]
     worse = [r for r in found if r.verdict == "worse"]
-    answer = ("yes" if better and not worse else "no")
+    answer = "yes" if better and not worse else "no"
     return [
         "bayes with σ0² below the variance cap, against ce at the same seeds (docs/PREREGISTRATION.md §10). Metric: "
         "mean plain training return on C3's setting, counted interactions to the threshold elsewhere (∞ = never); "
@@ -155,12 +179,16 @@ def sigma0_section(arms: list[ArmRuns]) -> list[str]:
         "comparisons (those not run count as p = 1). Weights: the median over seeds of each run's mean 1/(2σ²) on "
         f"D_demo · on D_replay · their ratio; *acts*: ratio ≥ {ACTS:g}, the most any σ² allows at σ0² = 0.5. A lower "
         "σ0² also raises the weight on every state: the study cannot separate a stronger imitation from a more "
-        "selective one.", "",
+        "selective one.",
+        "",
         "| setting | estimator | σ0² | seeds | bayes · ce | margin rule | p · Holm | verdict | weight on · off · ratio |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |", *rows, "",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        *rows,
+        "",
         f"**Is the Bayesian loss measurably better than ce in any setting? {answer}**: {len(better)} of {len(found)} "
         f"comparisons run are *better*, {len(worse)} *worse* ({FAMILY - len(found)} of {FAMILY} not run yet). "
-        f"The weight's ratio on ÷ off the demonstrations reaches {ACTS:g} (*acts*) in: {mechanism} arms."]
+        f"The weight's ratio on ÷ off the demonstrations reaches {ACTS:g} (*acts*) in: {mechanism} arms.",
+    ]
 
 
 ARCHIVE = "docs/data/sigma0.tar.xz"
@@ -169,20 +197,33 @@ ARCHIVE = "docs/data/sigma0.tar.xz"
 def study_report(source: str | os.PathLike) -> str:
     """docs/SIGMA0.md from the study's runs (a suite directory or its archive): provenance, the
     study's table and answer, the sweeps' wall time. The same data give the same bytes."""
-    from .report import _provenance, _skipped, _sweeps
+    from dqfd_bc_keras.experiments.report import _provenance, _skipped, _sweeps
 
     skipped: list = []
     with open_suite(source) as directory:
         arms = group_arms(load_runs(directory, skipped))
         sweeps = _sweeps(directory)
     runs = sum(len(a.runs) for a in arms)
-    return "\n".join([
-        "# The Bayesian loss where it can act: σ0² below the variance cap", "",
-        f"Generated by `python -m dqfd_bc_keras.experiments.sigma0 {ARCHIVE} --report docs/SIGMA0.md` from the "
-        f"{runs} runs in {ARCHIVE} (rules: docs/PREREGISTRATION.md §10). Its runs, ce's included, are of one code "
-        "version, apart from docs/data/results.tar.xz (whose runs the current code does not reproduce seed for "
-        "seed).", "", _provenance(arms), "", *_skipped(skipped), *sigma0_section(arms), "", "## Wall time", "",
-        *sweeps, ""])
+    return "\n".join(
+        [
+            "# The Bayesian loss where it can act: σ0² below the variance cap",
+            "",
+            f"Generated by `python -m dqfd_bc_keras.experiments.sigma0 {ARCHIVE} --report docs/SIGMA0.md` from the "
+            f"{runs} runs in {ARCHIVE} (rules: docs/PREREGISTRATION.md §10). Its runs, ce's included, are of one code "
+            "version, apart from docs/data/results.tar.xz (whose runs the current code does not reproduce seed for "
+            "seed).",
+            "",
+            _provenance(arms),
+            "",
+            *_skipped(skipped),
+            *sigma0_section(arms),
+            "",
+            "## Wall time",
+            "",
+            *sweeps,
+            "",
+        ]
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -58,7 +58,11 @@ def _percentiles(values: np.ndarray, level: float) -> tuple[float, float]:
 
 
 def bootstrap_ci(
-    x: Sequence[float], statistic: Statistic = np.mean, level: float = 0.95, resamples: int = 10_000, seed: int = 0,
+    x: Sequence[float],
+    statistic: Statistic = np.mean,
+    level: float = 0.95,
+    resamples: int = 10_000,
+    seed: int = 0,
 ) -> tuple[float, float]:
     """Percentile-bootstrap confidence interval of `statistic(x)`.
 
@@ -72,8 +76,12 @@ def bootstrap_ci(
 
 
 def bootstrap_diff_ci(
-    a: Sequence[float], b: Sequence[float], statistic: Statistic = np.mean, level: float = 0.95,
-    resamples: int = 10_000, seed: int = 0,
+    a: Sequence[float],
+    b: Sequence[float],
+    statistic: Statistic = np.mean,
+    level: float = 0.95,
+    resamples: int = 10_000,
+    seed: int = 0,
 ) -> tuple[float, float]:
     """Percentile-bootstrap confidence interval of `statistic(a) − statistic(b)`.
 
@@ -120,13 +128,18 @@ def fisher_exact(successes_a: int, n_a: int, successes_b: int, n_b: int) -> tupl
     """
     if not (0 <= successes_a <= n_a and 0 <= successes_b <= n_b):
         raise ValueError(f"need 0 ≤ successes ≤ n, got {successes_a}/{n_a} and {successes_b}/{n_b}")
-    result = sps.fisher_exact([[successes_a, n_a - successes_a], [successes_b, n_b - successes_b]],
-                              alternative="two-sided")
+    result = sps.fisher_exact(
+        [[successes_a, n_a - successes_a], [successes_b, n_b - successes_b]], alternative="two-sided"
+    )
     return float(result.statistic), float(result.pvalue)
 
 
 def tost_ci(
-    a: Sequence[float], b: Sequence[float], alpha: float = 0.05, resamples: int = 10_000, seed: int = 0,
+    a: Sequence[float],
+    b: Sequence[float],
+    alpha: float = 0.05,
+    resamples: int = 10_000,
+    seed: int = 0,
 ) -> tuple[float, float]:
     """The (1 − 2α) percentile-bootstrap CI of mean(a) − mean(b): TOST's interval.
 
@@ -209,7 +222,7 @@ def seeds_for_bound(sd: float, distance: float, power: float = 0.8, alpha: float
     """
     _check_design(sd, distance, alpha)
     _check_power(power)
-    return max(1, int(np.ceil(2.0 * (_z(1.0 - alpha) + _z(power)) ** 2 * sd ** 2 / distance ** 2)))
+    return max(1, int(np.ceil(2.0 * (_z(1.0 - alpha) + _z(power)) ** 2 * sd**2 / distance**2)))
 
 
 def equivalence_power(sd: float, margin: float, n: int, alpha: float = 0.05) -> float:
@@ -233,7 +246,7 @@ def seeds_for_equivalence(sd: float, margin: float, power: float = 0.8, alpha: f
     """
     _check_design(sd, margin, alpha)
     _check_power(power)
-    return max(1, int(np.ceil(2.0 * (_z(1.0 - alpha) + _z(1.0 - (1.0 - power) / 2.0)) ** 2 * sd ** 2 / margin ** 2)))
+    return max(1, int(np.ceil(2.0 * (_z(1.0 - alpha) + _z(1.0 - (1.0 - power) / 2.0)) ** 2 * sd**2 / margin**2)))
 
 
 @dataclass(frozen=True)
@@ -254,8 +267,9 @@ class Summary:
 
     def format(self, digits: int = 1) -> str:
         """`mean [low, high] (IQM x)` for a table cell."""
-        return (f"{self.mean:.{digits}f} [{self.ci_low:.{digits}f}, {self.ci_high:.{digits}f}] "
-                f"(IQM {self.iqm:.{digits}f})")
+        return (
+            f"{self.mean:.{digits}f} [{self.ci_low:.{digits}f}, {self.ci_high:.{digits}f}] (IQM {self.iqm:.{digits}f})"
+        )
 
 
 @dataclass(frozen=True)
@@ -278,8 +292,11 @@ class CensoredSummary:
 
     def format(self, digits: int = 1) -> str:
         """`median x [low, high] (k of n censored)` for a table cell, ∞ for inf."""
+
         def number(value: float) -> str:
             return "∞" if np.isinf(value) else f"{value:.{digits}f}"
 
-        return (f"median {number(self.median)} [{number(self.ci_low)}, {number(self.ci_high)}] "
-                f"({self.censored} of {self.n} censored)")
+        return (
+            f"median {number(self.median)} [{number(self.ci_low)}, {number(self.ci_high)}] "
+            f"({self.censored} of {self.n} censored)"
+        )

@@ -19,12 +19,14 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ..config import QUICK, Config, parse_assignments, preset_defaults
-from ..envs import checked_spaces, task_slug
-from ..errors import ConfigError
-from .claims import CLAIMS, PAPER as PAPER_READING, PAPER_READING_STEPS
-from .lab_settings import LAB_SETTINGS
-from .plans import planned_seeds
+from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments, preset_defaults
+from dqfd_bc_keras.envs.make import checked_spaces, task_slug
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.claims import CLAIMS, PAPER_READING_STEPS
+from dqfd_bc_keras.experiments.claims import PAPER as PAPER_READING
+from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS
+from dqfd_bc_keras.experiments.plans import planned_seeds
+
 
 @dataclass(frozen=True)
 class Arm:
@@ -47,14 +49,25 @@ class Arm:
         return hash(self.name)
 
     def config(self, seed: int) -> Config:
-        return Config.for_task(self.task, timeout=self.timeout, expert_loss=self.expert_loss, seed=seed,
-                               **dict(self.overrides))
+        return Config.for_task(
+            self.task, timeout=self.timeout, expert_loss=self.expert_loss, seed=seed, **dict(self.overrides)
+        )
 
 
-_SHORT = {"sigma0_sq": "sigma", "expert": "", "eval_every": "eval", "dynamic_demos": "dyn",
-          "early_stop_window": "stopwindow", "total_steps": "steps", "bayes_prior": "prior",
-          "mc_dropout": "mcdropout", "uncertainty": "", "expert_epsilon": "eps", "demo_episodes": "demos",
-          "env_kwargs": ""}
+_SHORT = {
+    "sigma0_sq": "sigma",
+    "expert": "",
+    "eval_every": "eval",
+    "dynamic_demos": "dyn",
+    "early_stop_window": "stopwindow",
+    "total_steps": "steps",
+    "bayes_prior": "prior",
+    "mc_dropout": "mcdropout",
+    "uncertainty": "",
+    "expert_epsilon": "eps",
+    "demo_episodes": "demos",
+    "env_kwargs": "",
+}
 
 
 def _label(key: str, value: object) -> str:
@@ -88,14 +101,21 @@ def on_task(arms: Sequence[Arm], task: str | None, assignments: Sequence[str] = 
         config = Config.for_task(target, **{**dict(a.overrides), **parse_assignments(list(assignments))})
         checked_spaces(config)  # an env the networks cannot take is refused here, before any run starts
         parsed = config.to_dict()
-        moved.append(arm(target, a.timeout, a.expert_loss, a.seeds, **{**dict(a.overrides),
-                                                                       **{k: parsed[k] for k in keys}}))
+        moved.append(
+            arm(target, a.timeout, a.expert_loss, a.seeds, **{**dict(a.overrides), **{k: parsed[k] for k in keys}})
+        )
     return list(dict.fromkeys(moved))
 
 
-PAPER_SETTINGS = (("C1", "cartpole", "naive"), ("C1", "cartpole-200", "naive"), ("C3", "cartpole", "bootstrap"),
-                  ("C4", "mountaincar-goals", "bootstrap"))
+PAPER_SETTINGS = (
+    ("C1", "cartpole", "naive"),
+    ("C1", "cartpole-200", "naive"),
+    ("C3", "cartpole", "bootstrap"),
+    ("C4", "mountaincar-goals", "bootstrap"),
+)
 """The paper's settings (ALGORITHM.md §7) and the claim whose power plan sets each one's seeds."""
+
+
 def claim_seeds(claim_id: str, task: str) -> int:
     """The planned seeds per arm of `claim_id` on its setting of `task` (plans.PLANNED_SEEDS)."""
     setting = next(s for c in CLAIMS if c.id == claim_id for s in c.settings if s.task == task)
@@ -120,23 +140,31 @@ def _paper() -> list[Arm]:
     and C2 also under the paper's own reading (its seeds planned on the archive's collapse rate,
     PREREGISTRATION §11)."""
     arms = [arm(t, m, loss, claim_seeds(claim, t)) for claim, t, m in PAPER_SETTINGS for loss in ("ce", "bayes")]
-    return arms + [arm("cartpole-200", "naive", loss, planned_seeds("C2", PAPER_READING), **C2_PAPER_READING)
-                   for loss in ("ce", "bayes")]
+    return arms + [
+        arm("cartpole-200", "naive", loss, planned_seeds("C2", PAPER_READING), **C2_PAPER_READING)
+        for loss in ("ce", "bayes")
+    ]
 
 
 def _dynamic() -> list[Arm]:
     """The two readings of dynamic demonstrations, measured with every interaction counted; the
     rule that picks `Config.dynamic_demos`'s default from them is in docs/PREREGISTRATION.md."""
-    return [arm(task, "bootstrap", loss, 10, dynamic_demos=mode, **PROTOCOL)
-            for task in PAPER_TASKS for loss in ("bayes", "ce") for mode in ("episodes", "rollouts")]
+    return [
+        arm(task, "bootstrap", loss, 10, dynamic_demos=mode, **PROTOCOL)
+        for task in PAPER_TASKS
+        for loss in ("bayes", "ce")
+        for mode in ("episodes", "rollouts")
+    ]
 
 
 def _efficiency() -> list[Arm]:
     """Interactions to the plain env's threshold, against SB3's DQN (`experiments efficiency`, baselines.py):
     bayes, ce, DQfD's margin and DQN on the paper's envs; the default (bayes) alone on the others."""
-    return [arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
-            for task, episodes in EFFICIENCY_TASKS.items()
-            for loss in (("bayes", "ce", "margin", "none") if task in PAPER_TASKS else ("bayes",))]
+    return [
+        arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
+        for task, episodes in EFFICIENCY_TASKS.items()
+        for loss in (("bayes", "ce", "margin", "none") if task in PAPER_TASKS else ("bayes",))
+    ]
 
 
 def _ablations() -> list[Arm]:
@@ -145,7 +173,10 @@ def _ablations() -> list[Arm]:
     arms = []
     for task in ("cartpole", "mountaincar-goals"):
         arms += [arm(task, "bootstrap", loss, 10, dynamic_demos="off") for loss in ("bayes", "ce")]
-        arms += [arm(task, "bootstrap", "bayes", 10, bayes_prior=False), arm(task, "bootstrap", "bayes", 10, mc_dropout=False)]
+        arms += [
+            arm(task, "bootstrap", "bayes", 10, bayes_prior=False),
+            arm(task, "bootstrap", "bayes", 10, mc_dropout=False),
+        ]
     return arms
 
 
@@ -169,8 +200,13 @@ GRID_TEACHERS = (("strong", 0.0), ("imperfect", 0.0), ("strong", 0.2), ("strong"
 """(expert, ε): the strong and imperfect scripted experts, and the strong one acting at random w.p. ε."""
 GRID_EPISODES = (1, 5, 20)
 GRID_SEEDS = 5
-GRID_METHODS = (("margin", ()), ("ce", ()), ("bayes", ()), ("bayes", (("uncertainty", BEST_OTHER_ESTIMATOR),)),
-                ("sqil", ()))
+GRID_METHODS = (
+    ("margin", ()),
+    ("ce", ()),
+    ("bayes", ()),
+    ("bayes", (("uncertainty", BEST_OTHER_ESTIMATOR),)),
+    ("sqil", ()),
+)
 """(expert loss, further Config fields) of the grid's learners with demonstrations."""
 
 
@@ -181,15 +217,22 @@ QUICK_GRID = ((("strong", 0.5),), (1,))
 def grid_cells(quick: bool = False) -> list[dict[str, object]]:
     """The Config fields of each cell: teacher × demonstrated episodes."""
     teachers, episodes = QUICK_GRID if quick else (GRID_TEACHERS, GRID_EPISODES)
-    return [{"expert": expert, "expert_epsilon": epsilon, "demo_episodes": n} for expert, epsilon in teachers
-            for n in episodes]
+    return [
+        {"expert": expert, "expert_epsilon": epsilon, "demo_episodes": n}
+        for expert, epsilon in teachers
+        for n in episodes
+    ]
 
 
 def quick(a: Arm) -> Arm:
     """Arm `a` on the QUICK budget (its own fields kept), one seed, labelled `quick`."""
     fields = dict(a.overrides)
-    return dataclasses.replace(a, overrides=(*a.overrides, *((k, v) for k, v in QUICK.items() if k not in fields)),
-                               label="-".join(filter(None, (a.label, "quick"))), seeds=1)
+    return dataclasses.replace(
+        a,
+        overrides=(*a.overrides, *((k, v) for k, v in QUICK.items() if k not in fields)),
+        label="-".join(filter(None, (a.label, "quick"))),
+        seeds=1,
+    )
 
 
 def grid_tasks(quick: bool = False) -> tuple[str, ...]:
@@ -200,8 +243,11 @@ def grid_arms(task: str, quick_budget: bool = False) -> list[Arm]:
     """When demonstrations help or hurt on `task` (PREREGISTRATION §8, §12): every method on every
     cell, and plain DQN once; BC alone is `imitation.py`'s, without RL."""
     arms = [arm(task, "bootstrap", "none", GRID_SEEDS, **PROTOCOL)]
-    arms += [arm(task, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
-             for cell in grid_cells(quick_budget) for loss, extra in GRID_METHODS]
+    arms += [
+        arm(task, "bootstrap", loss, GRID_SEEDS, **cell, **dict(extra), **PROTOCOL)
+        for cell in grid_cells(quick_budget)
+        for loss, extra in GRID_METHODS
+    ]
     return [quick(a) for a in arms] if quick_budget else arms
 
 
@@ -213,11 +259,23 @@ def all_grid_arms(quick_budget: bool = False) -> list[Arm]:
 def _estimators() -> list[Arm]:
     """bayes with the other estimators on the verdicts' settings (C3, C4, MountainCar's efficiency),
     in the pre-registered order: the best one first."""
-    return [a for u in OTHER_ESTIMATORS for a in (
-        arm("cartpole", "bootstrap", "bayes", claim_seeds("C3", "cartpole"), uncertainty=u),
-        arm("mountaincar-goals", "bootstrap", "bayes", claim_seeds("C4", "mountaincar-goals"), uncertainty=u),
-        arm("mountaincar", "bootstrap", "bayes", 10, uncertainty=u, demo_episodes=EFFICIENCY_TASKS["mountaincar"],
-            **PROTOCOL))]
+    return [
+        a
+        for u in OTHER_ESTIMATORS
+        for a in (
+            arm("cartpole", "bootstrap", "bayes", claim_seeds("C3", "cartpole"), uncertainty=u),
+            arm("mountaincar-goals", "bootstrap", "bayes", claim_seeds("C4", "mountaincar-goals"), uncertainty=u),
+            arm(
+                "mountaincar",
+                "bootstrap",
+                "bayes",
+                10,
+                uncertainty=u,
+                demo_episodes=EFFICIENCY_TASKS["mountaincar"],
+                **PROTOCOL,
+            ),
+        )
+    ]
 
 
 SIGMA0_VALUES = (0.02, 0.1)
@@ -231,11 +289,19 @@ def sigma0_settings() -> list[tuple[str, str, int, dict[str, object]]]:
     """(setting, task, seeds, Config fields) of the σ0² study (PREREGISTRATION §10), in its order:
     C3's, the CartPole grid's bad-teacher cells, MountainCar's efficiency setting."""
     cells = [cell for cell in grid_cells() if (cell["expert"], cell["expert_epsilon"]) in BAD_TEACHERS]
-    return [("C3", "cartpole", claim_seeds("C3", "cartpole"), {}),
-            *((f"grid {c['expert']} ε={c['expert_epsilon']:g} × {c['demo_episodes']}", "cartpole", GRID_SEEDS,
-               {**c, **PROTOCOL}) for c in cells),
-            ("MountainCar efficiency", "mountaincar", 10,
-             {"demo_episodes": EFFICIENCY_TASKS["mountaincar"], **PROTOCOL})]
+    return [
+        ("C3", "cartpole", claim_seeds("C3", "cartpole"), {}),
+        *(
+            (
+                f"grid {c['expert']} ε={c['expert_epsilon']:g} × {c['demo_episodes']}",
+                "cartpole",
+                GRID_SEEDS,
+                {**c, **PROTOCOL},
+            )
+            for c in cells
+        ),
+        ("MountainCar efficiency", "mountaincar", 10, {"demo_episodes": EFFICIENCY_TASKS["mountaincar"], **PROTOCOL}),
+    ]
 
 
 def _sigma0() -> list[Arm]:
@@ -243,15 +309,22 @@ def _sigma0() -> list[Arm]:
     pre-registered order: on CartPole ce and the distance estimator, then MC dropout; then
     MountainCar. ce is rerun with the study (the archive's ce runs are from older code, which
     the current code does not reproduce seed for seed), so the study lives in its own directory."""
+
     def arms(settings: list, losses: list[tuple[str, dict]]) -> list[Arm]:
-        return [arm(task, "bootstrap", loss, seeds, **extra, **fields)
-                for _, task, seeds, fields in settings for loss, extra in losses]
+        return [
+            arm(task, "bootstrap", loss, seeds, **extra, **fields)
+            for _, task, seeds, fields in settings
+            for loss, extra in losses
+        ]
 
     bayes = {u: [("bayes", {"uncertainty": u, "sigma0_sq": s}) for s in SIGMA0_VALUES] for u in SIGMA0_ESTIMATORS}
     first, second = SIGMA0_ESTIMATORS
     *cartpole, mountaincar = sigma0_settings()
-    ordered = [*arms(cartpole, [("ce", {}), *bayes[first]]), *arms(cartpole, bayes[second]),
-               *arms([mountaincar], [("ce", {}), *bayes[first], *bayes[second]])]
+    ordered = [
+        *arms(cartpole, [("ce", {}), *bayes[first]]),
+        *arms(cartpole, bayes[second]),
+        *arms([mountaincar], [("ce", {}), *bayes[first], *bayes[second]]),
+    ]
     unique: dict[str, Arm] = {}
     for a in ordered:  # the grid's imperfect × 5 cell is C3's setting: its arms run once, at C3's seeds
         unique.setdefault(a.name, a)

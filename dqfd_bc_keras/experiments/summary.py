@@ -9,15 +9,25 @@ import json
 from collections import Counter
 from pathlib import Path
 
-from ..config import Config
-from .arms import ArmRuns, find_arm
-from .claims import (CLAIMS, GOALS_MARGIN, RETURN_MARGIN, SHARE_MARGIN, ablation_pairs, dynamic_default, flips, judge,
-                     judge_ablation, too_few)
-from .efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
-from .estimators import CALIBRATION_FILE, meets_goal
-from .grid import BC_ALONE, DQN, collect, effect
-from .replicate import replicated
-from .suites import ALL, EFFICIENCY_TASKS, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm
+from dqfd_bc_keras.experiments.claims import (
+    CLAIMS,
+    GOALS_MARGIN,
+    RETURN_MARGIN,
+    SHARE_MARGIN,
+    ablation_pairs,
+    dynamic_default,
+    flips,
+    judge,
+    judge_ablation,
+    too_few,
+)
+from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
+from dqfd_bc_keras.experiments.estimators import CALIBRATION_FILE, meets_goal
+from dqfd_bc_keras.experiments.grid import BC_ALONE, DQN, collect, effect
+from dqfd_bc_keras.experiments.replicate import replicated
+from dqfd_bc_keras.experiments.suites import ALL, EFFICIENCY_TASKS, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES
 
 UNKNOWN = ("inconclusive", "not reproduced")
 
@@ -38,13 +48,20 @@ def _claims(arms: list[ArmRuns]) -> dict[str, list[str]]:
                 filed["unknown"].append(f"{where}: **inconclusive**: {too_few(bayes, ce)}.")
                 continue
             c = result.comparisons[0]
-            margin = (f"±{RETURN_MARGIN * bayes.runs[0].config.limit:g}" if claim.id in ("C1", "C3") else
-                      f"±{SHARE_MARGIN:g}" if claim.id == "C2" else f"+{GOALS_MARGIN:g}")
+            margin = (
+                f"±{RETURN_MARGIN * bayes.runs[0].config.limit:g}"
+                if claim.id in ("C1", "C3")
+                else f"±{SHARE_MARGIN:g}"
+                if claim.id == "C2"
+                else f"+{GOALS_MARGIN:g}"
+            )
             interval = "—" if c.tost is None else f"{c.tost[0]:.2f} … {c.tost[1]:.2f}"
             power = "" if result.power is None else f", power {result.power:.2f}"
-            line = (f"{where}: **{result.verdict}**: `{c.metric}` bayes {c.bayes.mean:.4g} · ce {c.ce.mean:.4g}, "
-                    f"90% CI of bayes − ce {interval} against {margin} ({len(bayes.runs)} and {len(ce.runs)} seeds"
-                    f"{power}).")
+            line = (
+                f"{where}: **{result.verdict}**: `{c.metric}` bayes {c.bayes.mean:.4g} · ce {c.ce.mean:.4g}, "
+                f"90% CI of bayes − ce {interval} against {margin} ({len(bayes.runs)} and {len(ce.runs)} seeds"
+                f"{power})."
+            )
             filed["unknown" if result.verdict.startswith(UNKNOWN) else result.verdict].append(line)
     return filed
 
@@ -62,9 +79,11 @@ def _sensitivity(arms: list[ArmRuns]) -> list[str]:
             moves += [flips(judge(claim, bayes, ce).verdict, reference) for bayes, ce in pairs[1:] if ce is not None]
     if not moves:
         return []
-    return [f"Sensitivity (each further bayes arm of a claim's setting against its ce arm): the verdict flips "
-            f"between holds and does not hold in {moves.count('yes')} of {len(moves)}, moves to or from "
-            f"inconclusive in {moves.count('unclear')}, stays in {moves.count('no')}."]
+    return [
+        f"Sensitivity (each further bayes arm of a claim's setting against its ce arm): the verdict flips "
+        f"between holds and does not hold in {moves.count('yes')} of {len(moves)}, moves to or from "
+        f"inconclusive in {moves.count('unclear')}, stays in {moves.count('no')}."
+    ]
 
 
 def _ablations(arms: list[ArmRuns]) -> list[str]:
@@ -72,8 +91,10 @@ def _ablations(arms: list[ArmRuns]) -> list[str]:
     if not verdicts:
         return []
     counts = ", ".join(f"{verdict} in {n}" for verdict, n in sorted(verdicts.items()))
-    return [f"Ablations (one part of the Bayesian machinery off, against the full arm): {counts}, "
-            f"of {sum(verdicts.values())}."]
+    return [
+        f"Ablations (one part of the Bayesian machinery off, against the full arm): {counts}, "
+        f"of {sum(verdicts.values())}."
+    ]
 
 
 def _efficiency(arms: list[ArmRuns], directory: Path) -> list[str]:
@@ -89,14 +110,18 @@ def _efficiency(arms: list[ArmRuns], directory: Path) -> list[str]:
         if a.method != "bayes" or a.task not in sb3:
             continue
         point, low, high = ratio_ci(sb3[a.task], a.steps)
-        text = (f"{a.task}: SB3 ÷ bayes {point:.1f}× [{low:.1f}×, {high:.1f}×] over {a.steps.size} seeds, the "
-                f"{a.target:g}× goal {'met' if point >= a.target else 'not met'}")
+        text = (
+            f"{a.task}: SB3 ÷ bayes {point:.1f}× [{low:.1f}×, {high:.1f}×] over {a.steps.size} seeds, the "
+            f"{a.target:g}× goal {'met' if point >= a.target else 'not met'}"
+        )
         same = Config.for_task(a.task, expert_loss="bayes", demo_episodes=EFFICIENCY_TASKS[a.task], **PROTOCOL)
         run = find_arm(arms, same)
         if run is not None and len(run.runs) > a.steps.size:
             more = ratio_ci(sb3[a.task], run.values("interactions_to_threshold"))
-            text += (f"; over all {len(run.runs)} archived seeds of the same arm {more[0]:.1f}× [{more[1]:.1f}×, "
-                     f"{more[2]:.1f}×], goal {'met' if more[0] >= a.target else 'not met'}")
+            text += (
+                f"; over all {len(run.runs)} archived seeds of the same arm {more[0]:.1f}× [{more[1]:.1f}×, "
+                f"{more[2]:.1f}×], goal {'met' if more[0] >= a.target else 'not met'}"
+            )
         lines.append(text + ".")
     return lines
 
@@ -108,8 +133,10 @@ def _estimators(directory: Path) -> list[str]:
     summary = json.loads(path.read_text())
     estimators = sorted({u for entries in summary["tasks"].values() for u in entries})
     met = [u for u in estimators if all(meets_goal(entries[u]) for entries in summary["tasks"].values())]
-    return [f"σ² estimators that meet the calibration goal (≥ {summary['goal_ratio']:g}× the on-demo σ² − σ0² off "
-            f"the demonstrations, on every task): {len(met)} of {len(estimators)}, {', '.join(met) or 'none'}."]
+    return [
+        f"σ² estimators that meet the calibration goal (≥ {summary['goal_ratio']:g}× the on-demo σ² − σ0² off "
+        f"the demonstrations, on every task): {len(met)} of {len(estimators)}, {', '.join(met) or 'none'}."
+    ]
 
 
 def _grid(arms: list[ArmRuns], directory: Path) -> list[str]:
@@ -117,18 +144,30 @@ def _grid(arms: list[ArmRuns], directory: Path) -> list[str]:
     for task in GRID_TASKS:
         cells, table = collect(arms, directory, task)
         dqn = table.get(DQN, {})
-        pairs = [(entries[c], dqn[c]) for method, entries in table.items() if method not in (DQN, BC_ALONE)
-                 for c in cells if c in entries and c in dqn]
+        pairs = [
+            (entries[c], dqn[c])
+            for method, entries in table.items()
+            if method not in (DQN, BC_ALONE)
+            for c in cells
+            if c in entries and c in dqn
+        ]
         if not pairs:
             continue
         verdicts = [effect(entry, baseline) for entry, baseline in pairs]
         seeds = sorted({len(entry.steps) for entry, _ in pairs})
-        partial = "" if seeds[0] >= GRID_SEEDS else (
-            f" So far from {seeds[0]}{'' if len(seeds) == 1 else f'–{seeds[-1]}'} of the {GRID_SEEDS} planned "
-            f"seeds per pair: read these as provisional.")
-        lines.append(f"Demonstration quality × quantity ({task}): a method with demonstrations is faster than DQN "
-                     f"in {verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
-                     f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}.{partial}")
+        partial = (
+            ""
+            if seeds[0] >= GRID_SEEDS
+            else (
+                f" So far from {seeds[0]}{'' if len(seeds) == 1 else f'–{seeds[-1]}'} of the {GRID_SEEDS} planned "
+                f"seeds per pair: read these as provisional."
+            )
+        )
+        lines.append(
+            f"Demonstration quality × quantity ({task}): a method with demonstrations is faster than DQN "
+            f"in {verdicts.count('helps')} of {len(verdicts)} (cell, method) pairs, slower in "
+            f"{verdicts.count('hurts')}, unclear in {verdicts.count('unclear')}.{partial}"
+        )
     return lines
 
 
@@ -137,11 +176,17 @@ def _replications(arms: list[ArmRuns], directory: Path) -> list[str]:
     if not found:
         return []
     tests = [c for *_, comparisons in found for c in comparisons]
-    differ = [f"{archived.label}: {c.metric} (p = {c.p:.2g})" for archived, _, comparisons in found
-              for c in comparisons if c.p < 0.05]
-    return [f"Replications at fresh seeds: {len(found)} arms, {len(tests)} rank tests, "
-            f"{len(differ)} with p < 0.05 (uncorrected; {0.05 * len(tests):.1f} expected by chance if none differ)"
-            f"{': ' + '; '.join(differ) if differ else ''}."]
+    differ = [
+        f"{archived.label}: {c.metric} (p = {c.p:.2g})"
+        for archived, _, comparisons in found
+        for c in comparisons
+        if c.p < 0.05
+    ]
+    return [
+        f"Replications at fresh seeds: {len(found)} arms, {len(tests)} rank tests, "
+        f"{len(differ)} with p < 0.05 (uncorrected; {0.05 * len(tests):.1f} expected by chance if none differ)"
+        f"{': ' + '; '.join(differ) if differ else ''}."
+    ]
 
 
 def _not_run(arms: list[ArmRuns]) -> list[str]:
@@ -163,16 +208,32 @@ def summary(arms: list[ArmRuns], directory: Path) -> list[str]:
     """The summary's lines (markdown), computed from `arms` and the suite `directory`'s files."""
     claims = _claims(arms)
     choice, _ = dynamic_default(arms)
-    found = [*_sensitivity(arms), *_ablations(arms), *_efficiency(arms, directory), *_estimators(directory),
-             *_grid(arms, directory), *_replications(arms, directory),
-             *([f"Dynamic demonstrations: the pre-registered rule picks `{choice}` as the default."] if choice else [])]
-    lines = ["## Summary", "", "Computed from the tables below (it regenerates with them); the numbers are the "
-             "judged metric's means, the TOST interval (90% CI) and the margin of each claim's rule.", ""]
+    found = [
+        *_sensitivity(arms),
+        *_ablations(arms),
+        *_efficiency(arms, directory),
+        *_estimators(directory),
+        *_grid(arms, directory),
+        *_replications(arms, directory),
+        *([f"Dynamic demonstrations: the pre-registered rule picks `{choice}` as the default."] if choice else []),
+    ]
+    lines = [
+        "## Summary",
+        "",
+        "Computed from the tables below (it regenerates with them); the numbers are the "
+        "judged metric's means, the TOST interval (90% CI) and the margin of each claim's rule.",
+        "",
+    ]
     for title, key in (("Holds", "holds"), ("Does not hold", "does not hold"), ("Unknown", "unknown")):
         lines += [f"**{title}**", "", *(f"- {line}" for line in claims[key] or ["none"]), ""]
-    lines += ["**Measured beside the claims**", "", *(f"- {line}" for line in found or ["nothing"]),
-              "- Studies with their own archives and reports: the Bayesian loss with σ0² below the variance cap "
-              "([SIGMA0.md](SIGMA0.md)) and MinAtar Breakout on frames ([PIXELS.md](PIXELS.md)).", ""]
+    lines += [
+        "**Measured beside the claims**",
+        "",
+        *(f"- {line}" for line in found or ["nothing"]),
+        "- Studies with their own archives and reports: the Bayesian loss with σ0² below the variance cap "
+        "([SIGMA0.md](SIGMA0.md)) and MinAtar Breakout on frames ([PIXELS.md](PIXELS.md)).",
+        "",
+    ]
     gaps = [*(f"claim {where}" for where in claims["not run"]), *_not_run(arms)]
     lines += ["**Not run yet**", "", *(f"- {line}" for line in gaps or ["nothing: every planned run is here"]), ""]
     return lines

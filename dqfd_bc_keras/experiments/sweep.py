@@ -28,13 +28,13 @@ from multiprocessing import get_context
 from multiprocessing.connection import wait as wait_for
 from pathlib import Path
 
-from ..cli import Terminated
-from ..errors import BrokenRunError, ConfigError, DirectoryInUseError, RunDirectoryError
-from ..files import DirectoryLock, write_text
-from ..provenance import provenance
-from ..runs import COMPLETE
-from .data import SWEEP_LOG
-from .suites import Arm, suite_arms
+from dqfd_bc_keras.commands.cli import Terminated
+from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DirectoryInUseError, RunDirectoryError
+from dqfd_bc_keras.experiments.data import SWEEP_LOG
+from dqfd_bc_keras.experiments.suites import Arm, suite_arms
+from dqfd_bc_keras.files import DirectoryLock, write_text
+from dqfd_bc_keras.runs.directory import COMPLETE
+from dqfd_bc_keras.runs.provenance import provenance
 
 BACKENDS = ("local", "ray")
 
@@ -86,7 +86,7 @@ def run_job(job: Job) -> Outcome:
     graphs and names are let go."""
     import keras
 
-    from ..runs import differences, saved_config, train
+    from dqfd_bc_keras.runs.directory import differences, saved_config, train
 
     keras.backend.clear_session()
 
@@ -101,8 +101,9 @@ def run_job(job: Job) -> Outcome:
                 if resume:  # the run on disk must be this arm's run
                     changed = differences(config.to_dict(), saved_config(job.directory).to_dict())
                     if changed:
-                        raise BrokenRunError(f"{job.directory / 'config.json'}: not the arm's config "
-                                             f"({'; '.join(changed)})")
+                        raise BrokenRunError(
+                            f"{job.directory / 'config.json'}: not the arm's config ({'; '.join(changed)})"
+                        )
                 result = train(config, job.directory, resume=resume, force=not resume, quiet=True)
             except BrokenRunError as error:
                 if not job.restart_broken:
@@ -110,11 +111,13 @@ def run_job(job: Job) -> Outcome:
                 result = train(config, job.directory, force=True, quiet=True)
     except DirectoryInUseError as error:  # another runner's: it will finish it
         return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, busy=str(error), pid=pid)
-    except Exception as error:  # noqa: BLE001  (a failed run is reported, the sweep goes on)
-        return Outcome(job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}",
-                       pid=pid)
-    return Outcome(job, result.episodes, result.env_steps, result.evaluation.mean_return,
-                   time.perf_counter() - started, pid=pid)
+    except Exception as error:
+        return Outcome(
+            job, 0, 0, float("nan"), time.perf_counter() - started, f"{type(error).__name__}: {error}", pid=pid
+        )
+    return Outcome(
+        job, result.episodes, result.env_steps, result.evaluation.mean_return, time.perf_counter() - started, pid=pid
+    )
 
 
 @contextlib.contextmanager
@@ -150,8 +153,9 @@ def locked(directory: Path, wait: bool = True) -> Iterator[None]:
         except BlockingIOError:
             lock = directory / DirectoryLock.NAME
             holder = (lock.read_text().strip() if lock.is_file() else "") or "(unknown)"
-            raise DirectoryInUseError(f"{directory} is in use by process {holder}; wait for it to finish or stop "
-                                      "it") from None
+            raise DirectoryInUseError(
+                f"{directory} is in use by process {holder}; wait for it to finish or stop it"
+            ) from None
         yield
     finally:
         os.close(fd)
@@ -236,8 +240,9 @@ def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WO
                     outcome = None
                 if outcome is None:  # it died during the run
                     worker.process.join()
-                    yield Outcome(worker.job, 0, 0, float("nan"), 0.0,
-                                  f"its process died (exit code {worker.process.exitcode})")
+                    yield Outcome(
+                        worker.job, 0, 0, float("nan"), 0.0, f"its process died (exit code {worker.process.exitcode})"
+                    )
                     continue
                 worker.runs += 1
                 if worker.runs >= runs_per_worker or not queue:
@@ -261,8 +266,11 @@ def _stop_all(workers: list[_Worker]) -> None:
     deadline = time.monotonic() + STOP_GRACE
     for worker in workers:
         if worker.end_by(deadline):
-            print(f"warning: {worker.job.directory}: the run had not stopped {STOP_GRACE:g} s after SIGTERM; "
-                  "killed (its last checkpoint is kept, and the next sweep resumes from it)", file=sys.stderr)
+            print(
+                f"warning: {worker.job.directory}: the run had not stopped {STOP_GRACE:g} s after SIGTERM; "
+                "killed (its last checkpoint is kept, and the next sweep resumes from it)",
+                file=sys.stderr,
+            )
 
 
 def _serve(jobs, outcomes) -> None:
@@ -295,8 +303,13 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None, runs_per_worker
         raise ConfigError("the ray backend needs Ray: pip install -r requirements-ray.txt") from None
     started_here = not ray.is_initialized()
     if started_here:
-        ray.init(address=address, num_cpus=None if address else workers, include_dashboard=False,
-                 log_to_driver=False, runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2])}})
+        ray.init(
+            address=address,
+            num_cpus=None if address else workers,
+            include_dashboard=False,
+            log_to_driver=False,
+            runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2])}},
+        )
     try:
         task = ray.remote(num_cpus=1, max_calls=runs_per_worker)(run_job)
         pending = [task.remote(job) for job in jobs]
@@ -316,9 +329,16 @@ def sweep_jobs(arms: Sequence[Arm], seeds: int | None, out: Path, restart_broken
 
 
 def run_suite(
-    suite: str | Sequence[Arm], seeds: int | None, out: str | Path, workers: int = 2, backend: str = "local",
-    address: str | None = None, progress: Callable[[str], None] = print, name: str = "arms",
-    restart_broken: bool = False, runs_per_worker: int = RUNS_PER_WORKER,
+    suite: str | Sequence[Arm],
+    seeds: int | None,
+    out: str | Path,
+    workers: int = 2,
+    backend: str = "local",
+    address: str | None = None,
+    progress: Callable[[str], None] = print,
+    name: str = "arms",
+    restart_broken: bool = False,
+    runs_per_worker: int = RUNS_PER_WORKER,
 ) -> list[Outcome]:
     """Run every incomplete (arm, seed) of `suite` (a name in SUITES, or arms called `name` in the
     progress lines and the sweep log), seeds 0 … `seeds` − 1, or each arm's own number when
@@ -326,56 +346,96 @@ def run_suite(
     (reported, the sweep goes on) unless `restart_broken`, which starts it over."""
     name, arms = (suite, suite_arms(suite)) if isinstance(suite, str) else (name, list(suite))
     jobs = sweep_jobs(arms, seeds, Path(out), restart_broken)
-    return run_jobs(jobs, Path(out), name, seeds or max(arm.seeds for arm in arms), workers, backend, address,
-                    progress, runs_per_worker)
+    return run_jobs(
+        jobs,
+        Path(out),
+        name,
+        seeds or max(arm.seeds for arm in arms),
+        workers,
+        backend,
+        address,
+        progress,
+        runs_per_worker,
+    )
 
 
 def run_jobs(
-    jobs: Sequence[Job], out: Path, name: str, seeds: int | str, workers: int = 2, backend: str = "local",
-    address: str | None = None, progress: Callable[[str], None] = print, runs_per_worker: int = RUNS_PER_WORKER,
+    jobs: Sequence[Job],
+    out: Path,
+    name: str,
+    seeds: int | str,
+    workers: int = 2,
+    backend: str = "local",
+    address: str | None = None,
+    progress: Callable[[str], None] = print,
+    runs_per_worker: int = RUNS_PER_WORKER,
 ) -> list[Outcome]:
     """Run the incomplete ones of `jobs`, logged in `out`'s sweep log as `name` with `seeds`; a
     worker process takes up to `runs_per_worker` runs in turn (1: a fresh process per run)."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
     todo = [job for job in jobs if not job.complete]
-    progress(f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
-             f"on {workers} {backend} worker(s)")
+    progress(
+        f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
+        f"on {workers} {backend} worker(s)"
+    )
     os.environ.setdefault("DQFD_TF_THREADS", "1")  # one core per run
     outcomes, started, interrupted = [], time.perf_counter(), True
-    stream = (_local(todo, workers, runs_per_worker) if backend == "local" else
-              _ray(todo, workers, address, runs_per_worker))
+    stream = (
+        _local(todo, workers, runs_per_worker) if backend == "local" else _ray(todo, workers, address, runs_per_worker)
+    )
     try:
         for outcome in stream:
             outcomes.append(outcome)
             job = outcome.job
-            status = (f"failed: {outcome.error}" if outcome.error else
-                      f"left to the runner that holds it ({outcome.busy})" if outcome.busy else
-                      "skipped: another runner completed it" if outcome.done_elsewhere else
-                      f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}")
-            progress(f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
-                     f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)")
+            status = (
+                f"failed: {outcome.error}"
+                if outcome.error
+                else f"left to the runner that holds it ({outcome.busy})"
+                if outcome.busy
+                else "skipped: another runner completed it"
+                if outcome.done_elsewhere
+                else f"{outcome.episodes} episodes, {outcome.env_steps} steps, eval {outcome.mean_return:.1f}"
+            )
+            progress(
+                f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
+                f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)"
+            )
         interrupted = False
     except KeyboardInterrupt:
-        progress(f"{name}: interrupted after {len(outcomes)} of {len(todo)} runs; no run was started after it, the "
-                 f"running ones stopped at their last checkpoint ({time.perf_counter() - started:.0f} s elapsed): "
-                 "run the same command again to go on")
+        progress(
+            f"{name}: interrupted after {len(outcomes)} of {len(todo)} runs; no run was started after it, the "
+            f"running ones stopped at their last checkpoint ({time.perf_counter() - started:.0f} s elapsed): "
+            "run the same command again to go on"
+        )
         raise
     finally:
         if outcomes or interrupted:  # every sweep that ran something, and one cut off (as such)
             log = out / SWEEP_LOG
-            entry = {"suite": name, "seeds": seeds, "runs": len(outcomes),
-                     "workers": workers, "backend": backend, "runs_per_worker": runs_per_worker, "seconds": round(time.perf_counter() - started, 1),
-                     "ended": time.strftime("%Y-%m-%d %H:%M:%S"), **({"interrupted": True} if interrupted else {}),
-                     **provenance()}
+            entry = {
+                "suite": name,
+                "seeds": seeds,
+                "runs": len(outcomes),
+                "workers": workers,
+                "backend": backend,
+                "runs_per_worker": runs_per_worker,
+                "seconds": round(time.perf_counter() - started, 1),
+                "ended": time.strftime("%Y-%m-%d %H:%M:%S"),
+                **({"interrupted": True} if interrupted else {}),
+                **provenance(),
+            }
             out.mkdir(parents=True, exist_ok=True)
             with locked(out):  # two runners ending together: each line kept, the file rewritten atomically
                 write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(entry) + "\n")
     busy = [o for o in outcomes if o.busy]
     if busy:
-        progress(f"{name}: {len(busy)} run(s) left to another runner that holds them; run the command again once "
-                 "it is done to check they are complete")
+        progress(
+            f"{name}: {len(busy)} run(s) left to another runner that holds them; run the command again once "
+            "it is done to check they are complete"
+        )
     failed = [o for o in outcomes if o.error]
     if failed:
-        raise ConfigError(f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}")
+        raise ConfigError(
+            f"{len(failed)} of {len(todo)} runs failed; first: {failed[0].job.directory}: {failed[0].error}"
+        )
     return outcomes

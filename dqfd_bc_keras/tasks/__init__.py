@@ -14,9 +14,33 @@ own registers from your module the same way, and `--task my_module:my-task` impo
 This package imports neither TensorFlow nor Gymnasium: reading a config.json loads neither.
 """
 
-from .registry import (ENV_DEFAULTS, EXPERT_NAMES, ID_NAMESPACE, NOT_REMADE, TASKS, Rule, TaskSpec,
-                       check_demonstrator, families, family_preset, find_preset, register_task)
-from . import cartpole, mountaincar, acrobot, lunarlander, minatar  # noqa: E402,F401,I001  (they register, in this order)
+from dqfd_bc_keras.tasks import acrobot, cartpole, lunarlander, minatar, mountaincar  # noqa: F401  (they register, in this order)
+from dqfd_bc_keras.tasks.registry import (
+    ENV_DEFAULTS,
+    EXPERT_NAMES,
+    ID_NAMESPACE,
+    NOT_REMADE,
+    TASKS,
+    Rule,
+    TaskSpec,
+    check_demonstrator,
+    families,
+    family_preset,
+    find_preset,
+    register_task,
+)
 
-__all__ = ["ENV_DEFAULTS", "EXPERT_NAMES", "ID_NAMESPACE", "NOT_REMADE", "TASKS", "Rule", "TaskSpec",
-           "check_demonstrator", "families", "family_preset", "find_preset", "register_task"]
+__all__ = [
+    "ENV_DEFAULTS",
+    "EXPERT_NAMES",
+    "ID_NAMESPACE",
+    "NOT_REMADE",
+    "TASKS",
+    "Rule",
+    "TaskSpec",
+    "check_demonstrator",
+    "families",
+    "family_preset",
+    "find_preset",
+    "register_task",
+]

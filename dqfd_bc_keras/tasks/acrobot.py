@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import ENV_DEFAULTS, TaskSpec, register_task
+from dqfd_bc_keras.tasks.registry import ENV_DEFAULTS, TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:
@@ -19,9 +19,16 @@ def imperfect(obs: np.ndarray) -> int:
     return 2 if obs[5] + 0.3 * obs[4] > 0.0 else 0
 
 
-register_task(TaskSpec(
-    "acrobot", "Acrobot-v1", "acrobot", 500, solved_return=-100.0, defaults={**ENV_DEFAULTS, "eval_every": 1_000},
-    experts={"strong": strong, "imperfect": imperfect},
-    doc="Acrobot-v1, 500 steps, solved at −100; the generic env defaults (SB3's budget of 100k steps) with "
+register_task(
+    TaskSpec(
+        "acrobot",
+        "Acrobot-v1",
+        "acrobot",
+        500,
+        solved_return=-100.0,
+        defaults={**ENV_DEFAULTS, "eval_every": 1_000},
+        experts={"strong": strong, "imperfect": imperfect},
+        doc="Acrobot-v1, 500 steps, solved at −100; the generic env defaults (SB3's budget of 100k steps) with "
         "an evaluation every 1k, the sample-efficiency grid",
-))
+    )
+)

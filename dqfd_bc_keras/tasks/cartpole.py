@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import TaskSpec, register_task
+from dqfd_bc_keras.tasks.registry import TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:
@@ -24,11 +24,29 @@ DEFAULTS = {"total_steps": 50_000, "eval_every": 1_000}
 """Runs end within ~10–50k steps (early stop at 10 episodes ≥ 490): a finer evaluation grid makes
 steps-to-threshold meaningful."""
 
-register_task(TaskSpec(
-    "cartpole", "CartPole-v1", "cartpole", 500, fall_penalty=-100.0, solved_return=475.0, defaults=DEFAULTS,
-    experts=EXPERTS, doc="CartPole-v1, 500 steps, −100 on a fall; stops early at 10 episodes ≥ 490",
-))
-register_task(TaskSpec(
-    "cartpole-200", "CartPole-v1", "cartpole", 200, fall_penalty=-100.0, solved_return=475.0, defaults=DEFAULTS,
-    experts=EXPERTS, doc="the paper's unstable variant with a 200-step limit",
-))
+register_task(
+    TaskSpec(
+        "cartpole",
+        "CartPole-v1",
+        "cartpole",
+        500,
+        fall_penalty=-100.0,
+        solved_return=475.0,
+        defaults=DEFAULTS,
+        experts=EXPERTS,
+        doc="CartPole-v1, 500 steps, −100 on a fall; stops early at 10 episodes ≥ 490",
+    )
+)
+register_task(
+    TaskSpec(
+        "cartpole-200",
+        "CartPole-v1",
+        "cartpole",
+        200,
+        fall_penalty=-100.0,
+        solved_return=475.0,
+        defaults=DEFAULTS,
+        experts=EXPERTS,
+        doc="the paper's unstable variant with a 200-step limit",
+    )
+)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import ENV_DEFAULTS, TaskSpec, register_task
+from dqfd_bc_keras.tasks.registry import ENV_DEFAULTS, TaskSpec, register_task
 
 
 def heuristic(s: np.ndarray, hover_gain: float = 0.5) -> int:
@@ -37,8 +37,15 @@ def imperfect(obs: np.ndarray) -> int:
     return heuristic(obs, hover_gain=0.7)
 
 
-register_task(TaskSpec(
-    "lunarlander", "LunarLander-v3", "lunarlander", 1000, solved_return=200.0,
-    defaults={**ENV_DEFAULTS, "eval_every": 1_000}, experts={"strong": strong, "imperfect": imperfect},
-    doc="LunarLander-v3, 1000 steps, solved at 200; as acrobot",
-))
+register_task(
+    TaskSpec(
+        "lunarlander",
+        "LunarLander-v3",
+        "lunarlander",
+        1000,
+        solved_return=200.0,
+        defaults={**ENV_DEFAULTS, "eval_every": 1_000},
+        experts={"strong": strong, "imperfect": imperfect},
+        doc="LunarLander-v3, 1000 steps, solved at 200; as acrobot",
+    )
+)

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
-from .registry import TaskSpec, register_task
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.tasks.registry import TaskSpec, register_task
 
 GAMES = ("asterix", "breakout", "freeway", "seaquest", "space_invaders")
 """MinAtar's games, as `minatar.gym.register_envs` names them (Breakout-v0: all 6 actions, -v1: the minimal set)."""
@@ -42,8 +42,11 @@ def _register_ids() -> None:
         name = game.title().replace("_", "")
         for version, minimal in (("v0", False), ("v1", True)):
             if f"MinAtar/{name}-{version}" not in registry:  # minatar's own registration came first
-                register(id=f"MinAtar/{name}-{version}", entry_point="minatar.gym:BaseEnv",
-                         kwargs={"game": game, "use_minimal_action_set": minimal})
+                register(
+                    id=f"MinAtar/{name}-{version}",
+                    entry_point="minatar.gym:BaseEnv",
+                    kwargs={"game": game, "use_minimal_action_set": minimal},
+                )
 
 
 @contextmanager
@@ -72,7 +75,6 @@ def require_minatar() -> None:
 
 if importlib.util.find_spec("minatar") is not None:
     _register_ids()
-
 
 
 # --- Breakout -------------------------------------------------------------------------------------
@@ -147,7 +149,7 @@ def _fly(bricks: np.ndarray, x: int, y: int, dx: int, dy: int, strike: bool, hor
                 first_break = min(first_break, step)
         elif new_y == 9:
             if not bricks.any():
-                bricks[BRICK_ROWS[0]:BRICK_ROWS[1] + 1] = True
+                bricks[BRICK_ROWS[0] : BRICK_ROWS[1] + 1] = True
             return Flight(step, (x, new_x), dx, first_break, bricks)
         strike = hit
         x, y = new_x, new_y
@@ -236,25 +238,45 @@ DEFAULTS: dict[str, object] = {
     # then one dense layer of 128; step size 0.00025 (theirs is RMSProp's, ours Adam's), batch 32,
     # replay 100k, the target network refreshed every 1000 steps (one gradient step per frame), ε
     # annealed to 0.1. Ours: 100k steps for their 5M frames, and the shared ENV_DEFAULTS' protocol.
-    "hidden": (128,), "bc_hidden": (128,), "learning_rate": 2.5e-4, "batch_size": 32, "replay_capacity": 100_000,
-    "target_update_period": 1000, "epsilon_end": 0.1,
-    "total_steps": 100_000, "eval_every": 5_000, "demo_episodes": 10, "early_stop_window": 0,
+    "hidden": (128,),
+    "bc_hidden": (128,),
+    "learning_rate": 2.5e-4,
+    "batch_size": 32,
+    "replay_capacity": 100_000,
+    "target_update_period": 1000,
+    "epsilon_end": 0.1,
+    "total_steps": 100_000,
+    "eval_every": 5_000,
+    "demo_episodes": 10,
+    "early_stop_window": 0,
 }
 """The Config defaults of the MinAtar presets."""
 
 # MinAtar has no step limit and a good player never loses Breakout's ball (the bricks refill), so
 # the limit is what ends the strong expert's episodes (90 of 100): 1000 steps is ~84 bricks, three
 # walls' worth, and 10 demonstrated episodes fill a tenth of the 100k-step budget.
-register_task(TaskSpec(
-    "minatar-breakout", "MinAtar/Breakout-v1", "minatar-breakout", 1000, defaults=DEFAULTS,
-    experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
-    doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
-))
+register_task(
+    TaskSpec(
+        "minatar-breakout",
+        "MinAtar/Breakout-v1",
+        "minatar-breakout",
+        1000,
+        defaults=DEFAULTS,
+        experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
+        doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
+    )
+)
 
 # Freeway ends itself after 2501 frames, on a clock the frame does not show; the 2500-step limit ends
 # it one frame earlier as a truncation, which is what an unseen clock is to the agent.
-register_task(TaskSpec(
-    "minatar-freeway", "MinAtar/Freeway-v1", "minatar-freeway", 2500, defaults=DEFAULTS,
-    experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
-    doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
-))
+register_task(
+    TaskSpec(
+        "minatar-freeway",
+        "MinAtar/Freeway-v1",
+        "minatar-freeway",
+        2500,
+        defaults=DEFAULTS,
+        experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
+        doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
+    )
+)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .registry import TaskSpec, register_task
+from dqfd_bc_keras.tasks.registry import TaskSpec, register_task
 
 
 def strong(obs: np.ndarray) -> int:
@@ -23,11 +23,28 @@ EXPERTS = {"strong": strong, "imperfect": imperfect}
 DEFAULTS = {"demo_episodes": 10, "total_steps": 100_000, "early_stop_window": 0}
 """Sparse rewards: 10 demonstrated episodes, 100k steps, no early stop (the budget ends a run)."""
 
-register_task(TaskSpec(
-    "mountaincar", "MountainCar-v0", "mountaincar", 200, solved_return=-110.0, defaults=DEFAULTS, experts=EXPERTS,
-    doc="MountainCar-v0, 200 steps, sparse; no early stop (the budget ends it)",
-))
-register_task(TaskSpec(
-    "mountaincar-goals", "MountainCar-v0", "mountaincar", 200, goal_reward=100.0, solved_return=-110.0,
-    defaults=DEFAULTS, experts=EXPERTS, doc="the paper's goal-count variant (Figs. 9–11): +100 on each flag",
-))
+register_task(
+    TaskSpec(
+        "mountaincar",
+        "MountainCar-v0",
+        "mountaincar",
+        200,
+        solved_return=-110.0,
+        defaults=DEFAULTS,
+        experts=EXPERTS,
+        doc="MountainCar-v0, 200 steps, sparse; no early stop (the budget ends it)",
+    )
+)
+register_task(
+    TaskSpec(
+        "mountaincar-goals",
+        "MountainCar-v0",
+        "mountaincar",
+        200,
+        goal_reward=100.0,
+        solved_return=-110.0,
+        defaults=DEFAULTS,
+        experts=EXPERTS,
+        doc="the paper's goal-count variant (Figs. 9–11): +100 on each flag",
+    )
+)

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
+from dqfd_bc_keras.errors import ConfigError
 
 Rule = Callable[[np.ndarray], int]
 """A scripted demonstrator: observation (as the networks see it) → action."""
@@ -23,8 +23,12 @@ recorded in the process that ran, a dataset given from Python): accepted as an `
 made again; such a run's D_demo is kept in its checkpoints (runs.GIVEN_DEMOS)."""
 DEFAULT_EXPERT = "imperfect"
 """Config's default `expert`; a preset without an expert of that name demonstrates with its first one."""
-ENV_DEFAULTS: Mapping[str, object] = {"demo_episodes": 10, "total_steps": 100_000, "eval_every": 5_000,
-                                      "early_stop_window": 0}
+ENV_DEFAULTS: Mapping[str, object] = {
+    "demo_episodes": 10,
+    "total_steps": 100_000,
+    "eval_every": 5_000,
+    "early_stop_window": 0,
+}
 """The Config defaults of any Gymnasium env that is not a preset (`--env ID`): no early stop,
 10 demonstrated episodes, 100k steps, an evaluation every 5k. Ours, not the paper's."""
 
@@ -99,8 +103,12 @@ def check_demonstrator(spec: str, task: TaskSpec) -> None:
     """A `ConfigError` unless `spec` names a demonstrator for `task`: a scripted expert's name,
     a rule `module:function` or a `.keras` model file (what each is, is checked when it is made)."""
     scripted = tuple(dict.fromkeys((*EXPERT_NAMES, *task.experts)))
-    if (spec not in scripted and not spec.endswith(".keras") and not re.fullmatch(r"[\w.]+:\w+", spec)
-            and not spec.startswith(NOT_REMADE)):
+    if (
+        spec not in scripted
+        and not spec.endswith(".keras")
+        and not re.fullmatch(r"[\w.]+:\w+", spec)
+        and not spec.startswith(NOT_REMADE)
+    ):
         raise ConfigError(f"expert={spec!r} is none of {', '.join(scripted)}, module:function or a .keras model file")
 
 

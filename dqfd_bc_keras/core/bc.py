@@ -1,0 +1,363 @@
+"""The behavioural-cloning classifier π_bc(a|s), fitted on D_demo (ALGORITHM.md §3).
+
+Two ways to fit it, one `train_step`:
+- MLE (for `ce` and `bc_margin`, as in DQfD-BC): plain cross entropy, no dropout;
+- MAP (for `bayes`): cross entropy + a Gaussian weight prior ‖w‖²/(2·s²·N), and `predictive`
+  returns the mean policy π̄_bc and a variance σ²(s) = σ0² + the epistemic part from one of
+  `choices.UNCERTAINTIES`: MC dropout (the paper's: dropout kept active for K passes), an
+  ensemble of K members on bootstrap resamples, or the distance to the demonstrations.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import keras
+import numpy as np
+import tensorflow as tf
+
+from dqfd_bc_keras.choices import UNCERTAINTIES
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.networks import NetworkInput, dense_stack, torso_layers
+from dqfd_bc_keras.core.optimizers import FusedAdam
+from dqfd_bc_keras.core.uncertainty import (
+    NearestDemoVariance,
+    bootstrap_counts,
+    ensemble_stack,
+    policy_variance,
+    reference_rows,
+)
+from dqfd_bc_keras.envs.observations import Frames
+
+DISTANCE_SIDE = 21
+"""Frames are average-pooled to about this side before the distance estimator reads them (84 → 21)."""
+
+
+@keras.saving.register_keras_serializable(package="dqfd_bc_keras")
+class BCModel(keras.Model):
+    """Classifier: state (a vector (d,), or frames through a convolutional torso) → action logits
+    (A,); `call` returns logits."""
+
+    def __init__(
+        self,
+        obs_dim: int,
+        n_actions: int,
+        hidden: Sequence[int] = (64, 64),
+        dropout: float = 0.0,
+        prior_scale: float | None = None,
+        mc_passes: int = 10,
+        sigma0_sq: float = 0.5,
+        mc_dropout: bool = True,
+        obs_mean: Sequence[float] | None = None,
+        obs_std: Sequence[float] | None = None,
+        uncertainty: str = "mc_dropout",
+        members: int = 5,
+        frames: dict | None = None,
+        torso: str = "mlp",
+        **kwargs,
+    ) -> None:
+        """`prior_scale=None` fits by MLE; a number s fits by MAP with the prior N(0, s²I).
+
+        `obs_mean`/`obs_std` standardise the input (the demonstrations' statistics).
+        `uncertainty` picks σ²'s estimator; `members` is K of the ensemble (one network otherwise).
+        `mc_dropout=False` predicts with one deterministic pass even when trained with dropout
+        (the ablation "σ² fixed at σ0²"). `frames` ({shape, scale, stack} of `observations.Frames`)
+        makes the input uint8 frames read by `torso` (networks.py); dropout and the ensemble's
+        members are in the dense layers after it, which is where they act on frames too (an
+        ensemble's members then share the torso, as Bootstrapped DQN's heads do: Osband et al. 2016).
+        """
+        super().__init__(**kwargs)
+        if uncertainty not in UNCERTAINTIES:
+            raise ValueError(f"uncertainty={uncertainty!r} is not one of {UNCERTAINTIES}")
+        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
+        self.hidden, self.dropout = tuple(int(h) for h in hidden), float(dropout)
+        self.prior_scale = None if prior_scale is None else float(prior_scale)
+        self.mc_passes, self.sigma0_sq, self.mc_dropout = int(mc_passes), float(sigma0_sq), bool(mc_dropout)
+        self.obs_mean = None if obs_mean is None else [float(x) for x in obs_mean]
+        self.obs_std = None if obs_std is None else [float(x) for x in obs_std]
+        self.uncertainty, self.members = uncertainty, int(members) if uncertainty == "ensemble" else 1
+        self.frames = (
+            None
+            if frames is None
+            else Frames(tuple(int(n) for n in frames["shape"]), float(frames["scale"]), int(frames.get("stack", 1)))
+        )
+        self.torso = torso if self.frames is not None else "mlp"
+        self.input_spec_ = NetworkInput(self.obs_dim, self.frames, self.torso)
+        scale = None if obs_mean is None or self.frames is not None else (self.obs_mean, self.obs_std)
+        self.body = torso_layers(self.input_spec_, scale)
+        """Standardisation (vectors) or the convolutional torso (frames): what the dense layers read."""
+        self.stack = (
+            ensemble_stack(self.members, self.hidden, self.n_actions)
+            if self.ensemble
+            else dense_stack(self.hidden, self.n_actions, self.dropout)
+        )
+        self.distance = (
+            NearestDemoVariance(
+                self._distance_width(),
+                self.n_actions,
+                name="nearest_demo_variance",
+                length=None if self.frames is not None else 1.0,
+            )
+            if uncertainty == "distance"
+            else None
+        )
+        # N of the prior's 1/N scaling: the size of the dataset being fitted (set by `fit_demos`).
+        self.n_data = self.add_weight(shape=(), initializer="ones", trainable=False, name="n_data")
+        self.loss_tracker = keras.metrics.Mean(name="loss")
+        self.ce_tracker = keras.metrics.Mean(name="cross_entropy")
+        self.accuracy = keras.metrics.SparseCategoricalAccuracy(name="accuracy")
+        self._fit = tf.function(
+            self._fit_graph,
+            autograph=False,
+            input_signature=[
+                tf.TensorSpec([None, *self.input_spec_.shape], self.input_spec_.dtype),
+                tf.TensorSpec([None], tf.int32),
+                tf.TensorSpec([], tf.int32),
+                tf.TensorSpec([], tf.int32),
+                tf.TensorSpec([], tf.int64),
+            ],
+        )
+        self.build((None, *self.input_spec_.shape))
+
+    def build(self, input_shape) -> None:
+        shape = tuple(input_shape)
+        for layer in self.body:
+            layer.build(shape)
+            shape = layer.compute_output_shape(shape)
+        shape = (self.members, *shape) if self.ensemble else shape
+        for layer in self.stack:
+            layer.build(shape)
+            shape = layer.compute_output_shape(shape)
+        super().build(input_shape)
+
+    def call(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
+        """Logits of π̄_bc: the network's, or for an ensemble log of the members' mean policy."""
+        logits = self.member_logits(obs, training)
+        return self._mean_policy_logits(logits) if self.ensemble else logits
+
+    @staticmethod
+    def _mean_policy_logits(member_logits: tf.Tensor) -> tf.Tensor:
+        """log mean_k softmax(logits_k): (K, B, A) → (B, A), the ensemble's π̄_bc as logits."""
+        return tf.math.log(tf.reduce_mean(tf.nn.softmax(member_logits), axis=0) + 1e-12)
+
+    def member_logits(self, obs: tf.Tensor, training: bool = False) -> tf.Tensor:
+        """(K, B, A) logits of each ensemble member, or (B, A) of the one network."""
+        return self.head_logits(self.features(obs), training)
+
+    def head_logits(self, x: tf.Tensor, training: bool = False) -> tf.Tensor:
+        """The dense layers (dropout, or the ensemble's members) on features `x` (B, f)."""
+        if self.ensemble:
+            x = tf.broadcast_to(x[None], [self.members, tf.shape(x)[0], x.shape[-1]])
+        for layer in self.stack:
+            x = layer(x, training=training)
+        return x
+
+    def features(self, obs: tf.Tensor) -> tf.Tensor:
+        """What the dense layers read: vectors in the demonstrations' standard units (as given
+        without statistics), or the torso's features of frames."""
+        x = obs if self.frames is not None else tf.cast(obs, tf.float32)
+        for layer in self.body:
+            x = layer(x)
+        return x
+
+    def distance_view(self, obs: tf.Tensor) -> tf.Tensor:
+        """The space the distance estimator measures in: standardised vectors, or the frames in
+        [0, 1] average-pooled to about `DISTANCE_SIDE` a side and flattened. Frames, not the
+        torso's features: those change at every refit and are trained to tell actions apart, not
+        to say how far a state is from the demonstrations; a MinAtar distance is then
+        √(cells that differ)."""
+        if self.frames is None:
+            return self.features(obs)
+        x = tf.cast(obs, tf.float32) * self.frames.scale
+        x = x[..., None] if len(self.frames.shape) == 2 else x
+        pool = max(1, min(self.frames.shape[:2]) // DISTANCE_SIDE)
+        if pool > 1:
+            x = tf.nn.avg_pool2d(x, pool, pool, "VALID")
+        return tf.reshape(x, [tf.shape(x)[0], -1])
+
+    def _distance_width(self) -> int:
+        """Features of `distance_view`: the observation's width, or what pooling leaves of the frames."""
+        if self.frames is None:
+            return self.obs_dim
+        return int(self.distance_view(tf.zeros([1, *self.frames.shape], tf.uint8)).shape[1])
+
+    @property
+    def map_fit(self) -> bool:
+        return self.prior_scale is not None
+
+    @property
+    def ensemble(self) -> bool:
+        return self.uncertainty == "ensemble"
+
+    @property
+    def metrics(self) -> list[keras.metrics.Metric]:
+        return [self.loss_tracker, self.ce_tracker, self.accuracy]
+
+    def prior_loss(self) -> tf.Tensor:
+        """‖w‖²/(2·s²·N) over every weight (MAP), or 0 (MLE); an ensemble's members each have
+        their own prior, so this is their sum."""
+        if not self.map_fit:
+            return tf.constant(0.0)
+        squared = tf.add_n([tf.reduce_sum(tf.square(w)) for w in self.trainable_weights])
+        return squared / (2.0 * self.prior_scale**2 * self.n_data)
+
+    def train_step(self, data):
+        """One step on mean cross entropy + prior; an ensemble's data carries (K, B) bootstrap
+        counts, and its loss is the sum of the members' losses (each member its own gradient)."""
+        obs, actions, counts = data if len(data) == 3 else (*data, None)
+        with tf.GradientTape() as tape:
+            logits = self.member_logits(obs, training=True)
+            if self.ensemble:
+                per_pair = tf.nn.sparse_softmax_cross_entropy_with_logits(
+                    tf.broadcast_to(tf.cast(actions, tf.int32)[None], tf.shape(logits)[:2]), logits
+                )
+                ce = tf.reduce_mean(per_pair)
+                loss = tf.reduce_sum(tf.reduce_mean(counts * per_pair, axis=1)) + self.prior_loss()
+            else:
+                ce = self.cross_entropy(actions, logits)
+                loss = ce + self.prior_loss()
+        grads = tape.gradient(loss, self.trainable_weights)
+        self.optimizer.apply(grads, self.trainable_weights)
+        return self._record(actions, self._mean_policy_logits(logits) if self.ensemble else logits, ce, loss)
+
+    @staticmethod
+    def cross_entropy(actions: tf.Tensor, logits: tf.Tensor) -> tf.Tensor:
+        """mean −log π_bc(a_E|s) over the batch."""
+        return tf.reduce_mean(tf.nn.sparse_softmax_cross_entropy_with_logits(tf.cast(actions, tf.int32), logits))
+
+    def _record(self, actions, logits, ce, loss) -> dict[str, tf.Tensor]:
+        self.loss_tracker.update_state(loss)
+        self.ce_tracker.update_state(ce)
+        self.accuracy.update_state(actions, logits)
+        return {m.name: m.result() for m in self.metrics}
+
+    def predictive(self, obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
+        """(π̄_bc (B, A), σ² (B,)), σ² = σ0² + the estimator's epistemic variance, in one graph:
+
+        mc_dropout  the mean and variance of K dropout passes;
+        ensemble    the mean and variance of the K members;
+        distance    one deterministic pass, and the nearest-demonstration variance.
+        Without dropout (the MLE model) every MC pass is the same: π̄_bc = π_bc and σ² = σ0²; so
+        it is with `mc_dropout=False`.
+        """
+        if self.ensemble:
+            probs = tf.nn.softmax(self.member_logits(obs))
+            return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
+        if self.distance is not None:
+            return tf.nn.softmax(self(obs)), self.sigma0_sq + self.distance(self.distance_view(obs))
+        if self.dropout == 0.0 or not self.mc_dropout:
+            probs = tf.nn.softmax(self(obs, training=False))
+            return probs, tf.fill(tf.shape(probs)[:1], tf.constant(self.sigma0_sq, probs.dtype))
+        batch = tf.shape(obs)[0]
+        # The body has no dropout: its features are computed once and the K passes share them.
+        logits = self.head_logits(tf.tile(self.features(obs), [self.mc_passes, 1]), training=True)
+        probs = tf.reshape(tf.nn.softmax(logits), [self.mc_passes, batch, self.n_actions])
+        return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
+
+    def fit_demos(
+        self, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int = 64, seed: int = 0
+    ) -> dict[str, float]:
+        """Fit (or, called again, warm-start) on demonstration pairs (s, a_E); N = len(obs).
+
+        Each epoch visits every pair once in a fresh random order (from `seed` and the epoch),
+        in batches of `batch_size` (the last one smaller), through `train_step`; all epochs run
+        in one graph call. Keras's `fit` spent ~1.5 s per call here on its data pipeline and
+        callbacks, for a few hundred half-millisecond steps. Each fit draws an ensemble's
+        bootstrap resamples afresh and a distance estimator's reference states. Returns the
+        last epoch's metrics.
+        """
+        self.n_data.assign(float(len(obs)))
+        if self.distance is not None:
+            rows = reference_rows(len(obs), self.distance.capacity, seed)
+            self.distance.set_references(self.distance_view(tf.constant(obs[rows])).numpy())
+        if epochs > 0:
+            self._fit(
+                tf.constant(obs, self.input_spec_.dtype),
+                tf.constant(actions, tf.int32),
+                tf.constant(epochs),
+                tf.constant(min(batch_size, len(obs))),
+                tf.constant(seed, tf.int64),
+            )
+        return {metric.name: float(metric.result()) for metric in self.metrics}
+
+    def _fit_graph(self, obs, actions, epochs, batch_size, seed) -> None:
+        n = tf.shape(obs)[0]
+        batches = (n + batch_size - 1) // batch_size
+        counts = bootstrap_counts(self.members, n, seed) if self.ensemble else None
+
+        def epoch(e):
+            for metric in self.metrics:
+                metric.reset_state()
+            order = tf.argsort(tf.random.stateless_uniform([n], seed=tf.stack([seed, tf.cast(e, tf.int64)])))
+
+            def batch(b):
+                rows = order[b * batch_size : tf.minimum((b + 1) * batch_size, n)]
+                data = (tf.gather(obs, rows), tf.gather(actions, rows))
+                data += (tf.gather(counts, rows, axis=1),) if self.ensemble else ()
+                with tf.control_dependencies([self.train_step(data)["loss"]]):
+                    return b + 1
+
+            with tf.control_dependencies([tf.while_loop(lambda b: b < batches, batch, [tf.constant(0)])]):
+                return e + 1
+
+        tf.while_loop(lambda e: e < epochs, epoch, [tf.constant(0)])
+
+    def get_config(self) -> dict:
+        return {
+            **super().get_config(),
+            "obs_dim": self.obs_dim,
+            "n_actions": self.n_actions,
+            "hidden": list(self.hidden),
+            "dropout": self.dropout,
+            "prior_scale": self.prior_scale,
+            "mc_passes": self.mc_passes,
+            "sigma0_sq": self.sigma0_sq,
+            "mc_dropout": self.mc_dropout,
+            "obs_mean": self.obs_mean,
+            "obs_std": self.obs_std,
+            "uncertainty": self.uncertainty,
+            "members": self.members,
+            "frames": None
+            if self.frames is None
+            else {"shape": list(self.frames.shape), "scale": self.frames.scale, "stack": self.frames.stack},
+            "torso": self.torso,
+        }
+
+
+def build_bc_model(
+    config: Config,
+    obs_dim: int | NetworkInput,
+    n_actions: int,
+    obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
+) -> BCModel:
+    """The BC model `config.expert_loss` calls for: MLE for ce and bc_margin; MAP for bayes,
+    with `config.uncertainty`'s estimator (dropout for mc_dropout and distance, whose π̄_bc is
+    then the paper's MAP network's; none in an ensemble's members)."""
+    bayesian = config.bayesian_bc
+    uncertainty = config.uncertainty if bayesian else "mc_dropout"
+    mean, std = (None, None) if obs_scale is None else obs_scale
+    spec = obs_dim if isinstance(obs_dim, NetworkInput) else NetworkInput(int(obs_dim))
+    frames = (
+        None
+        if spec.frames is None
+        else {"shape": list(spec.frames.shape), "scale": spec.frames.scale, "stack": spec.frames.stack}
+    )
+    model = BCModel(
+        spec.dim,
+        n_actions,
+        hidden=config.bc_hidden,
+        frames=frames,
+        torso=spec.torso,
+        dropout=config.bc_dropout if bayesian and uncertainty != "ensemble" else 0.0,
+        prior_scale=config.bc_prior_scale if bayesian else None,
+        mc_passes=config.mc_passes,
+        sigma0_sq=config.sigma0_sq,
+        mc_dropout=config.mc_dropout,
+        obs_mean=mean,
+        obs_std=std,
+        uncertainty=uncertainty,
+        members=config.ensemble_members,
+        name="bc_model",
+    )
+    model.compile(optimizer=FusedAdam(config.bc_learning_rate))
+    return model

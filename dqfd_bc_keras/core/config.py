@@ -1,0 +1,523 @@
+"""Every hyperparameter, with the paper's (or DQfD's) default, in one typed dataclass.
+
+Where the paper is silent, ALGORITHM.md decides; where that is silent too, the value is ours
+and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults (the
+registry in `tasks/`; any other Gymnasium env id gets `tasks.ENV_DEFAULTS`); `validate` rejects
+settings the algorithm cannot use with a `ConfigError` naming the value, without making an env:
+whether the env takes the config is `envs.checked_spaces`'s to say, where envs are about to be made.
+Nothing here imports TensorFlow: reading a config.json is cheap.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from dqfd_bc_keras.choices import DYNAMIC_MODES, PRIOR_CENTERS, TARGETS, TD_LOSSES, TIMEOUT_MODES, TORSOS, UNCERTAINTIES
+from dqfd_bc_keras.core.methods import Method, get_method, reading_saved_config
+from dqfd_bc_keras.envs.make import TaskSpaces, get_task, step_limit, task_spaces
+from dqfd_bc_keras.envs.network_input import CONV_TORSOS, NetworkInput
+from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.seeds import MAX_SEED
+from dqfd_bc_keras.tasks import check_demonstrator
+
+QUICK: dict[str, object] = {
+    "total_steps": 600,
+    "pretrain_steps": 50,
+    "bc_epochs": 2,
+    "bc_refit_epochs": 1,
+    "demo_episodes": 2,
+    "eval_every": 300,
+    "eval_episodes": 2,
+    "final_eval_episodes": 2,
+    "checkpoint_every": 300,
+    "replay_capacity": 2000,
+    "demo_capacity": 5000,
+}
+"""A budget of seconds per run, for tests and smoke checks (`train.py --quick`, the quick suite)."""
+
+
+@dataclass
+class Config:
+    """Hyperparameters of one run. Greek letters follow ALGORITHM.md."""
+
+    # --- task -------------------------------------------------------------------------------
+    task: str = "cartpole"
+    """Task preset (tasks.TASKS, or `module:preset` registered by `module`), or the id of any Gymnasium env with Discrete actions and an
+    observation that `observations` flattens (`module:Env-v0` imports `module` first)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments of the env's constructor (`gym.make(id, **env_kwargs)`), JSON values; part
+    of the task: every env of the run, its demonstrations and its evaluations are made with them."""
+    timeout: str = "bootstrap"
+    """Time-limit mode: bootstrap | naive | time-aware."""
+    max_steps: int | None = None
+    """Episode step limit; None: the task's (CartPole 500 or 200, MountainCar 200, an env's own)."""
+
+    # --- the loss J = J_DQ + λ1·J_n + λ2·J_E + λ3·J_L2 (§2) ----------------------------------
+    expert_loss: str = "bayes"
+    """The method (methods.py): margin (DQfD) | bc_margin (DQfD-BC) | ce (DQfD-BC) | bayes (the
+    paper) | none (plain DQN) | sqil (SQIL's rewards on our DQN), or a method of your own as
+    `module:NAME`."""
+    target: str = "dqn"
+    """Bootstrap target: dqn (the paper's) | double (DQfD's)."""
+    td_loss: str = "squared"
+    """Per-sample TD loss: squared (the paper's) | huber."""
+    gamma: float = 0.99
+    """Discount γ."""
+    n_step: int = 10
+    """n of the n-step return (DQfD)."""
+    lambda_n: float = 1.0
+    """λ1, weight of the n-step loss (DQfD)."""
+    lambda_expert: float = 1.0
+    """λ2, weight of the expert loss (DQfD)."""
+    lambda_l2: float = 1e-5
+    """λ3, weight of the L2 loss on the Q-network's kernels (DQfD)."""
+    margin: float = 0.8
+    """l(a_E, a) for a ≠ a_E in the margin losses (DQfD)."""
+    temperature: float = 1.0
+    """T in p_Q = softmax(Q/T) for the ce and bayes losses."""
+
+    # --- the Bayesian expert loss (§3) ------------------------------------------------------
+    sigma0_sq: float = 0.5
+    """Observation noise σ0²: a confident BC model's imitation weight is 1/(2σ0²) = 1."""
+    mc_passes: int = 10
+    """K, MC-dropout forward passes of the BC model for π̄_bc and σ²."""
+    prior_scale: float = 1.0
+    """s_p, standard deviation of the Gaussian prior around θ_prior."""
+    prior_center: str = "pretrained"
+    """θ_prior: the Q-network's weights at the end of pre-training, or zero."""
+    bayes_prior: bool = True
+    """The prior term ‖θ − θ_prior‖²/(2 s_p² N) of J_E (False: an ablation, the likelihood alone)."""
+    mc_dropout: bool = True
+    """σ²(s) from K MC-dropout passes of π_bc (False: an ablation, π̄_bc from one deterministic pass
+    and σ² = σ0² everywhere)."""
+    uncertainty: str = "mc_dropout"
+    """The estimator of σ²(s) − σ0² (uncertainty.py): mc_dropout (the paper's) | ensemble (K BC
+    members on bootstrap resamples of D_demo) | distance (to the nearest demonstrated state). Ours."""
+    ensemble_members: int = 5
+    """K of the `ensemble` estimator (Lakshminarayanan et al. 2017's 5)."""
+
+    # --- networks and optimisation (ours: the paper gives none) ----------------------------
+    torso: str = "auto"
+    """What reads the observation before the hidden layers (networks.py): mlp | minatar (one 3×3
+    conv of 16) | nature (Nature DQN's three convs) | auto (mlp for vectors, minatar for frames
+    under 36×36, nature from there). Shared by the Q-network and the BC model."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden ReLU layers of the Q-network (after the torso)."""
+    learning_rate: float = 1e-3
+    """Adam step size of the Q-network."""
+    batch_size: int = 64
+    """Mini-batch size of every gradient step."""
+    target_update_period: int = 250
+    """τ: gradient steps between refreshes of the target network θ' ← θ."""
+    pretrain_steps: int = 1000
+    """k, gradient steps on D_demo alone before interacting (§4)."""
+
+    # --- BC model π_bc (§3) -----------------------------------------------------------------
+    bc_hidden: tuple[int, ...] = (64, 64)
+    """Hidden ReLU layers of the BC classifier."""
+    bc_dropout: float = 0.2
+    """Dropout rate of the MAP BC model (bayes); the MLE model (ce, bc_margin) has none."""
+    bc_prior_scale: float = 1.0
+    """Standard deviation of the Gaussian weight prior of the MAP BC model."""
+    bc_learning_rate: float = 1e-3
+    """Adam step size of the BC model."""
+    bc_epochs: int = 60
+    """Epochs of the first BC fit on D_demo."""
+
+    # --- prioritized replay (§1; DQfD's values) ---------------------------------------------
+    replay_capacity: int = 100_000
+    """Capacity of D_replay (self-generated transitions, FIFO)."""
+    demo_capacity: int = 50_000
+    """Capacity of D_demo in transitions (dynamic demonstrations grow it up to here)."""
+    priority_alpha: float = 0.4
+    """α, priority exponent."""
+    priority_beta0: float = 0.6
+    """β at the start; annealed linearly to 1 over `beta_anneal_steps` gradient steps."""
+    beta_anneal_steps: int = 50_000
+    """Gradient steps over which β reaches 1."""
+    priority_eps_agent: float = 0.001
+    """ε_a, added to |δ| for self-generated transitions."""
+    priority_eps_demo: float = 1.0
+    """ε_d, added to |δ| for demonstrations (the demo bonus)."""
+
+    # --- demonstrations (§4, §5) ----------------------------------------------------------
+    expert: str = "imperfect"
+    """Who demonstrates when no dataset is given: a preset's scripted expert (strong | imperfect),
+    a rule `module:function` (obs → action), or a saved `.keras` Q-network or BC model."""
+    expert_epsilon: float = 0.0
+    """Probability that the demonstrator acts uniformly at random instead (a noisy expert)."""
+    demo_episodes: int = 5
+    """Episodes recorded from `expert` (seeds seed·1000 + i)."""
+    dynamic_demos: str = "episodes"
+    """DQfD-BC's dynamic demonstrations (BC-based expert losses only): at each new best moving
+    average, `episodes` inserts the agent's own training episodes since the last update that
+    reach that average (no extra interaction); `rollouts` plays M extra greedy episodes (counted
+    as interactions); `off` never grows D_demo."""
+    dynamic_window: int = 10
+    """W: the moving average of the last W episode returns that must reach a new best."""
+    dynamic_rollouts: int = 5
+    """M: greedy episodes added to D_demo at each new best (`dynamic_demos="rollouts"`)."""
+    bc_refit_epochs: int = 3
+    """Epochs of each warm-started BC refit on the enlarged D_demo."""
+
+    # --- Algorithm 1's loop (§4) -----------------------------------------------------------
+    total_steps: int = 50_000
+    """Budget of the learning loop's env steps (interactions also count demo roll-outs and the
+    random play that scales plain DQN's inputs)."""
+    train_freq: int = 1
+    """Env steps per gradient step (the paper: 1)."""
+    epsilon_start: float | None = None
+    """ε-greedy at the start; None: 0.1 after pre-training, 1.0 without demonstrations."""
+    epsilon_end: float = 0.01
+    """ε after the decay."""
+    epsilon_fraction: float = 0.1
+    """Fraction of the step budget over which ε decays linearly."""
+    early_stop_window: int = 10
+    """Stop once this many consecutive episodes return ≥ early_stop_fraction × limit (CartPole; 0: never)."""
+    early_stop_fraction: float = 0.98
+    """The paper's 490 of 500."""
+    eval_every: int = 5_000
+    """Interactions between greedy evaluations on the plain env: exactly at 0, E, 2E, … (an
+    episode is paused at a grid point, evaluated, and continues)."""
+    eval_episodes: int = 10
+    """Episodes per periodic evaluation."""
+    final_eval_episodes: int = 20
+    """Episodes of the evaluation written to eval.json at the end."""
+    checkpoint_every: int = 10_000
+    """Env steps between checkpoints (taken at the next episode end)."""
+
+    seed: int = 0
+    """Seed of every random generator of the run."""
+    deterministic: bool = True
+    """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    @classmethod
+    def for_task(cls, task: str, **overrides: object) -> Config:
+        """Task `task`'s defaults (its preset's, or `ENV_DEFAULTS` for any other Gymnasium env) with
+        `overrides`, validated. Use it rather than `Config(...)`, whose defaults are no task's."""
+        get_task(task)
+        return cls(**{**preset_defaults(task), **overrides})
+
+    @classmethod
+    def from_dict(cls, fields: dict) -> Config:
+        """The inverse of `to_dict` (a saved config.json, whose derived `observation` record is
+        skipped); unknown keys are an error."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        fields = {k: v for k, v in fields.items() if k not in DERIVED_KEYS}
+        unknown = sorted(set(fields) - known)
+        if unknown:
+            raise ConfigError(f"unknown config field(s) {unknown}")
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+        with reading_saved_config():  # its method (the user's) is imported to train, not to read its settings
+            return cls.for_task(values.pop("task", "cartpole"), **values)
+
+    def with_overrides(self, assignments: list[str]) -> Config:
+        """A copy with `key=value` assignments applied (values typed by the field), validated."""
+        fields = {**self.to_dict(), **parse_assignments(assignments)}
+        return self.for_task(fields.pop("task"), **fields)
+
+    @property
+    def limit(self) -> int:
+        """The episode step limit in force."""
+        return step_limit(self.task, self.max_steps)
+
+    @property
+    def network_input(self) -> NetworkInput:
+        """What the networks take in this task: vectors or frames, and the torso that reads them."""
+        return task_spaces(self.task, self.env_kwargs).network_input(self.torso, self.timeout)
+
+    @property
+    def method(self) -> Method:
+        """The registered method `expert_loss` names (methods.py)."""
+        return get_method(self.expert_loss)
+
+    @property
+    def uses_demos(self) -> bool:
+        """Every method but plain DQN (`none`) learns from demonstrations."""
+        return self.method.needs_demos
+
+    @property
+    def initial_epsilon(self) -> float:
+        if self.epsilon_start is not None:
+            return self.epsilon_start
+        return 0.1 if self.uses_demos else 1.0
+
+    @property
+    def uses_bc(self) -> bool:
+        """Whether a BC model is fitted (bc_margin, ce, bayes: the method's `bc_fit`)."""
+        return self.method.uses_bc
+
+    @property
+    def bayesian_bc(self) -> bool:
+        """The BC model is fitted by MAP with dropout (bayes), not by MLE (ce, bc_margin)."""
+        return self.method.bc_fit == "map"
+
+    def validate(self) -> Config:
+        """Raise ConfigError for the first value the algorithm cannot use; return self."""
+        task = get_task(self.task)
+        if not isinstance(self.env_kwargs, dict) or not all(isinstance(k, str) for k in self.env_kwargs):
+            raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
+        if not self.method.q_learning:
+            raise ConfigError(
+                f"expert_loss={self.expert_loss!r} trains no Q-network: behavioural cloning alone is "
+                "run by the lab's imitation arms (python -m dqfd_bc_keras.experiments grid)"
+            )
+        choices = {
+            "timeout": TIMEOUT_MODES,
+            "target": TARGETS,
+            "td_loss": TD_LOSSES,
+            "prior_center": PRIOR_CENTERS,
+            "dynamic_demos": DYNAMIC_MODES,
+            "uncertainty": UNCERTAINTIES,
+            "torso": TORSOS,
+        }
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ConfigError(f"{name}={getattr(self, name)!r} is not one of {allowed}")
+        for f in dataclasses.fields(self):  # inf or NaN passes every comparison below it, or none
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ConfigError(f"{f.name} must be a finite number, got {value!r}")
+        checks = [
+            ("seed", 0 <= self.seed <= MAX_SEED, f"in [0, {MAX_SEED}]"),
+            ("gamma", 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
+            ("n_step", self.n_step >= 1, "≥ 1"),
+            ("batch_size", self.batch_size >= 1, "≥ 1"),
+            ("mc_passes", self.mc_passes >= 1, "≥ 1"),
+            ("ensemble_members", self.ensemble_members >= 2, "≥ 2 (a variance needs two members)"),
+            (
+                "mc_dropout",
+                self.mc_dropout or self.uncertainty == "mc_dropout",
+                "True when uncertainty is not mc_dropout (False ablates the MC-dropout estimator)",
+            ),
+            ("expert_epsilon", 0.0 <= self.expert_epsilon <= 1.0, "in [0, 1]"),
+            ("sigma0_sq", self.sigma0_sq > 0, "> 0"),
+            ("temperature", self.temperature > 0, "> 0"),
+            ("prior_scale", self.prior_scale > 0, "> 0"),
+            ("bc_prior_scale", self.bc_prior_scale > 0, "> 0"),
+            ("bc_dropout", 0.0 <= self.bc_dropout < 1.0, "in [0, 1)"),
+            ("learning_rate", self.learning_rate > 0, "> 0"),
+            ("bc_learning_rate", self.bc_learning_rate > 0, "> 0"),
+            ("target_update_period", self.target_update_period >= 1, "≥ 1"),
+            ("pretrain_steps", self.pretrain_steps >= 0, "≥ 0"),
+            ("replay_capacity", self.replay_capacity >= self.n_step, "≥ n_step"),
+            (
+                "demo_capacity",
+                not self.uses_demos or self.demo_capacity >= self.limit,  # no D_demo without demos
+                f"≥ the episode limit {self.limit}",
+            ),
+            ("priority_alpha", self.priority_alpha >= 0, "≥ 0"),
+            ("priority_beta0", 0.0 <= self.priority_beta0 <= 1.0, "in [0, 1]"),
+            ("priority_eps_agent", self.priority_eps_agent > 0, "> 0"),
+            ("priority_eps_demo", self.priority_eps_demo > 0, "> 0"),
+            ("max_steps", self.max_steps is None or self.max_steps >= 1, "≥ 1 or None"),
+            ("demo_episodes", self.demo_episodes >= 1, "≥ 1"),
+            ("dynamic_window", self.dynamic_window >= 1, "≥ 1"),
+            ("dynamic_rollouts", self.dynamic_rollouts >= 1, "≥ 1"),
+            ("bc_refit_epochs", self.bc_refit_epochs >= 0, "≥ 0"),
+            ("total_steps", self.total_steps >= 1, "≥ 1"),
+            ("train_freq", self.train_freq >= 1, "≥ 1"),
+            ("epsilon_start", self.epsilon_start is None or 0 <= self.epsilon_start <= 1, "in [0, 1] or None"),
+            ("epsilon_end", 0.0 <= self.epsilon_end <= 1.0, "in [0, 1]"),
+            ("epsilon_fraction", 0.0 < self.epsilon_fraction <= 1.0, "in (0, 1]"),
+            ("early_stop_window", self.early_stop_window >= 0, "≥ 0"),
+            ("eval_every", self.eval_every >= 1, "≥ 1"),
+            ("eval_episodes", self.eval_episodes >= 1, "≥ 1"),
+            ("final_eval_episodes", self.final_eval_episodes >= 1, "≥ 1"),
+            ("checkpoint_every", self.checkpoint_every >= 1, "≥ 1"),
+            ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
+            ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
+        ]
+        check_demonstrator(self.expert, task)
+        for name, ok, expected in checks:
+            if not ok:
+                raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
+        if not self.uses_demos and self.total_steps < self.batch_size:
+            raise ConfigError(
+                f"total_steps={self.total_steps} is below batch_size={self.batch_size}: without "
+                "demonstrations there is no pre-training, so no gradient step would ever be taken"
+            )
+        if self.limit < self.n_step:
+            warnings.warn(
+                f"the episode limit {self.limit} is shorter than the n-step window n_step={self.n_step}: "
+                "every n-step return is cut at the end of its episode",
+                DqfdWarning,
+                stacklevel=2,
+            )
+        return self
+
+    def check_memory(self, spaces: TaskSpaces) -> Config:
+        """Raise ConfigError when a run's replay, networks and batch (`memory_needed`) need more
+        memory than this machine has, before TensorFlow would die of it halfway; return self.
+        Called where a run is about to train, with its env's `envs.checked_spaces` (not by
+        `for_task`: the lab reads configs of tasks whose envs it need not make)."""
+        parts = memory_needed(self, spaces.network_input(self.torso, self.timeout), spaces.n_actions)
+        available = machine_memory()
+        if sum(parts.values()) <= available:
+            return self
+        largest = max(parts, key=parts.get)
+        what, lower = {
+            "replay": (
+                f"the replay (replay_capacity={self.replay_capacity}, demo_capacity={self.demo_capacity}) and networks",
+                "replay_capacity (or demo_capacity)",
+            ),
+            "networks": (
+                f"the networks (hidden={_sizes(self.hidden)}, bc_hidden={_sizes(self.bc_hidden)}) and replay",
+                "hidden (or bc_hidden)",
+            ),
+            "activations": (f"the batches (batch_size={self.batch_size}), replay and networks", "batch_size"),
+        }[largest]
+        raise ConfigError(
+            f"{what} need ~{_gib(sum(parts.values()))} GiB, more than the {_gib(available)} GiB "
+            f"this machine has; lower {lower}"
+        )
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def memory_needed(config: Config, spec: NetworkInput, n_actions: int) -> dict[str, int]:
+    """Bytes a run of `config` holds at once, to an order of magnitude, by part:
+
+    replay       per row of D_demo ∪ D_replay (replay.py), float32: the table's [s | s' | a, r,
+                 terminated, truncated | π̄_bc (A) | σ²], the n-step view's [R | s_{t+m} | γ^m] and a
+                 sum-tree leaf, s being k pool indices for frames, whose pool holds two uint8 slots a row
+    networks     float32 parameters (networks.py: torso, dense layers) of the Q-network, its target
+                 and θ_prior, its gradient and Adam's two moments; of each BC member, weights, gradient
+                 and two moments
+    activations  every layer's output for a batch, float32: four Q passes a gradient step (s, s', and
+                 s_{t+n} twice), twice for the backward pass; a BC refresh's mc_passes over 8192 states
+    """
+    rows = config.demo_capacity + config.replay_capacity
+    frames = spec.frames
+    columns = spec.dim if frames is None else frames.stack
+    replay = 4 * rows * ((2 * columns + 5 + n_actions) + (columns + 2) + 1)
+    if frames is not None:
+        replay += 2 * (rows + frames.stack) * math.prod(frames.frame_shape)
+    torso_params, torso_outputs, width = 0, math.prod(spec.shape), math.prod(spec.shape)
+    if frames is not None and spec.torso in CONV_TORSOS:
+        height, across, channels = *frames.shape[:2], (frames.shape[2] if len(frames.shape) == 3 else 1)
+        for filters, kernel, stride in CONV_TORSOS[spec.torso]:
+            height, across = (height - kernel) // stride + 1, (across - kernel) // stride + 1
+            torso_params += (kernel * kernel * channels + 1) * filters
+            channels = filters
+            torso_outputs += height * across * filters
+        width = height * across * channels
+    sizes = {}
+    for name, hidden in (("q", config.hidden), ("bc", config.bc_hidden)):
+        units = [width, *hidden, n_actions]
+        sizes[name] = (
+            torso_params + sum((a + 1) * b for a, b in itertools.pairwise(units)),
+            torso_outputs + sum(units[1:]),
+        )
+    members = config.ensemble_members if config.uses_bc and config.uncertainty == "ensemble" else 1
+    bc_copies = 4 * members if config.uses_bc else 0
+    networks = 4 * (6 * sizes["q"][0] + bc_copies * sizes["bc"][0])
+    activations = 4 * (
+        8 * config.batch_size * sizes["q"][1]
+        + (config.mc_passes * members * 8192 * sizes["bc"][1] if config.uses_bc else 0)
+    )
+    return {"replay": replay, "networks": networks, "activations": activations}
+
+
+def _gib(size: int) -> str:
+    return f"{size / 2**30:,.0f}" if size >= 10 * 2**30 else f"{size / 2**30:.1f}"
+
+
+def _sizes(sizes: tuple[int, ...]) -> str:
+    """Layer sizes as `--set` takes them."""
+    return ",".join(map(str, sizes))
+
+
+def machine_memory() -> int:
+    """Bytes of memory this machine has: its physical memory, or the cgroup's limit if lower."""
+    physical = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            return min(physical, int(Path(limit).read_text().strip()))
+        except (OSError, ValueError):  # absent, or "max": no limit
+            continue
+    return physical
+
+
+def preset_defaults(task: str) -> dict[str, object]:
+    """The defaults of `task` (its preset's; for any env `ENV_DEFAULTS`, for an Atari env
+    `atari.ATARI_DEFAULTS`), without validating them: an env without a time limit has no valid
+    defaults until `max_steps` is given."""
+    shared = {
+        f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        for f in dataclasses.fields(Config)
+    }
+    return {**shared, **get_task(task).defaults, "task": task}
+
+
+DERIVED_KEYS = ("observation",)
+"""Keys of a config.json that record what the run found (the observation layout), not settings."""
+
+
+def parse_assignments(assignments: list[str]) -> dict[str, object]:
+    """`key=value` assignments (`--set`) as Config fields, each value typed by its field.
+
+    Tuples are comma lists (`hidden=128,128`); `none` sets an optional field to None;
+    `env_kwargs` takes a JSON object. Applied before any validation, so an override can make a
+    task usable (`max_steps` on an env without a time limit).
+    """
+    types = {f.name: f.type for f in dataclasses.fields(Config)}
+    changes: dict[str, object] = {}
+    for assignment in assignments:
+        key, sep, text = assignment.partition("=")
+        key = key.strip().replace("-", "_")
+        if key == "task":
+            raise ConfigError("the task is chosen with --task or --env: each has its own preset defaults")
+        if not sep:
+            raise ConfigError(f"--set {assignment!r}: expected key=value")
+        if key not in types:
+            raise ConfigError(f"--set {assignment!r}: {unknown_field(key)}")
+        changes[key] = _parse(key, types[key], text.strip())
+    return changes
+
+
+def unknown_field(key: str) -> str:
+    """What is said of `key`, which is no Config field: the nearest field's name, if any."""
+    import difflib
+
+    near = difflib.get_close_matches(key, [f.name for f in dataclasses.fields(Config)], n=1)
+    hint = f"did you mean {near[0]}?" if near else "Config's fields are listed in dqfd_bc_keras/core/config.py"
+    return f"unknown Config field {key!r}; {hint}"
+
+
+def _parse(key: str, annotation: str, text: str) -> object:
+    """`text` as the type named by the dataclass annotation `annotation`."""
+    optional = annotation.endswith("| None")
+    if optional and text.lower() == "none":
+        return None
+    base = annotation.removesuffix(" | None")
+    if base.startswith("dict"):
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            value = None
+        if not isinstance(value, dict):
+            raise ConfigError(f"--set {key}={text!r}: expected a JSON object, e.g. {key}='{{\"use_lidar\": false}}'")
+        return value
+    try:
+        if base == "bool":
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(text)
+            return text.lower() in ("true", "1")
+        if base.startswith("tuple"):
+            return tuple(int(part) for part in text.split(",") if part)
+        return {"int": int, "float": float, "str": str}[base](text)
+    except ValueError:
+        raise ConfigError(f"--set {key}={text!r}: expected {annotation}") from None

@@ -1,0 +1,201 @@
+"""The registry of methods: what `expert_loss` may name, and everything that follows from it.
+
+A method declares its name, whether it learns from demonstrations, how its BC model π_bc is
+fitted (none, MLE or MAP with dropout, ALGORITHM.md §3), its expert-loss term J_E (§2) and the
+Config fields only it reads. Validation, the agent, the BC builder and the lab's pairing rules
+all read these declarations, so a new method is one `Method(...)` and its term:
+
+    from dqfd_bc_keras.core.methods import Method, register
+
+    def j_e(agent, q, batch):                      # J_E, a scalar tensor (see expert_terms.py)
+        return ...
+
+    SOFT_MARGIN = register(Method("soft_margin", "a softer margin", bc_fit="mle", term=j_e))
+
+and `train.py --expert-loss my_module:SOFT_MARGIN` trains with it (the module is imported, and
+the `Method` it names is registered under its own name; config.json records `my_module:SOFT_MARGIN`
+so `--resume` finds it again; evaluating the run does not need it). This module imports no
+TensorFlow: reading a config.json does not load it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass
+from typing import Any
+
+from dqfd_bc_keras.errors import ConfigError
+
+BC_FITS = ("none", "mle", "map")
+"""How a method fits π_bc: not at all, by maximum likelihood (ce, bc_margin), or MAP with dropout (bayes)."""
+
+BC_FIELDS = ("bc_hidden", "bc_learning_rate", "bc_epochs")
+"""Config fields every method with a BC model reads."""
+DYNAMIC_FIELDS = ("dynamic_demos", "dynamic_window", "dynamic_rollouts", "bc_refit_epochs")
+"""Config fields of the dynamic demonstrations, which grow D_demo for the methods with a BC model (§5)."""
+BAYES_FIELDS = (
+    "sigma0_sq",
+    "mc_passes",
+    "prior_scale",
+    "prior_center",
+    "bc_dropout",
+    "bc_prior_scale",
+    "bayes_prior",
+    "mc_dropout",
+    "uncertainty",
+    "ensemble_members",
+)
+"""Config fields of the Bayesian expert loss and its MAP BC model (§3)."""
+
+Term = Callable[..., Any]
+"""J_E as the agent calls it: term(agent, q, batch) → a scalar tensor."""
+
+
+@dataclass(frozen=True)
+class Method:
+    """One value of `expert_loss`."""
+
+    name: str
+    doc: str
+    needs_demos: bool = True
+    """Whether the method learns from demonstrations (pre-training on D_demo, ε from 0.1)."""
+    bc_fit: str = "none"
+    """How π_bc is fitted: none | mle | map (BC_FITS)."""
+    term: Term | str | None = None
+    """J_E: a callable term(agent, q, batch), or "module:function" naming one (imported when the
+    agent is built, so declaring a method loads no TensorFlow); None: no expert loss."""
+    reads: tuple[str, ...] = ()
+    """The Config fields only this method (among the registered ones) reads besides the shared ones."""
+    sqil_rewards: bool = False
+    """SQIL's relabelling: reward 1 on demonstrations and 0 on the agent's own data, in batches drawn
+    half from each replay, uniformly (Reddy et al. 2020)."""
+    q_learning: bool = True
+    """False for behavioural cloning alone: π_bc is the policy and no Q-network is trained."""
+
+    def __post_init__(self) -> None:
+        if self.bc_fit not in BC_FITS:
+            raise ConfigError(f"method {self.name!r}: bc_fit={self.bc_fit!r} is not one of {BC_FITS}")
+
+    @property
+    def uses_bc(self) -> bool:
+        return self.bc_fit != "none"
+
+    def expert_term(self) -> Term | None:
+        """The callable J_E (a "module:function" term imported now)."""
+        if not isinstance(self.term, str):
+            return self.term
+        module, _, name = self.term.partition(":")
+        return getattr(importlib.import_module(module), name)
+
+
+_TERMS = "dqfd_bc_keras.core.expert_terms"
+METHODS: dict[str, Method] = {}
+"""Every registered method by name; `get_method` also imports a user's `module:NAME`."""
+
+
+def register(method: Method) -> Method:
+    """Add `method` to the registry (a user's own, from their module); returns it."""
+    if not isinstance(method, Method):
+        raise ConfigError(f"register() takes a Method, got {type(method).__name__}")
+    METHODS[method.name] = method
+    return method
+
+
+for _method in (
+    Method(
+        "margin",
+        "DQfD's large-margin loss on the demonstrated actions (§2)",
+        term=f"{_TERMS}:margin",
+        reads=("margin",),
+    ),
+    Method(
+        "bc_margin",
+        "DQfD-BC: the large margin around the BC model's action argmax π_bc",
+        bc_fit="mle",
+        term=f"{_TERMS}:bc_margin",
+        reads=("margin", *BC_FIELDS, *DYNAMIC_FIELDS),
+    ),
+    Method(
+        "ce",
+        "DQfD-BC: the cross-entropy H(π_bc, softmax(Q/T)) on every row",
+        bc_fit="mle",
+        term=f"{_TERMS}:ce",
+        reads=("temperature", *BC_FIELDS, *DYNAMIC_FIELDS),
+    ),
+    Method(
+        "bayes",
+        "the paper's Bayesian loss: Gaussian likelihood weighted by 1/σ²(s), and a prior around θ_prior",
+        bc_fit="map",
+        term=f"{_TERMS}:bayes",
+        reads=("temperature", *BAYES_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
+    ),
+    Method("none", "plain DQN: no demonstrations, no expert loss", needs_demos=False),
+    Method(
+        "sqil",
+        "SQIL on our DQN: no J_E; rewards 1 on demonstrations, 0 on the agent's, half of each batch from D_demo",
+        sqil_rewards=True,
+    ),
+    Method(
+        "bc-alone",
+        "behavioural cloning alone: the MLE BC model is the policy; no Q-learning",
+        bc_fit="mle",
+        reads=BC_FIELDS,
+        q_learning=False,
+    ),
+):
+    register(_method)
+BUILT_IN = tuple(METHODS)
+"""The package's own methods: any other name in METHODS was registered by a user's code."""
+
+
+_SAVED = ContextVar("reading_saved_config", default=False)
+
+
+@contextmanager
+def reading_saved_config() -> Iterator[None]:
+    """While a saved run's config.json is read, a method of the user's own whose module cannot be
+    imported here stands in as a plain `Method` (demonstrations, no BC model, no term): evaluating
+    a run needs its settings, not its loss. Asking the config for its method afterwards (training,
+    `--resume`) imports the module again and reports it missing."""
+    token = _SAVED.set(True)
+    try:
+        yield
+    finally:
+        _SAVED.reset(token)
+
+
+def get_method(name: str) -> Method:
+    """The method called `name`, or a user's `module:NAME` (a `Method` object in an importable module)."""
+    if name in METHODS:
+        return METHODS[name]
+    module, sep, attribute = name.rpartition(":")
+    if not sep or not module:
+        if _SAVED.get():  # a run of a Method a script registered (DQfD(expert_loss=Method(...)))
+            return Method(name, "a method a script registered, not registered here")
+        raise ConfigError(
+            f"expert_loss={name!r} is not one of {tuple(METHODS)} (or a method of your own as "
+            "module:NAME, a dqfd_bc_keras.core.methods.Method; one a script registered is registered "
+            "again with dqfd_bc_keras.core.methods.register)"
+        )
+    try:
+        method = getattr(importlib.import_module(module), attribute)
+    except (ImportError, AttributeError) as error:
+        if _SAVED.get():
+            return Method(name, f"a method of your own that cannot be imported here ({type(error).__name__})")
+        raise ConfigError(
+            f"expert_loss={name!r}: cannot import it ({type(error).__name__}: {error}); keep your "
+            "module importable (on PYTHONPATH or installed)"
+        ) from None
+    if not isinstance(method, Method):
+        raise ConfigError(
+            f"expert_loss={name!r}: {attribute} is a {type(method).__name__}, not a dqfd_bc_keras.core.methods.Method"
+        )
+    return method
+
+
+def method_fields() -> set[str]:
+    """The Config fields some registered method reads and others do not."""
+    return {field for method in METHODS.values() for field in method.reads}

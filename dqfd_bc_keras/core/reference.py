@@ -1,0 +1,207 @@
+"""The learning core stated plainly: Algorithm 1's learning steps, eager, in TensorFlow and numpy.
+
+The package learns inside graphs (agent.py, replay.py: a sum tree in variables, cached n-step returns,
+a fused Adam op, a `tf.while_loop`). This is the same mathematics (ALGORITHM.md §1–§4) without them.
+Nothing trains through it; tests/test_reference.py runs it beside the graph loop and shows both
+compute the same loss terms and end with the same weights: documentation that cannot rot.
+
+    pre-train:   k steps on D_demo alone, then θ_prior ← θ
+    every step:  rows i drawn with P(i) = p_i / Σ_k p_k, weights w_i = (N·P(i))^(−β) / max_j w_j
+                 J = J_DQ + λ1·J_n + λ2·J_E + λ3·J_L2, one step of Keras's Adam on θ
+                 p_i ← (|δ_i| + ε)^α, ε = ε_d on D_demo, ε_a on D_replay;  θ' ← θ every τ steps
+
+Left to the caller: acting (§4 step 3), whose transitions it `store`s, and dynamic demonstrations (§5).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+import tensorflow as tf
+
+Draw = Callable[[np.ndarray, int], np.ndarray]  # (p^α of every row, batch size) → the batch's rows
+
+
+class Transitions(NamedTuple):
+    """n transitions in time order, each with the BC model's view of its state (bc.py)."""
+
+    obs: np.ndarray  # (n, d) s_t
+    actions: np.ndarray  # (n,) a_t
+    rewards: np.ndarray  # (n,) r_t
+    next_obs: np.ndarray  # (n, d) s_{t+1}
+    terminated: np.ndarray  # (n,) the episode ended for good: nothing to bootstrap from
+    truncated: np.ndarray  # (n,) the episode was cut (a time limit): bootstrap from s_{t+1}
+    pi_bc: np.ndarray  # (n, A) π̄_bc(·|s_t)
+    sigma_sq: np.ndarray  # (n,) σ²(s_t)
+
+
+def proportional(p: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Rows with P(i) = p_i / Σ_k p_k: each u ∈ [0, 1) picks the row whose slice
+    [Σ_{k<i} p_k, Σ_{k≤i} p_k) of the total holds u·Σ_k p_k."""
+    cumulative = np.cumsum(p)
+    return np.searchsorted(cumulative, u * cumulative[-1], side="right")
+
+
+class Replay:
+    """D_demo in rows [0, n_demo), never evicted; D_replay in the next `replay_capacity` rows, a
+    ring whose newest transition overwrites the oldest. Row i has priority p_i (p^α; 0: empty)."""
+
+    def __init__(self, demos: Transitions, config) -> None:
+        self.c, self.n_demo, self.capacity = config, len(demos.actions), config.replay_capacity
+        self.data = Transitions(*(np.concatenate([x, np.zeros((self.capacity, *x.shape[1:]), x.dtype)]) for x in demos))
+        self.p = np.zeros(self.n_demo + self.capacity)
+        self.p[: self.n_demo] = self.max_p = 1.0  # a new row enters at the largest p so far
+        self.head = self.stored = 0  # the ring's next slot; how many transitions it holds
+
+    def store(self, t: Transitions) -> None:  # (at most `replay_capacity` at once)
+        rows = self.n_demo + (self.head + np.arange(len(t.actions))) % self.capacity
+        for column, values in zip(self.data, t, strict=True):
+            column[rows] = values
+        self.p[rows] = self.max_p
+        self.head, self.stored = (self.head + len(rows)) % self.capacity, min(self.stored + len(rows), self.capacity)
+
+    def following(self, row: int) -> int | None:
+        """The row stored right after `row` in its region; None after the newest."""
+        if row < self.n_demo:
+            return row + 1 if row + 1 < self.n_demo else None
+        newest = self.n_demo + (self.head - 1) % self.capacity
+        return None if row == newest else self.n_demo + (row - self.n_demo + 1) % self.capacity
+
+    def n_step(self, row: int) -> tuple[np.float32, np.ndarray, np.float32]:
+        """(Σ_{k<m} γ^k r_{t+k}, s_{t+m}, γ^m·(1 − terminated_{t+m−1})): m ≤ n stops at the end
+        of the episode (terminated or truncated) or at the newest stored transition."""
+        d, gamma, ret, m = self.data, np.float32(self.c.gamma), np.float32(0), 0
+        while True:
+            ret, m, after = ret + gamma**m * d.rewards[row], m + 1, self.following(row)
+            if m == self.c.n_step or d.terminated[row] or d.truncated[row] or after is None:
+                return ret, d.next_obs[row], gamma**m * (1 - np.float32(d.terminated[row]))
+            row = after
+
+    def sample(self, batch_size: int, beta: float, draw: Draw) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, importance weights w_i = (N·P(i))^(−β) / max_j w_j)."""
+        rows = draw(self.p, batch_size)
+        w = ((self.n_demo + self.stored) * self.p[rows] / self.p.sum()) ** -beta
+        return rows, w / w.max()
+
+    def update_priorities(self, rows: np.ndarray, td_abs: np.ndarray) -> None:
+        eps = np.where(rows < self.n_demo, self.c.priority_eps_demo, self.c.priority_eps_agent)
+        self.p[rows] = (td_abs + eps) ** self.c.priority_alpha
+        self.max_p = max(self.max_p, self.p[rows].max())
+
+
+class Learner:
+    """θ, θ', θ_prior, Adam's state and the replay; `config` is a Config (squared TD loss; no SQIL).
+    θ = [W_1, b_1, …, W_L, b_L] (`build_q_network(…).get_weights()`'s layout), `obs_scale` = (μ, σ):
+    Q(s, ·; θ) = W_L·relu(… relu(W_1·(s − μ)/σ + b_1) …) + b_L. `draw` picks each batch's rows."""
+
+    def __init__(
+        self,
+        config,
+        theta: list[np.ndarray],
+        obs_scale: tuple[np.ndarray, np.ndarray],
+        demos: Transitions,
+        draw: Draw | None = None,
+    ) -> None:
+        if config.expert_loss == "sqil" or config.td_loss != "squared":
+            raise ValueError("the reference has neither SQIL nor the Huber TD loss")
+        self.c, self.mu, self.sigma = config, *(np.float32(x) for x in obs_scale)
+        self.theta = [tf.Variable(np.float32(w)) for w in theta]
+        self.target = [tf.identity(w) for w in self.theta]  # θ'
+        self.prior = [tf.zeros_like(w) for w in self.theta]  # θ_prior is 0 while pre-training
+        self.m, self.v = [np.zeros(w.shape, np.float32) for w in theta], [np.zeros(w.shape, np.float32) for w in theta]
+        self.steps, self.replay = 0, Replay(demos, config)
+        rng = np.random.default_rng(config.seed)
+        self.draw = draw or (lambda p, size: proportional(p, rng.random(size)))
+
+    def q(self, s: np.ndarray, theta: list[tf.Tensor]) -> tf.Tensor:
+        x = (s - self.mu) / self.sigma
+        for i in range(0, len(theta) - 2, 2):
+            x = tf.nn.relu(x @ theta[i] + theta[i + 1])
+        return x @ theta[-2] + theta[-1]
+
+    def pretrain(self, k: int) -> list[dict[str, float]]:
+        """Algorithm 1, step 2: k steps on D_demo alone, then θ_prior ← θ (if "pretrained")."""
+        if self.replay.stored:
+            raise ValueError("pre-training samples D_demo alone, but the replay holds agent data")
+        terms = self.learn(k)
+        if self.c.prior_center == "pretrained":
+            self.prior = [tf.identity(w) for w in self.theta]
+        return terms
+
+    def learn(self, steps: int) -> list[dict[str, float]]:  # the loss terms of each step
+        return [self.learn_step() for _ in range(steps)]
+
+    def beta(self) -> float:  # linear from β0 to 1 over `beta_anneal_steps` steps, then 1
+        c = self.c
+        return c.priority_beta0 + (1 - c.priority_beta0) * min(1.0, self.steps / max(c.beta_anneal_steps, 1))
+
+    def next_values(self, s: np.ndarray) -> np.ndarray:
+        """V'(s) = max_a Q(s, a; θ') (dqn) or Q(s, argmax_a Q(s, a; θ); θ') (double)."""
+        q_target = self.q(s, self.target).numpy()
+        a = q_target.argmax(1) if self.c.target == "dqn" else self.q(s, self.theta).numpy().argmax(1)
+        return q_target[np.arange(len(s)), a]
+
+    def learn_step(self) -> dict[str, float]:
+        """One Adam step on J for a prioritized batch; returns J's terms."""
+        c, replay = self.c, self.replay
+        rows, w = replay.sample(c.batch_size, self.beta(), self.draw)
+        b, w = Transitions(*(x[rows] for x in replay.data)), np.float32(w)
+        ret_n, s_n, discount_n = (np.array(x) for x in zip(*(replay.n_step(i) for i in rows), strict=True))
+        # Constant targets: y = r + γ(1 − terminated)·V'(s'),  y_n = Σ_{k<m} γ^k r_{t+k} + γ^m(1 − terminated)·V'(s_{t+m})
+        v, v_n = np.split(self.next_values(np.concatenate([b.next_obs, s_n])), 2)
+        y, y_n = b.rewards + np.float32(c.gamma) * (1 - np.float32(b.terminated)) * v, ret_n + discount_n * v_n
+        with tf.GradientTape() as tape:
+            q = self.q(b.obs, self.theta)
+            q_sa = tf.gather_nd(q, np.stack([np.arange(len(rows)), b.actions], 1))
+            delta = y - q_sa
+            terms = {
+                "td": tf.reduce_mean(w * tf.square(delta)),
+                "n_step": tf.reduce_mean(w * tf.square(y_n - q_sa)),
+                "expert": self.expert_loss(q, b, w, rows < replay.n_demo),
+                "l2": tf.add_n([tf.reduce_sum(tf.square(W)) for W in self.theta[::2]]),
+            }  # kernels, not biases
+            loss = (
+                terms["td"]
+                + c.lambda_n * terms["n_step"]
+                + c.lambda_expert * terms["expert"]
+                + c.lambda_l2 * terms["l2"]
+            )
+        self.adam(tape.gradient(loss, self.theta))
+        replay.update_priorities(rows, np.abs(delta.numpy()))
+        self.steps += 1
+        if self.steps % c.target_update_period == 0:
+            self.target = [tf.identity(w) for w in self.theta]
+        return {"loss": float(loss), **{name: float(value) for name, value in terms.items()}}
+
+    def adam(self, grads: list[tf.Tensor], b1=np.float32(0.9), b2=np.float32(0.999), eps=np.float32(1e-7)) -> None:
+        """Keras's Adam in float32: m ← β1·m + (1 − β1)·g, v ← β2·v + (1 − β2)·g²,
+        θ ← θ − lr·√(1 − β2^t)/(1 − β1^t) · m/(√v + ε), t = this step's number."""
+        t = self.steps + 1
+        size = np.float32(self.c.learning_rate) * np.sqrt(1 - b2**t) / (1 - b1**t)
+        for i, (g, w) in enumerate(zip((g.numpy() for g in grads), self.theta, strict=True)):
+            self.m[i], self.v[i] = b1 * self.m[i] + (1 - b1) * g, b2 * self.v[i] + (1 - b2) * g**2
+            w.assign(w.numpy() - size * self.m[i] / (np.sqrt(self.v[i]) + eps))
+
+    def expert_loss(self, q: tf.Tensor, b: Transitions, w: np.ndarray, demo: np.ndarray) -> tf.Tensor:
+        """J_E (§2–§3), importance-weighted; `demo` marks the batch's rows from D_demo."""
+        c, kind = self.c, self.c.expert_loss
+        if kind == "none":
+            return tf.constant(0.0)
+        if kind in ("margin", "bc_margin"):
+            # max_a [Q(s, a) + l(a_E, a)] − Q(s, a_E), l = margin where a ≠ a_E: a_E is the
+            # demonstrated action, on D_demo only (DQfD), or argmax π̄_bc, on every row (DQfD-BC).
+            a_e = b.actions if kind == "margin" else b.pi_bc.argmax(1)
+            l = np.float32(c.margin * (np.arange(q.shape[1]) != a_e[:, None]))
+            q_e = tf.gather_nd(q, np.stack([np.arange(len(a_e)), a_e], 1))
+            return tf.reduce_mean((w * demo if kind == "margin" else w) * (tf.reduce_max(q + l, 1) - q_e))
+        if kind == "ce":  # H(π_bc, p_Q) = −Σ_a π_bc(a|s) log p_Q(a|s),  p_Q = softmax(Q/T)
+            return tf.reduce_mean(w * -tf.reduce_sum(b.pi_bc * tf.nn.log_softmax(q / c.temperature), 1))
+        # bayes: mean_s Σ_a (p_Q(a|s) − π̄_bc(a|s))² / (2σ²(s))  +  ‖θ − θ_prior‖² / (2·s_p²·N)
+        p_q = tf.nn.softmax(q / c.temperature)
+        likelihood = tf.reduce_mean(w * tf.reduce_sum(tf.square(p_q - b.pi_bc), 1) / (2 * b.sigma_sq))
+        if not c.bayes_prior:
+            return likelihood
+        squared = tf.add_n([tf.reduce_sum(tf.square(t - p)) for t, p in zip(self.theta, self.prior, strict=True)])
+        return likelihood + squared / (2 * c.prior_scale**2 * self.replay.n_demo)

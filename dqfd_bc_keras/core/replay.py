@@ -1,0 +1,422 @@
+"""Prioritized replay over D_demo ∪ D_replay, held in TensorFlow variables (ALGORITHM.md §1).
+
+Storage is preallocated: table rows [0, demo_capacity) hold the demonstrations (never evicted;
+replaced as a whole when dynamic demonstrations change D_demo), rows [demo_capacity,
+demo_capacity + capacity) are a circular buffer of self-generated transitions. One sum tree
+over all rows gives proportional prioritization,
+
+    P(i) = p_i^α / Σ_k p_k^α,   p_i = |δ_i| + ε_d (demo) or ε_a (self-generated),
+    w_i = (N·P(i))^(−β) / max_j w_j   (max over the batch),
+
+and new transitions enter at the largest priority seen. Everything here runs inside a
+TensorFlow graph, so storing, sampling and the priority write-back add no graph calls.
+
+Every sample carries its n-step return from the stored sequence: R = Σ_{k<m} γ^k r_{t+k}
+with m ≤ n stopping at the episode's end (terminated or truncated) or at the newest stored
+transition, then bootstrapping from s_{t+m} with γ^m·(1 − terminated). A row's return only
+changes when a row of its window is written, so it is computed then (for the n rows whose
+window holds a new transition, and for all of D_demo when it is set) and kept beside the
+table: sampling reads it with one gather instead of re-deriving it for every batch.
+
+Frames (`networks.NetworkInput.image`) are never stored as floats, nor once per stack: a uint8
+pool holds single frames, two slots per row (its s_t's newest frame, written only when s_t does
+not continue the previous row's s_{t+1}, and its s_{t+1}'s newest frame), and a row's s and s'
+columns hold the k pool indices of their stacked frames (k = 1 for MinAtar, 4 for Atari). Within
+an episode s_t's frames are the previous row's s_{t+1}'s, and s_{t+1}'s are s_t's shifted by one
+and a new frame; a fresh stack (a reset) is k copies of one frame. The self-generated rows' slots
+run k rows beyond the table's capacity, so the oldest rows' earlier frames outlive them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import tensorflow as tf
+
+from dqfd_bc_keras.core.networks import NetworkInput, as_input
+from dqfd_bc_keras.errors import ConfigError
+
+
+class Batch(NamedTuple):
+    """A prioritized mini-batch; every field is a (B, ...) tensor."""
+
+    indices: tf.Tensor
+    """(B,) int32 storage rows, for the priority write-back."""
+    obs: tf.Tensor
+    """(B, d) s_t, or (B, *shape) uint8 frames."""
+    actions: tf.Tensor
+    """(B,) int32 a_t."""
+    rewards: tf.Tensor
+    """(B,) r_t."""
+    next_obs: tf.Tensor
+    """(B, d) s_{t+1}."""
+    discount: tf.Tensor
+    """(B,) γ·(1 − terminated_t): zero only for a true termination."""
+    n_returns: tf.Tensor
+    """(B,) Σ_{k<m} γ^k r_{t+k}."""
+    n_next_obs: tf.Tensor
+    """(B, d) s_{t+m}."""
+    n_discount: tf.Tensor
+    """(B,) γ^m·(1 − terminated_{t+m−1})."""
+    pi_bc: tf.Tensor
+    """(B, A) π̄_bc(·|s_t), the BC model's (mean) policy, stored with the row."""
+    sigma_sq: tf.Tensor
+    """(B,) σ²(s_t), the BC model's predictive variance, stored with the row."""
+    is_demo: tf.Tensor
+    """(B,) 1.0 for demonstration rows, 0.0 for self-generated ones."""
+    weights: tf.Tensor
+    """(B,) importance-sampling weights, max 1."""
+
+
+class SumTree(tf.Module):
+    """Proportional sampling over `size` leaves in two levels: blocks of `WIDTH` leaves and
+    each block's sum, both `tf.Variable`s.
+
+    Sampling is a cumulative sum and a binary search (`tf.searchsorted`) per level; an update
+    rewrites the leaves and re-sums their blocks: a dozen TensorFlow ops in all, where a
+    32-ary tree of 150k leaves takes five levels of a dozen each. Every op costs µs here
+    (README "Performance"); a 1-D cumulative sum of thousands of block sums costs ~7 µs, but
+    one along rows wider than ~100 costs far more (~250 µs for 64 rows of 388), hence narrow
+    blocks. The total is re-summed from the block sums on each read, so rounding never
+    accumulates.
+    """
+
+    WIDTH = 64
+
+    def __init__(self, size: int) -> None:
+        super().__init__()
+        self.size = int(size)
+        self.width = self.WIDTH
+        self.blocks = max(1, math.ceil(self.size / self.width))
+        self.leaf = tf.Variable(tf.zeros([self.blocks, self.width]), trainable=False, name="leaves")
+        self.block_sums = tf.Variable(tf.zeros([self.blocks]), trainable=False, name="block_sums")
+
+    @property
+    def total(self) -> tf.Tensor:
+        return tf.reduce_sum(self.block_sums)
+
+    def _cell(self, indices: tf.Tensor) -> tf.Tensor:
+        """(n, 2) [block, position] of each leaf index."""
+        indices = tf.cast(indices, tf.int32)
+        return tf.stack([indices // self.width, indices % self.width], axis=1)
+
+    def leaves(self, indices: tf.Tensor) -> tf.Tensor:
+        return tf.gather_nd(self.leaf, self._cell(indices))
+
+    def set(self, indices: tf.Tensor, values: tf.Tensor) -> None:
+        """Set leaves `indices` (n,) to `values` (n,) and re-sum their blocks."""
+        cells = self._cell(indices)
+        self.leaf.scatter_nd_update(cells, tf.cast(values, tf.float32))
+        blocks = cells[:, :1]
+        self.block_sums.scatter_nd_update(blocks, tf.reduce_sum(tf.gather_nd(self.leaf, blocks), axis=1))
+
+    def find(self, mass: tf.Tensor) -> tf.Tensor:
+        """The leaf whose cumulative-sum interval holds each of `mass` (n,) in [0, total)."""
+        cumulative = tf.cumsum(self.block_sums)
+        # Float rounding can put a mass at or past the last boundary: keep it inside.
+        mass = tf.minimum(mass, cumulative[-1] * (1.0 - 1e-6))
+        # The first block whose cumulative sum exceeds the mass: never an empty one.
+        # The clamps never bind for finite priorities; NaN ones (a diverged update) would index past
+        # the end, and the divergence must reach `training.check_finite`, not crash a gather.
+        block = tf.minimum(tf.searchsorted(cumulative, mass, side="right"), self.blocks - 1)
+        mass -= tf.gather(tf.concat([[0.0], cumulative], axis=0), block)
+        within = tf.cumsum(tf.gather(self.leaf, block), axis=1)  # (n, width)
+        mass = tf.minimum(mass, within[:, -1] * (1.0 - 1e-6))
+        position = tf.searchsorted(within, mass[:, None], side="right")[:, 0]
+        return tf.minimum(block * self.width + position, self.size - 1)
+
+
+class PrioritizedReplay(tf.Module):
+    """D_demo and D_replay with proportional prioritization and n-step returns, in the graph.
+
+    Each row of one float32 table packs a transition and the BC model's view of its state:
+    [s (d) | s' (d) | a | r | terminated | truncated | π̄_bc (A) | σ²], so a whole n-step
+    window of the batch is one gather. π̄_bc and σ² are functions of s alone and the BC model
+    is fixed between refits, so they are computed when a row is written (and recomputed for
+    every row after a refit) instead of K MC-dropout passes on every sampled batch.
+    """
+
+    def __init__(
+        self,
+        obs_dim: int | NetworkInput,
+        n_actions: int,
+        capacity: int = 100_000,
+        demo_capacity: int = 50_000,
+        n_step: int = 10,
+        gamma: float = 0.99,
+        alpha: float = 0.4,
+        eps_agent: float = 0.001,
+        eps_demo: float = 1.0,
+        seed: int = 0,
+    ) -> None:
+        super().__init__()
+        if capacity < n_step:
+            raise ConfigError(f"replay capacity must be ≥ n_step={n_step}, got {capacity}")
+        spec = as_input(obs_dim)
+        self.frames = spec.frames
+        """The frames' layout when observations are frames (then s and s' columns hold pool indices)."""
+        self.obs_dim = spec.dim if self.frames is None else self.frames.stack
+        """Columns of s (and of s') in the table: features, or the pool indices of the stacked frames."""
+        self.n_actions = int(n_actions)
+        self.capacity, self.demo_capacity = int(capacity), int(demo_capacity)
+        self.n_step, self.gamma, self.alpha = int(n_step), float(gamma), float(alpha)
+        self.eps_agent, self.eps_demo = float(eps_agent), float(eps_demo)
+        d, A = self.obs_dim, self.n_actions
+        self.OBS, self.NEXT_OBS = slice(0, d), slice(d, 2 * d)
+        self.ACTION, self.REWARD, self.TERMINATED, self.TRUNCATED = 2 * d, 2 * d + 1, 2 * d + 2, 2 * d + 3
+        self.PI_BC, self.SIGMA_SQ = slice(2 * d + 4, 2 * d + 4 + A), 2 * d + 4 + A
+        rows = self.demo_capacity + self.capacity
+        self.table = tf.Variable(tf.zeros([rows, 2 * d + 5 + A]), trainable=False, name="table")
+        self.demo_size = tf.Variable(0, trainable=False, name="demo_size")
+        self.agent_size = tf.Variable(0, trainable=False, name="agent_size")
+        self.head = tf.Variable(0, trainable=False, name="head")
+        self.max_priority = tf.Variable(1.0, trainable=False, name="max_priority")
+        """The largest p^α written so far: new transitions enter with it."""
+        self.n_step_view = tf.Variable(tf.zeros([rows, d + 2]), trainable=False, name="n_step_view")
+        """[R | s_{t+m} (d) | γ^m·(1 − terminated)] of each row, kept current by `_refresh_n_step`."""
+        self.tree = SumTree(rows)
+        self._strictly_upper = tf.constant(np.triu(np.ones((n_step, n_step), np.float32), k=1))
+        self.rng = tf.random.Generator.from_seed(seed)
+        if self.frames is not None:
+            self._init_pool()
+
+    @property
+    def size(self) -> tf.Tensor:
+        return self.demo_size + self.agent_size
+
+    # --- frames -----------------------------------------------------------------------------
+    def _init_pool(self) -> None:
+        k = self.frames.stack
+        self.slot_rows = self.demo_capacity + self.capacity + k
+        """Rows of pool slots: D_demo's, then D_replay's capacity and k more (module docstring)."""
+        self.pool = tf.Variable(
+            tf.zeros([2 * self.slot_rows, *self.frames.frame_shape], tf.uint8), trainable=False, name="frame_pool"
+        )
+        self.serial = tf.Variable(tf.constant(0, tf.int64), trainable=False, name="serial")
+        """Self-generated transitions stored so far: their slot row is D_demo's + serial mod (capacity + k)."""
+        self.last_next = tf.Variable(tf.zeros(self.frames.shape, tf.uint8), trainable=False, name="last_next_obs")
+        self.last_next_index = tf.Variable(tf.zeros([k]), trainable=False, name="last_next_index")
+        self.has_last = tf.Variable(False, trainable=False, name="has_last")
+
+    @property
+    def pool_bytes(self) -> int:
+        """Bytes of the frame pool (0 for vector observations)."""
+        return 0 if self.frames is None else int(np.prod(self.pool.shape))
+
+    def _newest(self, obs: tf.Tensor) -> tf.Tensor:
+        """The newest frame of observations (..., *shape): the last of a stack, or all of it."""
+        return obs[..., -1] if self.frames.stack > 1 else obs
+
+    def store_frames(self, obs: tf.Tensor, next_obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
+        """Write the new frames of one self-generated transition to the pool; returns the pool
+        indices (k,) of s and of s', as float32 table columns (exact below 2^24)."""
+        k = self.frames.stack
+        slot = 2 * (self.demo_capacity + tf.cast(self.serial % (self.capacity + k), tf.int32))
+        obs, next_obs = tf.cast(obs, tf.uint8), tf.cast(next_obs, tf.uint8)
+        checks = []
+        if k > 1:  # the invariants that let a stack be stored as one new frame
+            checks.append(
+                tf.debugging.Assert(
+                    tf.reduce_all(next_obs[..., :-1] == obs[..., 1:]),
+                    ["s' is not s's frame stack shifted by one frame"],
+                )
+            )
+        continues = tf.logical_and(self.has_last, tf.reduce_all(obs == self.last_next))
+
+        def fresh() -> tf.Tensor:
+            ok = (
+                []
+                if k == 1
+                else [
+                    tf.debugging.Assert(
+                        tf.reduce_all(obs == obs[..., -1:]), ["a fresh frame stack must be copies of one frame"]
+                    )
+                ]
+            )
+            with tf.control_dependencies(ok):
+                self.pool.scatter_nd_update([[slot]], self._newest(obs)[None])
+            return tf.fill([k], tf.cast(slot, tf.float32))
+
+        with tf.control_dependencies(checks):
+            obs_index = tf.cond(continues, self.last_next_index.read_value, fresh)
+        self.pool.scatter_nd_update([[slot + 1]], self._newest(next_obs)[None])
+        next_index = tf.concat([obs_index[1:], tf.cast(slot + 1, tf.float32)[None]], axis=0)
+        self.last_next.assign(next_obs)
+        self.last_next_index.assign(next_index)
+        self.has_last.assign(True)
+        self.serial.assign_add(1)
+        return obs_index, next_index
+
+    def demo_frames(self, obs: np.ndarray, next_obs: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Write D_demo's frames (complete episodes in time order; `ends` marks each episode's last
+        transition) to its slots; returns the pool indices (n, k) of every s and s'."""
+        k, n = self.frames.stack, len(obs)
+        newest = (lambda x: x[..., -1]) if k > 1 else (lambda x: x)
+        starts = np.flatnonzero(np.concatenate([[True], ends[:-1]]))
+        if k > 1 and not (
+            np.array_equal(next_obs[..., :-1], obs[..., 1:]) and (obs[starts] == obs[starts][..., -1:]).all()
+        ):
+            raise ConfigError(
+                "demonstrated frame stacks must shift by one frame per step and start as copies "
+                "of one frame (as the Atari preprocessing makes them)"
+            )
+        frames = np.empty((2 * n, *self.frames.frame_shape), np.uint8)
+        frames[1::2] = newest(next_obs)
+        obs_index, next_index = np.empty((n, k), np.float32), np.empty((n, k), np.float32)
+        for i in range(n):
+            if i > 0 and not ends[i - 1]:  # inside an episode: s_t is s_{t-1}'s s'
+                obs_index[i] = next_index[i - 1]
+            else:
+                frames[2 * i] = newest(obs[i])
+                obs_index[i] = 2 * i
+            next_index[i] = np.append(obs_index[i][1:], 2 * i + 1)
+        self.pool.scatter_nd_update(tf.range(2 * n)[:, None], frames)
+        return obs_index, next_index
+
+    def observations(self, columns: tf.Tensor) -> tf.Tensor:
+        """States from table columns (B, obs_dim): the vectors themselves, or the frames (B, *shape)
+        their pool indices name, uint8."""
+        if self.frames is None:
+            return columns
+        frames = tf.gather(self.pool, tf.cast(columns, tf.int32))  # (B, k, *frame_shape)
+        if self.frames.stack > 1:
+            return tf.transpose(frames, [0, *range(2, frames.shape.rank), 1])
+        return frames[:, 0]
+
+    def states(self, indices: tf.Tensor) -> tf.Tensor:
+        """s_t of stored rows `indices`."""
+        return self.observations(tf.gather(self.table, indices)[:, self.OBS])
+
+    def rows(self, obs, actions, rewards, next_obs, terminated, truncated, pi_bc, sigma_sq) -> tf.Tensor:
+        """Pack (n, ...) transition arrays into (n, width) table rows."""
+        column = lambda x: tf.cast(tf.reshape(x, [-1, 1]), tf.float32)  # noqa: E731
+        return tf.concat(
+            [
+                tf.cast(obs, tf.float32),
+                tf.cast(next_obs, tf.float32),
+                column(actions),
+                column(rewards),
+                column(terminated),
+                column(truncated),
+                tf.cast(pi_bc, tf.float32),
+                column(sigma_sq),
+            ],
+            axis=1,
+        )
+
+    def set_demos(self, rows: tf.Tensor) -> None:
+        """Replace D_demo by these packed rows (time order, complete episodes), at max priority."""
+        n, old = int(rows.shape[0]), int(self.demo_size.numpy())
+        if n == 0 or n > self.demo_capacity:
+            raise ConfigError(f"D_demo must hold 1 to demo_capacity={self.demo_capacity} transitions, got {n}")
+        if rows.shape[1] != self.table.shape[1]:
+            raise ConfigError(f"demonstration rows have width {rows.shape[1]}, the table {self.table.shape[1]}")
+        self.table.scatter_nd_update(tf.range(n)[:, None], rows)
+        self.demo_size.assign(n)
+        self._refresh_n_step(tf.range(n))
+        priorities = tf.concat([tf.fill([n], self.max_priority), tf.zeros([max(old - n, 0)])], axis=0)
+        self.tree.set(tf.range(len(priorities)), priorities)
+
+    def store(self, row: tf.Tensor) -> None:
+        """Append one packed self-generated transition (width,) at the circular head, at max priority."""
+        position = self.head.read_value()
+        index = self.demo_capacity + position
+        self.table.scatter_nd_update([[index]], row[None])
+        self.tree.set(index[None], self.max_priority[None])
+        self.head.assign((position + 1) % self.capacity)
+        self.agent_size.assign(tf.minimum(self.agent_size + 1, self.capacity))
+        # The rows whose n-step window reaches the new one: it and the n − 1 stored before it.
+        self._refresh_n_step(self.demo_capacity + (position - tf.range(self.n_step)) % self.capacity)
+
+    def stored_indices(self) -> tf.Tensor:
+        """The table rows in use: D_demo, then D_replay."""
+        return tf.concat([tf.range(self.demo_size), self.demo_capacity + tf.range(self.agent_size)], axis=0)
+
+    def sample(self, batch_size: int, beta: tf.Tensor) -> Batch:
+        """Draw `batch_size` rows with P(i) ∝ p_i^α, with IS weights and n-step returns."""
+        total = self.tree.total
+        indices = self.tree.find(self.rng.uniform([batch_size]) * total)
+        weights = tf.pow(tf.cast(self.size, tf.float32) * self.tree.leaves(indices) / total, -beta)
+        return self._batch(indices, weights / tf.reduce_max(weights))
+
+    def sample_balanced(self, batch_size: int) -> Batch:
+        """SQIL's batch: the first half uniformly from D_demo, the second from D_replay (all from
+        D_demo while D_replay is empty), weights 1."""
+        u = self.rng.uniform([batch_size])
+        from_agent = tf.logical_and(tf.range(batch_size) >= batch_size // 2, self.agent_size > 0)
+        indices = tf.where(
+            from_agent,
+            self.demo_capacity + tf.cast(u * tf.cast(self.agent_size, tf.float32), tf.int32),
+            tf.cast(u * tf.cast(self.demo_size, tf.float32), tf.int32),
+        )
+        return self._batch(indices, tf.ones([batch_size]))
+
+    def _batch(self, indices: tf.Tensor, weights: tf.Tensor) -> Batch:
+        """The stored rows `indices` as a batch with these importance weights."""
+        row = tf.gather(self.table, indices)
+        n_returns, n_next_obs, n_discount = tf.split(tf.gather(self.n_step_view, indices), [1, self.obs_dim, 1], axis=1)
+        return Batch(
+            indices=indices,
+            obs=self.observations(row[:, self.OBS]),
+            actions=tf.cast(row[:, self.ACTION], tf.int32),
+            rewards=row[:, self.REWARD],
+            next_obs=self.observations(row[:, self.NEXT_OBS]),
+            discount=self.gamma * (1.0 - row[:, self.TERMINATED]),
+            n_returns=n_returns[:, 0],
+            n_next_obs=self.observations(n_next_obs),
+            n_discount=n_discount[:, 0],
+            pi_bc=row[:, self.PI_BC],
+            sigma_sq=row[:, self.SIGMA_SQ],
+            is_demo=tf.cast(indices < self.demo_capacity, tf.float32),
+            weights=weights,
+        )
+
+    def _refresh_n_step(self, indices: tf.Tensor) -> None:
+        """Recompute the n-step return, s_{t+m} and discount of rows `indices` (distinct)."""
+        window = tf.gather(self.table, self._window(indices))  # (n, n_step, width); step 0 is the row
+        n_returns, n_next_obs, n_discount = self._n_step(indices, window)
+        self.n_step_view.scatter_nd_update(
+            indices[:, None], tf.concat([n_returns[:, None], n_next_obs, n_discount[:, None]], axis=1)
+        )
+
+    def _window(self, indices: tf.Tensor) -> tf.Tensor:
+        """(B, n) rows t, t+1, …, t+n−1 of each sample's region (D_replay wraps around)."""
+        k = tf.range(self.n_step)
+        agent_position = (indices - self.demo_capacity + k[:, None]) % self.capacity
+        return tf.transpose(
+            tf.where(indices < self.demo_capacity, indices + k[:, None], self.demo_capacity + agent_position)
+        )
+
+    def _n_step(self, indices: tf.Tensor, window: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor, tf.Tensor]:
+        """(R, s_{t+m}, γ^m·(1 − terminated)) for each row, m ≤ n within its episode."""
+        k = tf.range(self.n_step)
+        is_demo = indices < self.demo_capacity
+        # How many transitions were stored after this one (so far) in its region.
+        ahead = tf.where(
+            is_demo, self.demo_size - 1 - indices, (self.head - 1 - (indices - self.demo_capacity)) % self.capacity
+        )
+        done = window[:, :, self.TERMINATED] + window[:, :, self.TRUNCATED] > 0
+        # Step k is in the window iff no earlier step ended the episode and it has been stored.
+        ended_before = tf.matmul(tf.cast(done, tf.float32), self._strictly_upper) > 0  # Σ_{i<k} done_i > 0
+        inside = tf.cast(tf.logical_and(tf.logical_not(ended_before), k[None, :] <= ahead[:, None]), tf.float32)
+        discounts = tf.pow(self.gamma, tf.cast(k, tf.float32))
+        n_returns = tf.reduce_sum(inside * discounts * window[:, :, self.REWARD], axis=1)
+        m = tf.cast(tf.reduce_sum(inside, axis=1), tf.int32)  # ≥ 1: step 0 is always inside
+        last = tf.gather(window, m - 1, axis=1, batch_dims=1)  # (B, width), the row t+m−1
+        n_discount = tf.pow(self.gamma, tf.cast(m, tf.float32)) * (1.0 - last[:, self.TERMINATED])
+        return n_returns, last[:, self.NEXT_OBS], n_discount
+
+    def set_expert_targets(self, indices: tf.Tensor, pi_bc: tf.Tensor, sigma_sq: tf.Tensor) -> None:
+        """Overwrite π̄_bc and σ² of rows `indices` (after the BC model was refitted)."""
+        rows = tf.gather(self.table, indices)
+        rows = tf.concat([rows[:, : self.PI_BC.start], pi_bc, sigma_sq[:, None]], axis=1)
+        self.table.scatter_nd_update(indices[:, None], rows)
+
+    def update_priorities(self, indices: tf.Tensor, td_abs: tf.Tensor) -> None:
+        """p_i ← (|δ_i| + ε)^α after a gradient step, ε = ε_d for demonstrations, ε_a otherwise."""
+        eps = tf.where(indices < self.demo_capacity, self.eps_demo, self.eps_agent)
+        priorities = tf.pow(td_abs + eps, self.alpha)
+        self.tree.set(indices, priorities)
+        self.max_priority.assign(tf.maximum(self.max_priority, tf.reduce_max(priorities)))

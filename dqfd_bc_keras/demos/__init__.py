@@ -1,0 +1,62 @@
+"""Demonstration datasets: record them with any demonstrator (a scripted expert, a rule
+`module:function`, a saved `.keras` model), save them as plain `.npz`, and load them back with
+every check a learner relies on; Minari datasets convert both ways (`demos/minari.py`).
+
+This module is the public face of four: `dataset` (the dataset and its invariants),
+`recording` (demonstrators played on a task env), `npz` (the `.npz` format) and
+`minari`; `load_source` reads either kind of source. The command line is
+`commands/demos.py`:
+
+    python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
+    python -m dqfd_bc_keras.demos inspect demos.npz
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from dqfd_bc_keras.demos.dataset import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, concatenate, validate
+from dqfd_bc_keras.demos.minari import from_minari
+from dqfd_bc_keras.demos.npz import load, save
+from dqfd_bc_keras.demos.recording import EpisodeRecorder, record, rollout
+
+__all__ = [
+    "ARRAYS",
+    "FORMAT_VERSION",
+    "DemoDataset",
+    "DemoMeta",
+    "EpisodeRecorder",
+    "concatenate",
+    "given_expert",
+    "given_source",
+    "load",
+    "load_source",
+    "record",
+    "rollout",
+    "save",
+    "validate",
+]
+
+
+def load_source(
+    source: str, task: str, timeout: str, env_kwargs: dict[str, Any] | None = None, max_transitions: int | None = None
+) -> DemoDataset:
+    """Demonstrations for `task` (made with `env_kwargs`) from `source`: a `.npz` file of ours or
+    `minari:DATASET_ID` (a dataset in the local Minari cache, converted by `demos.minari.from_minari`),
+    of at most `max_transitions` transitions."""
+    if source.startswith("minari:"):
+        return from_minari(source.removeprefix("minari:"), task, timeout, env_kwargs, max_transitions)
+    return load(source, task=task, timeout=timeout, env_kwargs=env_kwargs, max_transitions=max_transitions)
+
+
+def given_source(dataset: DemoDataset) -> str:
+    """Where a dataset given to a run came from, as its metadata says: a Minari dataset or a file."""
+    return "minari" if dataset.meta.expert.startswith("minari:") else "file"
+
+
+def given_expert(source: str, dataset: DemoDataset) -> str:
+    """What a run's config names as its `expert` when demonstrations were given, not recorded:
+    where they came from and who demonstrated them, as their metadata says. Not a demonstrator
+    any process could call (tasks.registry.NOT_REMADE): the run keeps its D_demo in its checkpoints."""
+    by = dataset.meta.expert
+    return f"demonstrations from {source}" + ("" if by == source else f" ({by})")

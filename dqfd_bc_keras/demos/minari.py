@@ -1,0 +1,325 @@
+"""Demonstrations to and from Minari datasets (Farama's offline-RL format), never over the network.
+
+Only the local Minari cache is used: its root is `MINARI_DATASETS_PATH`, else
+`~/.minari/datasets`, and a dataset `ns/name-v0` lives in `<root>/ns/name-v0/data`. To read a
+published dataset, download it first yourself (`minari download ns/name-v0`).
+
+A Minari episode holds T actions and T + 1 observations with Gymnasium's flags, which is our
+`bootstrap` timeout mode; it becomes T transitions of our format (`demos.dataset.ARRAYS`):
+
+    obs = observations[:-1]   next_obs = observations[1:]   actions int64   rewards float32
+    terminated / truncated bool (a step with both flags counts as terminated, as `TimeLimitMode` does)
+
+Minari keeps the plain env's rewards, so tasks with shaped rewards (cartpole's fall penalty,
+mountaincar-goals' goal reward) are refused both ways: use the plain env id (`CartPole-v1`).
+Minari is optional (`pip install -r requirements-extras.txt`); it is imported only here, lazily.
+
+    python -m dqfd_bc_keras.demos export demos.npz --minari mountaincar/imperfect-v0
+    python train.py --env CartPole-v1 --demos minari:cartpole/expert-v0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import warnings
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from dqfd_bc_keras.choices import TIMEOUT_MODES
+from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta, validate
+from dqfd_bc_keras.envs.make import TaskSpec, effective_kwargs, get_task, task_spaces
+from dqfd_bc_keras.envs.observations import describe
+from dqfd_bc_keras.errors import ConfigError, DemoFileError, one_line
+
+_ABSENT = object()
+
+DATA_FORMAT = "hdf5"
+"""Minari's storage format for the datasets we write: its extra needs only h5py, which Keras
+already depends on (the `arrow`/`parquet` formats need pyarrow, a large extra wheel)."""
+
+
+def _minari() -> ModuleType:
+    """The `minari` module, or a one-line `ConfigError` saying how to install it."""
+    try:
+        import minari
+    except ImportError as error:
+        raise ConfigError(
+            f"Minari datasets need the optional dependency minari ({error}): pip install -r requirements-extras.txt"
+        ) from None
+    return minari
+
+
+def _dataset_dir(dataset_id: str) -> Path:
+    """Where the local cache keeps `dataset_id` (checked to be a well-formed Minari id)."""
+    from minari.dataset.minari_dataset import parse_dataset_id
+    from minari.storage.datasets_root_dir import get_dataset_path
+
+    try:
+        parse_dataset_id(dataset_id)
+    except (ValueError, TypeError):  # TypeError: an id without its -vN version
+        raise ConfigError(
+            f"malformed Minari dataset id {dataset_id!r}: expected (namespace/)name-vN, e.g. mountaincar/imperfect-v0"
+        ) from None
+    return get_dataset_path(dataset_id)
+
+
+def _bare_id(env_id: str) -> str:
+    """An env id without the `module:` prefix that only tells Gymnasium what to import."""
+    return env_id.rpartition(":")[2]
+
+
+def _refuse_shaped(spec: TaskSpec, what: str) -> None:
+    """Minari datasets carry the plain env's rewards: a shaped task would mix two reward scales."""
+    shaping = (
+        "a fall penalty" if spec.fall_penalty is not None else "a goal reward" if spec.goal_reward is not None else None
+    )
+    if shaping is not None:
+        raise ConfigError(
+            f"{what}: task {spec.name!r} has shaped rewards ({shaping}) but a Minari dataset "
+            f"holds the plain env's rewards; use the plain env id instead, e.g. --env {spec.env_id}"
+        )
+
+
+def _check_spaces(
+    where: Path, dataset_spaces: tuple[gym.Space, gym.Space], task: str, task_obs: gym.Space, n_actions: int
+) -> None:
+    """The dataset's spaces must be the task env's own: the same kinds and shapes (a Box's
+    bounds may differ) and Discrete(n) from 0."""
+    obs_space, action_space = dataset_spaces
+    actions_ok = (
+        isinstance(action_space, gym.spaces.Discrete)
+        and int(action_space.start) == 0
+        and int(action_space.n) == n_actions
+    )
+    if describe(obs_space) != describe(task_obs) or not actions_ok:
+        raise DemoFileError(
+            where,
+            f"mismatched spaces: dataset has {describe(obs_space)}/{action_space}, "
+            f"task {task} has {describe(task_obs)}/Discrete({n_actions})",
+        )
+
+
+def from_minari(
+    dataset_id: str,
+    task: str,
+    timeout: str = "bootstrap",
+    env_kwargs: dict[str, Any] | None = None,
+    max_transitions: int | None = None,
+) -> DemoDataset:
+    """Read the Minari dataset `dataset_id` from the local cache as demonstrations for `task`
+    made with `env_kwargs`.
+
+    Never downloads. Refuses, in one line naming the dataset: a missing dataset (and where it
+    looked), another env, other env kwargs (compared with the registration's defaults filled
+    in on both sides), other spaces, a shaped-reward task, `timeout="time-aware"` (there is no
+    time feature to add) and incomplete episodes. Observations are flattened as the task's are
+    (`observations`). `naive` records every truncation as a termination, as our naive mode
+    does; `bootstrap` keeps Gymnasium's flags.
+    """
+    env_kwargs = dict(env_kwargs or {})
+    minari = _minari()
+    where = Path(f"minari:{dataset_id}")
+    if timeout not in TIMEOUT_MODES:
+        raise ConfigError(f"unknown timeout mode {timeout!r}; expected one of {TIMEOUT_MODES}")
+    if timeout == "time-aware":
+        raise ConfigError(
+            f"{where}: timeout='time-aware' needs the time left in every state, which a Minari "
+            "dataset does not record; use --timeout bootstrap (or naive)"
+        )
+    spec = get_task(task)
+    _refuse_shaped(spec, str(where))
+    directory = _dataset_dir(dataset_id)
+    if not (directory / "data").is_dir():
+        raise DemoFileError(
+            where,
+            f"not in the local Minari cache (looked in {directory}); datasets are never "
+            f"downloaded here: run `minari download {dataset_id}` or set MINARI_DATASETS_PATH",
+        )
+    try:
+        source = minari.load_dataset(dataset_id, download=False)
+    except Exception as error:  # corrupt metadata, an unsupported version, a missing storage extra
+        raise DemoFileError(where, f"cannot be read ({one_line(error)})") from None
+
+    if source.env_spec is None:
+        raise DemoFileError(
+            where, f"names no env (its env_spec is empty), so it cannot be checked against {spec.env_id}"
+        )
+    if _bare_id(source.env_spec.id) != _bare_id(spec.env_id):
+        raise DemoFileError(where, f"was recorded on {source.env_spec.id}, but task {task!r} is {spec.env_id}")
+    spaces = task_spaces(task, env_kwargs)
+    theirs = effective_kwargs(spec.env_id, dict(source.env_spec.kwargs or {}))
+    ours = effective_kwargs(spec.env_id, env_kwargs)
+    if theirs != ours:  # the keys that differ, with the constructor's and registration's defaults filled in
+        keys = sorted(k for k in {*theirs, *ours} if theirs.get(k, _ABSENT) != ours.get(k, _ABSENT))
+        recorded, made = ({k: kwargs.get(k, "(not given)") for k in keys} for kwargs in (theirs, ours))
+        raise DemoFileError(
+            where, f"was recorded with env kwargs {json.dumps(recorded)}, but the task is made with {json.dumps(made)}"
+        )
+    layout = spaces.layout
+    if layout.image:
+        raise DemoFileError(
+            where,
+            f"task {task!r} observes frames ({layout.text()}); reading Minari datasets of "
+            "frames is not supported yet: convert it to an .npz (docs/DEMONSTRATIONS.md)",
+        )
+    if max_transitions is not None and source.total_steps > max_transitions:
+        raise DemoFileError(
+            where,
+            f"holds {source.total_steps} transitions, more than demo_capacity={max_transitions} "
+            "(raise it with --set demo_capacity=N)",
+        )
+    _check_spaces(where, (source.observation_space, source.action_space), task, layout.space, spaces.n_actions)
+
+    columns: dict[str, list[np.ndarray]] = {name: [] for name in ARRAYS}
+    returns: list[float] = []
+    try:
+        episodes = list(source.iterate_episodes())
+    except Exception as error:
+        raise DemoFileError(where, f"cannot be read ({one_line(error)})") from None
+    for index, episode in enumerate(episodes):
+        steps = len(episode.rewards)
+        try:
+            observations = layout.flatten(episode.observations, batch=steps + 1)
+        except (KeyError, IndexError, TypeError, ValueError) as error:
+            raise DemoFileError(
+                where,
+                f"episode {index} has {steps} steps and observations that do not fit "
+                f"{describe(layout.space)} × {steps + 1} ({one_line(error)})",
+            ) from None
+        terminated = np.asarray(episode.terminations, dtype=bool)
+        truncated = np.asarray(episode.truncations, dtype=bool) & ~terminated
+        if steps == 0:
+            raise DemoFileError(where, f"episode {index} has no steps")
+        if not (terminated[-1] or truncated[-1]):
+            raise DemoFileError(
+                where, f"episode {index} is incomplete: its last step is neither terminated nor truncated"
+            )
+        if (terminated[:-1] | truncated[:-1]).any():
+            raise DemoFileError(where, f"episode {index} ends (terminated or truncated) before its last step")
+        if timeout == "naive":
+            terminated, truncated = terminated | truncated, np.zeros_like(truncated)
+        rewards = np.asarray(episode.rewards, dtype=np.float32)
+        values = (
+            observations[:-1],
+            np.asarray(episode.actions, dtype=np.int64).reshape(-1),
+            rewards,
+            observations[1:],
+            terminated,
+            truncated,
+            np.full(steps, index, np.int64),
+        )
+        for name, value in zip(ARRAYS, values, strict=True):
+            columns[name].append(value)
+        returns.append(float(np.sum(rewards, dtype=np.float64)))
+    if not returns:
+        raise DemoFileError(where, "the dataset is empty")
+
+    meta = DemoMeta(
+        task=task,
+        env_id=spec.env_id,
+        timeout=timeout,
+        obs_dim=layout.dim,
+        n_actions=spaces.n_actions,
+        expert=f"minari:{dataset_id}",
+        epsilon=0.0,
+        seed=0,
+        episode_returns=returns,
+        plain_returns=list(returns),
+        env_kwargs=env_kwargs,
+        observation=layout.text(),
+    )
+    dataset = DemoDataset(
+        **{name: np.concatenate(columns[name]).astype(dtype, copy=False) for name, (dtype, _) in ARRAYS.items()},
+        meta=meta,
+    )
+    validate(where, dataset)
+    return dataset
+
+
+def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Path:
+    """Publish `dataset` in the local Minari cache as `dataset_id`; returns its directory.
+
+    Only `bootstrap` datasets of unshaped tasks: their flags and rewards mean what Gymnasium's
+    do, which is what a Minari user assumes. An existing dataset is replaced only with
+    `force`, and only once the new one is written. No reference scores are computed (that
+    would roll the env out again).
+    """
+    minari = _minari()
+    from minari.data_collector import EpisodeBuffer
+
+    m = dataset.meta
+    where = f"minari:{dataset_id}"
+    if m.timeout != "bootstrap":
+        raise ConfigError(
+            f"{where}: the dataset was recorded with timeout={m.timeout!r}, so its flags at the "
+            "time limit do not mean what Gymnasium's do; record it again with --timeout bootstrap"
+        )
+    _refuse_shaped(get_task(m.task), where)  # also imports the env's module (`module:Env-v0`)
+    layout = task_spaces(m.task, m.env_kwargs).layout
+    if layout.image:
+        raise ConfigError(
+            f"{where}: the dataset's observations are frames ({m.observation}); writing Minari "
+            "datasets of frames is not supported yet (keep them as .npz)"
+        )
+    if not layout.flat:
+        raise ConfigError(
+            f"{where}: the dataset's observations were flattened from {m.observation}; a Minari "
+            "dataset holds the env's own observations, so record it with Minari's DataCollector"
+        )
+    env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
+    env_spec = dataclasses.replace(env_spec, kwargs={**env_spec.kwargs, **m.env_kwargs})
+    directory = _dataset_dir(dataset_id)
+    if directory.exists() and not force:
+        raise ConfigError(f"{where}: a Minari dataset of that id exists at {directory}; pass --force to replace it")
+
+    starts = np.flatnonzero(np.diff(dataset.episode_ids, prepend=-1))
+    ends = np.append(starts[1:], len(dataset))
+    buffers = [
+        EpisodeBuffer(
+            observations=np.concatenate([dataset.obs[a:b], dataset.next_obs[b - 1 : b]]),
+            actions=dataset.actions[a:b],
+            rewards=dataset.rewards[a:b],
+            terminations=dataset.terminated[a:b],
+            truncations=dataset.truncated[a:b],
+        )
+        for a, b in zip(starts, ends, strict=True)
+    ]
+    description = (
+        f"Demonstrations exported by dqfd_bc_keras: task {m.task} ({m.env_id}), demonstrator "
+        f"{m.expert}, epsilon={m.epsilon:g}, seed={m.seed}, {len(buffers)} episodes, "
+        f"{len(dataset)} steps, timeout=bootstrap (Gymnasium's flags)."
+    )
+
+    # Replacing: keep the old dataset under a hidden name (Minari skips dot-directories) until
+    # the new one is complete, so a failed export leaves the cache as it was.
+    backup = directory.with_name(f".{directory.name}.replaced-{os.getpid()}") if directory.exists() else None
+    if backup is not None:
+        directory.rename(backup)
+    try:
+        with warnings.catch_warnings():  # the nags about author, email, code link and eval env we do not know
+            warnings.filterwarnings("ignore", message=r".*is set to None", category=UserWarning)
+            minari.create_dataset_from_buffers(
+                dataset_id,
+                buffers,
+                env=env_spec,
+                algorithm_name=m.expert,
+                description=description,
+                data_format=DATA_FORMAT,
+            )
+    except BaseException as error:
+        shutil.rmtree(directory, ignore_errors=True)
+        if backup is not None:
+            backup.rename(directory)
+        if isinstance(error, Exception):
+            raise ConfigError(f"{where}: Minari could not write it ({one_line(error)})") from error
+        raise
+    if backup is not None:
+        shutil.rmtree(backup, ignore_errors=True)
+    return directory

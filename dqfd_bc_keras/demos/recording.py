@@ -1,0 +1,374 @@
+"""Demonstrators and recording: a task's scripted experts, a user's rule `module:function` or a
+saved `.keras` model made into a demonstrator (`make_demonstrator`), played on a task env, its
+complete episodes kept as a dataset (`record`, `rollout`, `EpisodeRecorder`, which also records
+the agent's greedy policy and the agent itself while it trains). `experts.py` is the public face
+of the demonstrators.
+
+A user's rule runs inside the recording loop: whatever it raises or answers that is no action is
+one line naming the rule and its file:line, and `try_demonstrator` asks it for its first action
+before TensorFlow loads.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta
+from dqfd_bc_keras.envs.episodes import play
+from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_spaces
+from dqfd_bc_keras.errors import ConfigError, DqfdError, one_line
+from dqfd_bc_keras.seeds import demo_seed
+from dqfd_bc_keras.tasks import EXPERT_NAMES, NOT_REMADE, Rule, check_demonstrator, families, family_preset
+
+if TYPE_CHECKING:
+    from dqfd_bc_keras.core.config import Config
+
+
+def _where(filename: str, line: int | None = None) -> str:
+    """A source location as the user would look it up: relative to the working directory when under it."""
+    path = Path(filename)
+    try:
+        path = path.resolve().relative_to(Path.cwd())
+    except (OSError, ValueError):
+        pass
+    return f"{path}:{line}" if line else str(path)
+
+
+def _raised_at(error: BaseException, file: str | None) -> str:
+    """Where `error` was raised: its innermost frame in the user's `file` (else its innermost frame
+    outside the import machinery), as file:line; a SyntaxError names its own line."""
+    if isinstance(error, SyntaxError) and error.filename:
+        return _where(error.filename, error.lineno)
+    frames = [frame for frame in traceback.extract_tb(error.__traceback__) if not frame.filename.startswith("<")]
+    own = [frame for frame in frames if frame.filename == file]
+    frame = (own or frames)[-1] if frames else None
+    return _where(frame.filename, frame.lineno) if frame else "no source file"
+
+
+def _defined_at(rule: Rule) -> str:
+    """The file:line of `rule`'s definition (a function's), else its module's name."""
+    code = getattr(rule, "__code__", None)
+    return _where(code.co_filename, code.co_firstlineno) if code else getattr(rule, "__module__", "?")
+
+
+def _check_choice(kind: str, value: str, choices: Sequence[str]) -> None:
+    if value not in choices:
+        raise ConfigError(f"unknown {kind} {value!r}; valid choices: {', '.join(choices)}")
+
+
+@dataclass(frozen=True)
+class Demonstrator:
+    """obs -> action: `rule`, replaced with prob. epsilon by a uniformly random action.
+
+    What the rule raises, and an answer that is not an int action in [0, n_actions) (a float, a
+    bool, a string, an out-of-range int; a numpy integer or a 0-d integer array is one), is a
+    `ConfigError` naming the rule and where it is: a rule is often the user's code."""
+
+    name: str
+    rule: Rule = field(repr=False)
+    n_actions: int
+    epsilon: float
+    rng: np.random.Generator = field(repr=False, compare=False)
+
+    def __call__(self, obs: np.ndarray) -> int:
+        if self.rng.random() < self.epsilon:
+            return int(self.rng.integers(self.n_actions))
+        try:
+            action = self.rule(np.asarray(obs))
+        except DqfdError:
+            raise
+        except Exception as error:
+            code = getattr(self.rule, "__code__", None)
+            raise ConfigError(
+                f"{self.name} raised {one_line(error)} ({_raised_at(error, code.co_filename if code else None)})"
+            ) from None
+        try:
+            value = np.asarray(action)
+            ok = value.ndim == 0 and value.dtype.kind in "iu" and 0 <= value < self.n_actions
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ConfigError(
+                f"{self.name} returned {action!r} ({type(action).__name__}); a demonstrator returns an "
+                f"int action in [0, {self.n_actions}) ({_defined_at(self.rule)})"
+            )
+        return int(value)
+
+
+def _check_epsilon(epsilon: float) -> float:
+    if not 0.0 <= epsilon <= 1.0:
+        raise ConfigError(f"epsilon must be in [0, 1], got {epsilon!r}")
+    return float(epsilon)
+
+
+def make_expert(family: str, name: str, epsilon: float = 0.0, seed: int | None = None) -> Demonstrator:
+    """Build a validated expert whose random actions come from its own generator seeded with `seed`."""
+    _check_choice("family", family, families())
+    preset = family_preset(family)
+    if name not in preset.experts:
+        raise ConfigError(
+            f"unknown expert name {name!r}; valid choices: {', '.join(preset.experts)} (the scripted "
+            f"experts of {family}: choose one with --expert)"
+        )
+    return Demonstrator(
+        f"{family}/{name}",
+        preset.experts[name],
+        task_spaces(preset.name).n_actions,
+        _check_epsilon(epsilon),
+        np.random.default_rng(seed),
+    )
+
+
+def _import_rule(spec: str) -> Rule:
+    """The function `spec` (module:function) names; a one-line error naming the user's file when
+    the module cannot be imported, raises while importing, or has no such function."""
+    module, _, name = spec.partition(":")
+    try:
+        imported = importlib.import_module(module)
+    except ModuleNotFoundError as error:
+        if error.name is not None and (module == error.name or module.startswith(f"{error.name}.")):
+            raise ConfigError(
+                f"demonstrator {spec}: no module named {error.name!r} (is its directory on PYTHONPATH?)"
+            ) from None
+        problem = error
+    except Exception as error:  # the module's own code raised while it was imported
+        problem = error
+    else:
+        rule = getattr(imported, name, None)
+        if rule is None:
+            functions = sorted(
+                key
+                for key, value in vars(imported).items()
+                if callable(value) and not key.startswith("_") and getattr(value, "__module__", None) == module
+            )
+            where = _where(getattr(imported, "__file__", None) or module)
+            raise ConfigError(
+                f"demonstrator {spec}: {module} ({where}) has no function {name!r}; "
+                f"it has {', '.join(functions) or 'none'}"
+            )
+        if not callable(rule):
+            raise ConfigError(f"demonstrator {spec}: {name} is not a function (it is of type {type(rule).__name__})")
+        return rule
+    try:
+        found = importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        found = None
+    what = f"SyntaxError: {problem.msg}" if isinstance(problem, SyntaxError) else one_line(problem)  # no (file, line)
+    raise ConfigError(
+        f"demonstrator {spec}: importing {module} raised {what} "
+        f"({_raised_at(problem, found.origin if found else None)})"
+    )
+
+
+def make_demonstrator(
+    spec: str, task: str, epsilon: float = 0.0, seed: int | None = None, env_kwargs: dict | None = None
+) -> Demonstrator:
+    """The demonstrator `spec` on `task` (made with `env_kwargs`): a scripted expert of the task's
+    family (strong | imperfect, or a preset's own names), a rule `module:function` (an importable
+    function of the observation as the networks see it, flattened, → action), or the greedy
+    policy of a saved `.keras` Q-network or BC model (checked against the task's spaces)."""
+    check_demonstrator(spec, get_task(task))
+    if spec.startswith(NOT_REMADE):
+        raise ConfigError(
+            f"expert {spec!r} existed only in the Python process that used it: give the "
+            "demonstrations themselves (--demos FILE.npz)"
+        )
+    n_actions = task_spaces(task, env_kwargs).n_actions  # first: an env we cannot learn on is the error
+    family = get_task(task).family
+    if spec in EXPERT_NAMES or spec in get_task(task).experts:
+        if family is None:
+            raise ConfigError(
+                f"{task} has no scripted {spec} expert: give demonstrations with --demos "
+                "FILE.npz or minari:DATASET_ID, or a demonstrator module:function or model.keras"
+            )
+        return make_expert(family, spec, epsilon, seed)
+    if spec.endswith(".keras"):
+        from dqfd_bc_keras.evaluation import load_policy  # loads Keras: only when a model demonstrates
+
+        rule: Rule = load_policy(spec, None, task, env_kwargs=env_kwargs or {})[0]
+    else:
+        rule = _import_rule(spec)
+    return Demonstrator(spec, rule, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed))
+
+
+def try_demonstrator(config: Config) -> None:
+    """Ask `config.expert` for its action on the first observation it will be recorded from
+    (`training.demonstrations`), without its epsilon: a rule that cannot be imported, raises or
+    answers no action is one line in about a second, before TensorFlow loads and before a run
+    directory exists. A `.keras` model is checked when it is loaded (that needs TensorFlow)."""
+    if config.expert.endswith(".keras"):
+        return
+    policy = make_demonstrator(config.expert, config.task, env_kwargs=config.env_kwargs)
+    env = make_task(config.task, timeout=config.timeout, max_steps=config.max_steps, env_kwargs=config.env_kwargs)
+    try:
+        obs, _ = env.reset(seed=demo_seed(config.seed))
+        policy(obs)
+    finally:
+        env.close()
+
+
+def expert_returns(family: str, name: str, episodes: int = 100, seed: int = 0, epsilon: float = 0.0) -> np.ndarray:
+    """Undiscounted returns of the expert on the plain env (`envs.make_plain_env`: frames as
+    uint8, the preset's limit where the env has none); episode i is reset with seed + i."""
+    expert = make_expert(family, name, epsilon, seed)
+    with make_plain_env(family_preset(family).name) as env:
+        return np.asarray(play(env, expert, range(seed, seed + episodes)).returns, dtype=np.float64)
+
+
+def callable_name(rule: Rule) -> str:
+    """How a run names a Python callable given as its demonstrator (tasks.NOT_REMADE): no later
+    process can call it again, so the name says what it was, never a reference to import."""
+    return f"python callable {getattr(rule, '__qualname__', type(rule).__name__)}"
+
+
+def record(
+    task: str,
+    expert: str | Demonstrator | Rule,
+    episodes: int,
+    seed: int = 0,
+    epsilon: float = 0.0,
+    timeout: str = "bootstrap",
+    max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> DemoDataset:
+    """Run the demonstrator `expert` (`make_demonstrator`: strong | imperfect |
+    module:function | model.keras; a Python callable obs → action; or one already made) for
+    `episodes` episodes of `task` made with `env_kwargs`, `max_steps` steps at most; episode i
+    resets with seed + i."""
+    if episodes < 1:
+        raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
+    if callable(expert) and not isinstance(expert, Demonstrator):
+        expert = Demonstrator(
+            callable_name(expert),
+            expert,
+            task_spaces(task, env_kwargs).n_actions,
+            _check_epsilon(epsilon),
+            np.random.default_rng(seed),
+        )
+    policy = (
+        expert
+        if isinstance(expert, Demonstrator)
+        else make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
+    )
+    source = policy.name if policy is expert else expert
+    with make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs) as env:
+        return rollout(
+            env,
+            policy,
+            range(seed, seed + episodes),
+            task=task,
+            source=source,
+            epsilon=epsilon,
+            seed=seed,
+            env_kwargs=env_kwargs,
+        )
+
+
+class EpisodeRecorder:
+    """Transitions of complete episodes as they are played, turned into a dataset on demand.
+
+    One recorder serves scripted demonstrations, greedy roll-outs and the agent's own training
+    episodes (dynamic demonstrations), so every D_demo episode has the same layout and meta.
+    """
+
+    def __init__(
+        self,
+        env,
+        *,
+        task: str,
+        source: str,
+        epsilon: float = 0.0,
+        seed: int = 0,
+        env_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        self.task, self.source, self.epsilon, self.seed = task, source, float(epsilon), int(seed)
+        self.env_kwargs = dict(env_kwargs or {})
+        shape = env.observation_space.shape
+        self.frames = len(shape) > 1  # envs.make_task flattens all but frames
+        self.obs_dim, self.n_actions = int(np.prod(shape)), int(env.action_space.n)
+        self.obs_shape = [int(n) for n in shape] if self.frames else None
+        self.timeout = env.get_wrapper_attr("mode")
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget every recorded episode (and the one being played)."""
+        self.columns: dict[str, list] = {name: [] for name in ARRAYS}
+        self.returns: list[float] = []
+        self.plain_returns: list[float] = []
+        self.open = 0
+
+    def reset(self, obs: np.ndarray) -> None:
+        """A new episode starts in `obs`; an unfinished one before it is dropped."""
+        for column in self.columns.values():
+            del column[len(column) - self.open :]
+        self.obs, self.open, self.ret, self.plain = obs, 0, 0.0, 0.0
+
+    def step(
+        self, action: int, next_obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
+    ) -> None:
+        values = (self.obs, action, reward, next_obs, terminated, truncated, len(self.returns))
+        for name, value in zip(ARRAYS, values, strict=True):
+            self.columns[name].append(value)
+        self.obs, self.open = next_obs, self.open + 1
+        self.ret += float(reward)
+        self.plain += info["plain_reward"]
+        if terminated or truncated:
+            self.returns.append(self.ret)
+            self.plain_returns.append(self.plain)
+            self.open = 0
+
+    def dataset(self) -> DemoDataset:
+        """The complete episodes recorded so far (an episode still being played is left out)."""
+        if not self.returns:
+            raise ConfigError("no complete episode has been recorded")
+        end = len(self.columns["actions"]) - self.open
+        meta = DemoMeta(
+            task=self.task,
+            env_id=get_task(self.task).env_id,
+            timeout=self.timeout,
+            obs_dim=self.obs_dim,
+            n_actions=self.n_actions,
+            expert=self.source,
+            epsilon=self.epsilon,
+            seed=self.seed,
+            episode_returns=list(self.returns),
+            plain_returns=list(self.plain_returns),
+            env_kwargs=dict(self.env_kwargs),
+            observation=task_spaces(self.task, self.env_kwargs).layout.text(),
+            obs_shape=self.obs_shape,
+        )
+        dtypes = {name: dtype for name, (dtype, _) in ARRAYS.items()} | {
+            "obs": meta.obs_dtype,
+            "next_obs": meta.obs_dtype,
+        }
+        arrays = {name: np.asarray(self.columns[name][:end], dtype=dtypes[name]) for name in ARRAYS}
+        return DemoDataset(**arrays, meta=meta)
+
+
+def rollout(
+    env,
+    policy: Callable[[np.ndarray], int],
+    seeds: Sequence[int],
+    *,
+    task: str,
+    source: str,
+    epsilon: float = 0.0,
+    seed: int = 0,
+    env_kwargs: dict[str, Any] | None = None,
+) -> DemoDataset:
+    """One complete episode of `policy` on the task env `env` per seed, as a dataset.
+
+    `source` names the demonstrator in the metadata (a scripted expert, or the agent's
+    greedy policy for dynamic demonstrations); `env_kwargs` are those `env` was made with.
+    """
+    recorder = EpisodeRecorder(env, task=task, source=source, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
+    play(env, policy, seeds, recorder)
+    return recorder.dataset()

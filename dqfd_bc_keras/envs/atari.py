@@ -1,0 +1,360 @@
+"""Atari: the standard DQN preprocessing of an `ALE/<Game>-v5` env (`--env ale_py:ALE/Breakout-v5`).
+
+The learner's env (`learning=True`) is, from the emulator out (the wrappers are below):
+
+    AtariFrames    no-op starts (1..noop_max frames of NOOP, drawn from the env's np_random),
+                   each action repeated frame_skip frames with the rewards summed, the last two
+                   frames max-pooled, the grey screen area-averaged to screen_size x screen_size
+    EpisodicLife   losing a life ends the episode (terminated=True); the reset after it goes on
+                   with the same game, a real reset happens only once the game is over
+    ClipReward     the reward becomes sign(r); info["plain_reward"] keeps the raw game reward
+    StackFrames    the last frame_stack frames, uint8 (84, 84, 4), newest last
+
+and the plain env (`learning=False`, what evaluation scores) is AtariFrames and StackFrames
+only: the same observations, the raw game reward, one episode per game. Our `TimeLimitMode`
+goes outside either (`envs/make.py`).
+
+This is CleanRL's `dqn_atari.py` and SB3's `AtariWrapper` (NoopResetEnv(30), MaxAndSkipEnv(4),
+EpisodicLifeEnv, ClipRewardEnv, an 84x84 grey frame, 4 frames stacked) with these differences:
+
+* ALE v5. CleanRL and SB3 use `<Game>NoFrameskip-v4`: no frame skip, no sticky actions. v5 skips
+  4 frames itself (no max-pooling) and repeats the previous action with probability 0.25
+  (Machado et al. 2018). We make the v5 env with `frameskip=1`, so that skipping and pooling
+  happen here once, and keep its sticky actions (0.25) unless the env kwargs say otherwise
+  (`{"repeat_action_probability": 0.0}` is v4's setting). The `max_num_frames_per_episode`
+  of 108 000 frames (27 000 steps) stays: the ALE truncates a game there.
+* No FireResetEnv (pressing FIRE at reset, which CleanRL and SB3 add for Breakout and the like):
+  the agent has to learn to press FIRE, as in gymnasium's `AtariPreprocessing`.
+* The grey frame is the ALE's own (`obs_type="grayscale"`, as `AtariPreprocessing` reads it),
+  not cv2's RGB-to-grey conversion, and the area average is ours (`area_weights`, cv2's
+  INTER_AREA as two matrix products, within one grey level of cv2's rounding) so opencv is
+  not needed.
+* After a lost life SB3's EpisodicLifeEnv takes one NOOP step that nobody sees and starts the
+  next episode from its frame; we start it from the frame the life was lost on, so no step's
+  reward goes missing: over the episodes of one game the plain rewards add up to its score.
+  A seed passed to that reset is ignored (the seed of the reset that started the game fixed
+  its course); the stack restarts with copies of that frame, as at any reset.
+* Frames are stacked on the last axis, (84, 84, 4), the layout the networks take.
+
+The frame stack keeps two invariants the replay relies on to store each frame once: within an
+episode next_obs[..., :-1] == obs[..., 1:], and every reset's stack is frame_stack copies of
+the reset frame (also after a lost life).
+
+The options (`AtariOptions`) come from the run's env kwargs: `split_kwargs` takes the keys
+`noop_max`, `frame_skip`, `screen_size`, `frame_stack`, `clip_rewards`,
+`terminal_on_life_loss` and `obs_type` out; the rest go to `gym.make` (`repeat_action_probability`,
+`full_action_space`, `mode`, `difficulty`, `max_num_frames_per_episode`, ...). With
+`obs_type="ram"` the agent observes the console's 128 bytes of RAM, a vector: no-op starts and
+frame skip (the last frame's RAM, no pooling), lives and clipping as above, no screen or stack.
+
+>>> env = make_atari("ale_py:ALE/Breakout-v5", {"frame_stack": 2})
+>>> obs, info = env.reset(seed=0)
+>>> obs.shape, obs.dtype.name
+((84, 84, 2), 'uint8')
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import importlib
+import inspect
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from dqfd_bc_keras.errors import ConfigError
+
+NOOP = 0
+"""The ALE's action 0 in every game's minimal action set."""
+
+RESERVED_ALE_KWARGS = {
+    "frameskip": "the preprocessing skips frames: use frame_skip",
+    "sound_obs": "the observation is the screen or the RAM only",
+}
+
+OBS_TYPES = ("grayscale", "ram")
+"""What an Atari agent can observe: the grey screen as frames, or the console's 128 bytes of RAM."""
+FRAME_OPTIONS = ("screen_size", "frame_stack")
+"""The options that shape frames, which a RAM observation does not have."""
+
+
+def is_atari(env_id: str) -> bool:
+    """Whether `env_id` (with or without a `module:` prefix) is in the ALE/ namespace."""
+    return env_id.rpartition(":")[2].startswith("ALE/")
+
+
+@dataclass(frozen=True)
+class AtariOptions:
+    """The preprocessing of an Atari env; each field can be set by an env kwarg of that name."""
+
+    noop_max: int = 30
+    """At most this many NOOP frames after a real reset (at least one); 0: none."""
+    frame_skip: int = 4
+    """Each action is repeated this many frames; the last two are max-pooled."""
+    screen_size: int = 84
+    """The grey frame is area-averaged to screen_size x screen_size."""
+    frame_stack: int = 4
+    """The observation is the last frame_stack frames, newest last."""
+    clip_rewards: bool = True
+    """Learning: the reward is sign(r) (info["plain_reward"] keeps r)."""
+    terminal_on_life_loss: bool = True
+    """Learning: a lost life ends the episode, and the next reset continues the game."""
+    obs_type: str = "grayscale"
+    """"grayscale": the screen, shrunk and stacked as above; "ram": the console's 128 bytes as one
+    vector, with no-op starts and frame skip (the last step's RAM: pooling is for flickering
+    sprites) and neither screen_size nor frame_stack."""
+
+
+ATARI_OPTIONS = AtariOptions()
+"""The defaults: CleanRL's and SB3's."""
+
+ATARI_STEP_LIMIT = 27_000
+"""An Atari task's step limit: the ALE's 108,000 frames at 4 frames a step."""
+ATARI_DEFAULTS: Mapping[str, object] = {
+    "hidden": (512,),
+    "bc_hidden": (512,),
+    "learning_rate": 1e-4,
+    "batch_size": 32,
+    "target_update_period": 1000,
+    "train_freq": 4,
+    "replay_capacity": 100_000,
+    "demo_capacity": 50_000,
+    "total_steps": 1_000_000,
+    "eval_every": 50_000,
+    "eval_episodes": 5,
+    "final_eval_episodes": 10,
+    "demo_episodes": 5,
+    "early_stop_window": 0,
+    "checkpoint_every": 100_000,
+}
+"""The Config defaults of an Atari env: the Nature network's 512 dense units, CleanRL dqn_atari.py's
+learning rate, batch, target period and training frequency; D_replay 100k (not 1M: a frame
+costs two pool slots, 1.4 GB per 100k transitions here) and a 1M-step budget, ours."""
+
+_MINIMUM = {"noop_max": 0, "frame_skip": 1, "screen_size": 1, "frame_stack": 1}
+
+
+def split_kwargs(env_kwargs: Mapping[str, Any] | None) -> tuple[AtariOptions, dict[str, Any]]:
+    """The preprocessing options in `env_kwargs` and the kwargs for `gym.make` (the rest, with
+    the ALE's own frame skip off and the observation `obs_type`). A one-line `ConfigError` for a bad
+    option value, for an ALE kwarg the preprocessing sets, for a frame option with the RAM, and
+    for a key that is neither."""
+    fields = {field.name: field for field in dataclasses.fields(AtariOptions)}
+    ale_keywords = [
+        name
+        for name in inspect.signature(_ale_env().__init__).parameters
+        if name not in ("self", *RESERVED_ALE_KWARGS, *fields)
+    ]
+    options, make_kwargs = {}, {}
+    for key, value in (env_kwargs or {}).items():
+        if key in fields:
+            options[key] = _checked(key, value, fields[key].type)
+        elif key in RESERVED_ALE_KWARGS:
+            raise ConfigError(f"--env-kwargs {key}: not for an Atari env here; {RESERVED_ALE_KWARGS[key]}")
+        elif key in ale_keywords:
+            make_kwargs[key] = value
+        else:
+            near = difflib.get_close_matches(key, [*fields, *ale_keywords], n=1)
+            hint = f"did you mean {near[0]!r}? " if near else ""
+            raise ConfigError(
+                f"--env-kwargs {key}: neither an Atari option nor an ALE keyword ({hint}options: "
+                f"{', '.join(fields)}; ALE: {', '.join(ale_keywords)})"
+            )
+    atari = AtariOptions(**options)
+    if atari.obs_type == "ram":
+        for key in FRAME_OPTIONS:
+            if key in options:
+                raise ConfigError(
+                    f"--env-kwargs {key}: not with obs_type='ram', which observes the console's 128 bytes, not frames"
+                )
+    return atari, {**make_kwargs, "frameskip": 1, "obs_type": atari.obs_type}
+
+
+def _checked(key: str, value: Any, kind: str) -> int | bool | str:
+    """`value` of option `key` if it has the option's type (`kind`, the annotation) and range."""
+    if kind == "str":
+        if value not in OBS_TYPES:
+            raise ConfigError(
+                f"--env-kwargs {key}: expected 'grayscale' (the screen as frames) or 'ram' (the "
+                f"console's 128 bytes), got {value!r}"
+            )
+        return value
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise ConfigError(f"--env-kwargs {key}: expected true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, int) or value < _MINIMUM[key]:
+        raise ConfigError(f"--env-kwargs {key}: expected an integer >= {_MINIMUM[key]}, got {value!r}")
+    return value
+
+
+def _ale_env() -> type:
+    """The ALE's Gymnasium env class (importing ale_py registers the ALE/ ids)."""
+    return importlib.import_module("ale_py.env").AtariEnv
+
+
+def wrap_atari(env: gym.Env, options: AtariOptions = ATARI_OPTIONS, learning: bool = True) -> gym.Env:
+    """`env` (an ALE env made with `split_kwargs`'s kwargs) preprocessed: the learner's env when
+    `learning`, else the plain env (raw rewards, one episode per game); RAM is not stacked."""
+    env = AtariFrames(env, options.noop_max, options.frame_skip, options.screen_size)
+    if learning and options.terminal_on_life_loss:
+        env = EpisodicLife(env)
+    if learning and options.clip_rewards:
+        env = ClipReward(env)
+    return env if options.obs_type == "ram" else StackFrames(env, options.frame_stack)
+
+
+def make_atari(
+    env_id: str,
+    env_kwargs: Mapping[str, Any] | None = None,
+    learning: bool = True,
+    render_mode: str | None = None,
+    **make_options: Any,
+) -> gym.Env:
+    """`gym.make` of ALE env `env_id` (`ale_py:ALE/<Game>-v5`) with the ALE kwargs of `env_kwargs`,
+    then `wrap_atari` with its options; `make_options` (e.g. `max_episode_steps`) go to `gym.make`."""
+    module, _, bare = env_id.rpartition(":")
+    importlib.import_module(module or "ale_py")
+    options, make_kwargs = split_kwargs(env_kwargs)
+    rendering = {} if render_mode is None else {"render_mode": render_mode}
+    return wrap_atari(gym.make(bare, **make_options, **make_kwargs, **rendering), options, learning)
+
+
+def area_weights(n_in: int, n_out: int) -> np.ndarray:
+    """The (n_out, n_in) matrix that area-averages a length-n_in line to n_out cells (cv2's
+    INTER_AREA): cell i covers [i, i + 1) * n_in / n_out, each pixel counts by its overlap."""
+    edges = np.arange(n_out + 1) * (n_in / n_out)
+    pixels = np.arange(n_in + 1)
+    overlap = np.minimum(edges[1:, None], pixels[None, 1:]) - np.maximum(edges[:-1, None], pixels[None, :-1])
+    return np.clip(overlap, 0.0, None) * (n_out / n_in)
+
+
+class AtariFrames(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """No-op starts, frame skipping with max-pooling, and the frame shrunk to `screen_size`².
+
+    A reset takes 1..`noop_max` NOOP frames (the count drawn from the env's `np_random`, so
+    `reset(seed=s)` fixes it); a step repeats the action `frame_skip` frames (fewer if the
+    game ends), sums their rewards and max-pools the last two frames (Atari sprites flicker
+    between frames), then area-averages the (210, 160) grey screen to `screen_size`².
+    `info["noops"]` at a reset is the count taken. An env observing the RAM (a 1-D uint8 Box)
+    gets the no-op starts and the skip, and each step observes its last frame's RAM as it is.
+    """
+
+    def __init__(self, env: gym.Env, noop_max: int = 30, frame_skip: int = 4, screen_size: int = 84) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, noop_max=noop_max, frame_skip=frame_skip, screen_size=screen_size
+        )
+        gym.Wrapper.__init__(self, env)
+        space = env.observation_space
+        if not (isinstance(space, gym.spaces.Box) and len(space.shape) in (1, 2) and space.dtype == np.uint8):
+            raise ConfigError(
+                f"Atari preprocessing needs a grey uint8 screen (obs_type='grayscale') or the RAM "
+                f"(obs_type='ram'), got {space}"
+            )
+        if getattr(env.unwrapped, "_frameskip", 1) != 1:
+            raise ConfigError("Atari preprocessing needs the ALE env made with frameskip=1: it skips frames itself")
+        meanings = getattr(env.unwrapped, "get_action_meanings", None)
+        if noop_max and meanings is not None and meanings()[NOOP] != "NOOP":
+            raise ConfigError(f"no-op starts need action {NOOP} to be NOOP, it is {meanings()[NOOP]}")
+        self.noop_max, self.frame_skip = int(noop_max), int(frame_skip)
+        self.ram = len(space.shape) == 1
+        if not self.ram:
+            self._rows = area_weights(space.shape[0], screen_size).astype(np.float32)
+            self._cols = area_weights(space.shape[1], screen_size).T.astype(np.float32)
+            self.observation_space = gym.spaces.Box(0, 255, (screen_size, screen_size), np.uint8)
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        frame, info = self.env.reset(**kwargs)
+        noops = int(self.env.unwrapped.np_random.integers(1, self.noop_max + 1)) if self.noop_max else 0
+        for _ in range(noops):
+            frame, _, terminated, truncated, info = self.env.step(NOOP)
+            if terminated or truncated:
+                frame, info = self.env.reset(**kwargs)
+        info["noops"] = noops
+        return self._shrink(frame), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        total, last_two = 0.0, []
+        for _ in range(self.frame_skip):
+            frame, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            last_two = [*last_two[-1:], frame]
+            if terminated or truncated:
+                break
+        frame = last_two[-1] if self.ram else np.max(last_two, axis=0)
+        return self._shrink(frame), total, terminated, truncated, info
+
+    def _shrink(self, frame: np.ndarray) -> np.ndarray:
+        """The area average in float32 (as cv2 computes it; the two differ by at most one grey level);
+        the RAM as it is."""
+        if self.ram:
+            return frame
+        return np.clip(np.rint(self._rows @ frame.astype(np.float32) @ self._cols), 0, 255).astype(np.uint8)
+
+
+class EpisodicLife(gym.Wrapper):
+    """A lost life ends the episode (terminated=True); the next reset continues the game.
+
+    DeepMind's DQN trick (SB3's EpisodicLifeEnv): the learner sees the end of a life as the
+    end of its return, while all of the game stays reachable. `info["lives"]` counts them;
+    a drop to 0 is left to the game's own end (some games sit at 0 lives for a few frames).
+    A reset right after a lost life returns that step's observation and `info` with
+    `new_game=False` and ignores its arguments; any other reset is a real one (`new_game=True`).
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.lives = 0
+        self._continues: tuple[Any, dict[str, Any]] | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        if self._continues is not None:
+            (obs, info), self._continues = self._continues, None
+            return obs, {**info, "new_game": False}
+        obs, info = self.env.reset(**kwargs)
+        self.lives = int(info["lives"])
+        return obs, {**info, "new_game": True}
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        lives = int(info["lives"])
+        life_lost = 0 < lives < self.lives
+        self.lives = lives
+        self._continues = (obs, dict(info)) if life_lost and not (terminated or truncated) else None
+        return obs, reward, terminated or life_lost, truncated, info
+
+
+class ClipReward(gym.Wrapper):
+    """The reward becomes sign(r) in {-1, 0, 1} (DQN's clipping); `info["plain_reward"]` is r."""
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info.setdefault("plain_reward", float(reward))
+        return obs, float(np.sign(float(reward))), terminated, truncated, info
+
+
+class StackFrames(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """The last `frame_stack` frames on the last axis, newest last; a reset fills the stack
+    with copies of its frame, so next_obs[..., :-1] == obs[..., 1:] and a reset stack is one
+    frame repeated (what lets the replay store each frame once)."""
+
+    def __init__(self, env: gym.Env, frame_stack: int = 4) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, frame_stack=frame_stack)
+        gym.Wrapper.__init__(self, env)
+        self.frame_stack = int(frame_stack)
+        self.observation_space = gym.spaces.Box(0, 255, (*env.observation_space.shape, self.frame_stack), np.uint8)
+        self._stack = np.zeros(self.observation_space.shape, np.uint8)
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        frame, info = self.env.reset(**kwargs)
+        self._stack = np.repeat(frame[..., None], self.frame_stack, axis=-1)
+        return self._stack, info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        frame, reward, terminated, truncated, info = self.env.step(action)
+        self._stack = np.concatenate([self._stack[..., 1:], frame[..., None]], axis=-1)  # a new array each step
+        return self._stack, reward, terminated, truncated, info

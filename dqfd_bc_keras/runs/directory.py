@@ -1,0 +1,416 @@
+"""A training run on disk: what `train.py` writes, checkpoints, and resuming.
+
+    RUN_DIR/config.json        every hyperparameter (written once, at the start), and under
+                               "observation" the env's observation space and how it was flattened
+            metrics.csv        one row per episode (records.EpisodeRow)
+            evals.csv          greedy evaluations on the plain env at exactly every eval_every interactions
+                               (records.EvalRow)
+            demonstrations.json  the initial D_demo: size, returns and source (records.DemoSummary;
+                               runs with demonstrations)
+            dynamic_demos.json every dynamic-demonstration update (records.DemoUpdate)
+            tb/                TensorBoard events: returns, evaluations, each loss term
+            checkpoints/       latest checkpoint (models, Adam, replay, RNGs, counters, Python state), and
+                               demos_given.npz, D_demo as given before any interaction
+            q_network.keras  bc_model.keras  demos.npz  eval.json  learning_curve.png   (at the end)
+            provenance.json    the code, libraries and machine the run ran on (at the end)
+            complete.json      written last: the run is complete only when it exists
+
+Every file is written atomically; a checkpoint is a new directory, fsynced, then made current
+by rewriting `checkpoints/latest.json`, then the old one is deleted, so a run killed at any
+moment resumes from a complete one. One process writes a run directory (`.lock` holds its PID).
+The files of records are written by `runs/writers.py`.
+
+A directory is a run directory when it holds `checkpoints/latest.json` or `complete.json`, or a
+`config.json` that train.py wrote (a JSON object with a `task` and an `expert_loss`: a run's first
+file). Only such a directory is replaced (`--force`), and replacing it deletes only the names above
+(and the temporaries of their writes): a file a user put beside them is kept. Any other directory
+that is not empty (its lock aside) is refused. A run killed before its first checkpoint holds its
+config.json but no checkpoint: a rerun, or `--resume`, starts it over, with a warning.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import shutil
+import sys
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import tensorflow as tf
+
+from dqfd_bc_keras import demos as demo_io
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.make import checked_spaces, task_spaces
+from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
+from dqfd_bc_keras.evaluation import EvalResult
+from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
+from dqfd_bc_keras.runs.provenance import provenance
+from dqfd_bc_keras.training.records import DemoSummary, EpisodeRow, EvalRow
+from dqfd_bc_keras.runs.writers import COMPLETE, METRICS, RESTART, RESUME, append_row, check_dir, clear, plot_learning_curve, write_demonstrations, write_dynamic_demos, write_evals, write_metrics
+from dqfd_bc_keras.training.state import TrainingState
+from dqfd_bc_keras.seeds import final_eval_seed
+from dqfd_bc_keras.training.loop import Callback, Learner, build, evaluate_at, run_evaluation, train_with_callback
+
+GIVEN_DEMOS = "demos_given.npz"
+"""D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
+demonstrations whatever their source (a file, a Minari dataset, a recording)."""
+EVAL_FIELDS = EvalRow.columns()
+"""evals.csv's columns, as the record spells them."""
+
+
+@dataclass
+class RunResult:
+    """What a finished run reports: where, how long, its counts and the final evaluation."""
+
+    out: Path
+    episodes: int
+    env_steps: int
+    interactions: int
+    stopped_early: bool
+    wall_time: float
+    evaluation: EvalResult
+    run: RunDirectory | None = field(default=None, repr=False)
+    """The run directory's learner and state, to go on training (`continue_run`)."""
+
+
+TB_SKIPS = ("episode", "interactions", "wall_time")
+"""Columns of an episode row that are not TensorBoard scalars (interactions is its x axis)."""
+
+
+class RunDirectory:
+    """One run directory and the learner training into it."""
+
+    def __init__(self, config: Config, out: Path, learner: Learner, state: TrainingState, quiet: bool) -> None:
+        self.config, self.out, self.learner, self.state = config, out, learner, state
+        self.metrics_rows = -1
+        """Rows metrics.csv holds as this process wrote it (−1: not written yet by this process)."""
+        self.progress = None
+        if not quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.progress = tqdm(total=config.total_steps, unit="step", dynamic_ncols=True,
+                                 initial=int(learner.interaction.env_steps.numpy()))
+
+    @functools.cached_property
+    def tb(self) -> tf.summary.SummaryWriter:
+        """Opened at the first summary: a resume that fails to restore leaves no event file."""
+        return tf.summary.create_file_writer(str(self.out / "tb"))
+
+    @contextlib.contextmanager
+    def tb_errors(self) -> Iterator[None]:
+        """TensorFlow's error writing the event files (a full disk) as one line naming tb/: the run
+        stops there, resumable from its last checkpoint."""
+        try:
+            yield
+        except tf.errors.OpError as error:
+            raise RunDirectoryError(f"{self.out / 'tb'}: cannot write the TensorBoard events "
+                                    f"({one_line(error)})") from None
+
+    def write_demonstrations(self, source: str | None) -> None:
+        """What the run started from before any interaction (not interactions themselves), as it
+        was given (checkpoints/demos_given.npz) and its summary: a dataset from `source` (a file, a
+        Minari dataset, a Python object: DEMO_SOURCES), or one it recorded from its expert (None)."""
+        data = self.learner.demos
+        if data is None:
+            return
+        demo_io.save(data, self.out / "checkpoints" / GIVEN_DEMOS, force=True)
+        meta = data.meta
+        source = source or "recorded"
+        write_demonstrations(self.out, DemoSummary(
+            transitions=len(data), episodes=data.n_episodes, expert=meta.expert,
+            episode_returns=meta.episode_returns, plain_returns=meta.plain_returns,
+            pretrain_steps=self.config.pretrain_steps, source=source))
+
+    # --- called after every episode -------------------------------------------------------
+    def on_episode(self, learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
+        step = row.env_step
+        with self.tb_errors(), self.tb.as_default(step=row.interactions):  # TensorBoard's x axis: interactions
+            for key, value in row.to_row().items():
+                if key not in TB_SKIPS and value is not None:
+                    tf.summary.scalar(f"train/{key}", value)
+        if self.progress is not None:
+            self.progress.update(step - self.progress.n)
+            self.progress.set_postfix(episode=row.episode, ret=f"{row.return_:.0f}")
+        self.write_metrics()
+        if state.demo_updates:
+            write_dynamic_demos(self.out, state.demo_updates)
+        if step >= state.next_checkpoint:
+            state.next_checkpoint = step + self.config.checkpoint_every
+            self.save_checkpoint()
+
+    def write_metrics(self) -> None:
+        """metrics.csv: the new episode's row appended, so a long run writes each row once (a
+        rewrite per episode cost O(episodes²)); written whole, atomically, when the file is not one
+        row behind (this process's first episode, a resume). A crash in an append leaves at worst a
+        partial last line, which the resume's rewrite replaces."""
+        rows = self.state.metrics
+        if self.metrics_rows == len(rows) - 1 and (self.out / METRICS).is_file():
+            append_row(self.out / METRICS, rows[-1])
+        else:
+            write_metrics(self.out, rows)
+        self.metrics_rows = len(rows)
+
+    def evaluate(self, points: list[int]) -> list[EvalRow]:
+        """One greedy evaluation of the current network, logged at each grid point in `points`."""
+        rows = evaluate_at(self.learner, self.state, points)
+        for row in rows:
+            with self.tb_errors(), self.tb.as_default(step=row.interactions):
+                tf.summary.scalar("eval/plain_return", row.mean_return)
+                tf.summary.scalar("eval/env_step", row.env_step)
+                if row.mean_goals is not None:
+                    tf.summary.scalar("eval/goals", row.mean_goals)
+        write_evals(self.out, self.state.evals)
+        with self.tb_errors():
+            self.tb.flush()
+        return rows
+
+    # --- checkpoints ------------------------------------------------------------------------
+    def save_checkpoint(self) -> None:
+        """Write a complete new checkpoint, fsync it, switch `latest.json` to it, then delete
+        the old one: at every moment `latest.json` names a complete checkpoint, whether the
+        save is killed or interrupted (Ctrl-C, SIGTERM) at any point of it."""
+        root = self.out / "checkpoints"
+        target = free_name(root / f"ckpt-{int(self.learner.interaction.env_steps.numpy())}")
+        try:
+            self.learner.checkpoint().write(str(target / "tf"))
+            dynamic = self.learner.dynamic
+            if dynamic is not None:
+                demo_io.save(dynamic.dataset, target / "demos.npz", force=True)
+                if dynamic.recent:
+                    demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
+            self.state.interactions = self.learner.interactions
+            write_text(target / "state.json", json.dumps(self.state.to_dict()))
+            write_text(target / "config.json", json.dumps(self.config.to_dict(), indent=1))  # the run's own
+            sync_tree(target)
+        except BaseException as error:
+            shutil.rmtree(target, ignore_errors=True)  # the debris of a save that did not finish
+            if isinstance(error, tf.errors.OpError):  # e.g. the disk is full
+                raise RunDirectoryError(f"{target}: cannot write the checkpoint ({one_line(error)})") from None
+            raise
+        # The switch, outside the clean-up above: once `latest.json` may name `target`, nothing
+        # deletes it (an interrupt here leaves one complete checkpoint or the other, and the
+        # next save deletes whichever is not current).
+        write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
+        for old in root.iterdir():
+            if old.is_dir() and old != target:
+                shutil.rmtree(old, ignore_errors=True)
+
+    def restore_checkpoint(self) -> None:
+        root = self.out / "checkpoints"
+        source = root / "latest.json"
+        try:
+            source = root / json.loads(source.read_text())["dir"]
+            self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
+            dynamic = self.learner.dynamic
+            if dynamic is not None:
+                dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
+                recent = source / "recent.npz"
+                dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
+            self.state = TrainingState.from_dict(json.loads((source / "state.json").read_text()))
+        except (OSError, ValueError, LookupError, TypeError, tf.errors.OpError) as error:
+            raise BrokenRunError(f"{source}: the checkpoint cannot be resumed ({one_line(error)}); "
+                                 "start the run over with --force") from None
+        self.learner.tally.count = self.state.interactions
+
+    # --- the end ----------------------------------------------------------------------------
+    def finish(self) -> RunResult:
+        if self.progress is not None:
+            self.progress.close()
+        learner, out = self.learner, self.out
+        with atomic_path(out / "q_network.keras") as tmp:
+            learner.agent.q_network.save(tmp)
+        if learner.bc is not None:
+            with atomic_path(out / "bc_model.keras") as tmp:
+                learner.bc.save(tmp)
+        if learner.dynamic is not None:
+            demo_io.save(learner.dynamic.dataset, out / "demos.npz", force=True)
+        evaluation = run_evaluation(self.config, learner.agent, self.config.final_eval_episodes,
+                                    final_eval_seed(self.config.seed))
+        write_text(out / "eval.json", json.dumps(evaluation.to_dict(), indent=1))
+        plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
+        self.save_checkpoint()
+        with self.tb_errors():
+            self.tb.close()
+        write_text(out / "provenance.json", json.dumps(provenance(), indent=1))
+        write_text(out / COMPLETE, json.dumps({"episodes": self.state.episode, "env_steps": int(
+            learner.interaction.env_steps.numpy()), "interactions": learner.interactions}) + "\n", durable=True)
+        return RunResult(out, self.state.episode, int(learner.interaction.env_steps.numpy()), learner.interactions,
+                         self.state.stopped_early, self.state.wall_time, evaluation)
+
+
+def train(
+    config: Config,
+    out: str | Path,
+    dataset: demo_io.DemoDataset | None = None,
+    resume: bool = False,
+    force: bool = False,
+    quiet: bool = False,
+    source: str | None = None,
+    callback: Callback | None = None,
+) -> RunResult:
+    """Train `config` into run directory `out` (or continue the run there with `resume`), as
+    its only writer. A new run that fails before its first checkpoint leaves nothing behind.
+    `source` says where a given `dataset` came from (DEMO_SOURCES; None: a file or a Minari
+    dataset, as its metadata says); `callback` is given each episode's and evaluation's row."""
+    out = Path(out)
+    if not resume:
+        # before anything is written: a run that cannot fit (or whose env cannot) is refused, not killed halfway
+        config.check_memory(checked_spaces(config))
+    created = not out.exists()
+    if not (out / DirectoryLock.NAME).exists():  # else a live writer is named first, holding the lock
+        check_dir(out, resume, force)
+    with DirectoryLock(out):
+        mode = check_dir(out, resume, force)
+        if mode == RESTART:
+            warnings.warn(f"{out}: no checkpoint yet (the run was stopped before its first); starting it over",
+                          DqfdWarning, stacklevel=2)
+            if resume and (out / "checkpoints" / GIVEN_DEMOS).is_file():  # the run's own D_demo, as a resume would
+                dataset = _given_demos(out / "checkpoints" / GIVEN_DEMOS, config)
+        resume = mode == RESUME
+        if not resume:
+            clear(out)
+        try:
+            run = _start(config, out, dataset, resume, quiet, source)
+        except BaseException as error:
+            if not resume:
+                shutil.rmtree(out) if created else clear(out)
+            if isinstance(error, DivergedError):
+                raise DivergedError(f"{out}: {error}; nothing was kept") from None
+            if isinstance(error, KeyboardInterrupt):  # what the command line says the interrupt left
+                error.args = (f"{out}: nothing was kept (the run had not reached its first checkpoint)",)
+            raise
+        if resume:  # restored: what a kill cut short goes
+            remove_temporaries(out)
+            (out / COMPLETE).unlink(missing_ok=True)  # written again when it finishes again
+        return _train_into(run, callback)
+
+
+def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None = None) -> RunResult:
+    """Go on training the learner of `run`, finished or stopped in this process, to a budget of
+    `total_steps`: its config.json says the new budget once a checkpoint has it."""
+    with DirectoryLock(run.out):
+        run.learner.extend(total_steps)
+        run.config = run.learner.config
+        run.progress = None
+        run.__dict__.pop("tb", None)  # closed by `finish`: opened again at the next summary
+        (run.out / COMPLETE).unlink(missing_ok=True)
+        run.save_checkpoint()
+        write_config(run.config, run.out)
+        return _train_into(run, callback)
+
+
+def _train_into(run: RunDirectory, callback: Callback | None) -> RunResult:
+    """Steps 3–5 into the run's directory (until a False of `callback`), then its end."""
+    try:
+        train_with_callback(run.learner, run.state, run.on_episode, run.evaluate, callback)
+    except DivergedError as error:
+        kept = json.loads((run.out / "checkpoints" / "latest.json").read_text())["dir"]
+        raise DivergedError(f"{run.out}: {error}; the last good checkpoint, {kept}, is kept") from None
+    result = run.finish()
+    result.run = run
+    return result
+
+
+def save_run(out: str | Path, learner: Learner, state: TrainingState, source: str | None) -> None:
+    """Write `learner` and its `state`, trained in this process, as a complete run directory `out`
+    (replacing a run there): what `evaluate.py`, `train.py --resume` and `DQfD.load` read."""
+    out = Path(out)
+    check_dir(out, resume=False, force=True)
+    with DirectoryLock(out):
+        check_dir(out, resume=False, force=True)
+        clear(out)
+        write_config(learner.config, out)
+        run = RunDirectory(learner.config, out, learner, state, quiet=True)
+        run.write_demonstrations(source)
+        write_metrics(out, state.metrics)
+        write_evals(out, state.evals)
+        if state.demo_updates:
+            write_dynamic_demos(out, state.demo_updates)
+        run.finish()
+
+
+def write_config(config: Config, out: Path) -> None:
+    """config.json: every field, and under "observation" the env's observation space and its flattening."""
+    observation = task_spaces(config.task, config.env_kwargs).layout.to_dict()
+    write_text(out / "config.json", json.dumps({**config.to_dict(), "observation": observation}, indent=1))
+
+
+def saved_config(out: str | Path) -> Config:
+    """The config of the run in `out`, to resume it: its task, env kwargs and step limit come from
+    there, not from the command line. A one-line error if there is no run to resume, and if its
+    `config.json` is not the one its latest checkpoint was trained with (a copy is in each)."""
+    out = Path(out)
+    check_dir(out, resume=True, force=False)
+    config = _read_config(out / "config.json")
+    try:
+        own = out / "checkpoints" / json.loads((out / "checkpoints" / "latest.json").read_text())["dir"] / "config.json"
+    except (OSError, ValueError, KeyError, TypeError):
+        return config  # an unreadable latest.json is the restore's to report
+    if own.is_file():  # checkpoints written before the copy existed have none
+        trained = _read_config(own)
+        changed = differences(trained.to_dict(), config.to_dict())
+        if changed == differences({"total_steps": trained.total_steps}, {"total_steps": config.total_steps}) and (
+                trained.total_steps > config.total_steps):
+            return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
+        if changed:
+            raise BrokenRunError(f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
+                                 f"{'; '.join(changed)}; put it back, or start the run over with --force")
+    return config
+
+
+def differences(was: dict, now: dict) -> list[str]:
+    """The fields whose values differ between two configs' dicts, as `key: now (was before)`."""
+    return [f"{key}: {now.get(key)!r} (was {was.get(key)!r})" for key in sorted({*was, *now})
+            if was.get(key) != now.get(key)]
+
+
+def _read_config(path: Path) -> Config:
+    try:
+        return Config.from_dict(json.loads(path.read_text()))
+    except (OSError, ValueError) as error:
+        raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
+
+
+def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool,
+           source: str | None = None) -> RunDirectory:
+    """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
+    if resume:
+        config = saved_config(out)
+        if _read_config(out / "config.json") != config:  # the budget a checkpoint has and config.json lacked
+            write_config(config, out)
+    else:
+        write_config(config, out)
+    given = out / "checkpoints" / GIVEN_DEMOS
+    if resume and given.is_file():  # the run's own D_demo, not a new recording (nor the --demos of this call)
+        dataset = _given_demos(given, config)
+    learner, _ = build(config, dataset, fresh=not resume)
+    run = RunDirectory(config, out, learner, TrainingState(), quiet)
+    if resume:
+        run.restore_checkpoint()
+    else:
+        run.write_demonstrations(source or (demo_io.given_source(dataset) if dataset is not None else None))
+        run.state.next_checkpoint = config.checkpoint_every
+        run.save_checkpoint()
+    return run
+
+
+def _given_demos(given: Path, config: Config) -> demo_io.DemoDataset:
+    """The D_demo a run was given (checkpoints/demos_given.npz), checked against its config."""
+    try:
+        return demo_io.load(given, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
+    except DemoFileError as error:
+        raise BrokenRunError(f"{error}; the run cannot be resumed: start the run over with --force") from None
+
+
+def free_name(path: Path) -> Path:
+    """`path`, or `path.1`, `path.2`, … if taken: a checkpoint never overwrites the current one."""
+    candidate, k = path, 0
+    while candidate.exists():
+        k += 1
+        candidate = path.with_name(f"{path.name}.{k}")
+    return candidate
+

@@ -1,0 +1,413 @@
+"""Algorithm 1 of the paper end to end (ALGORITHM.md §4–§5), one function per phase:
+
+    demonstrations → fit π_bc → pre-train k steps on D_demo (θ_prior ← θ) →
+    episodes of ε-greedy interaction, one prioritized update per `train_freq` env steps,
+    θ' ← θ every τ updates → dynamic demonstrations after each episode →
+    stop at the step budget or the task's early-stopping rule.
+
+Every env step whose transition the learner may train on is an interaction, counted in one
+place (`wrappers.CountInteractions` on every env of the learner); greedy evaluations happen at
+exactly every `eval_every` interactions, pausing an episode at the grid point if need be.
+
+An episode is one TensorFlow graph call (`interaction.Interaction.play`: act, step the env,
+store, learn, all in the graph). Per-episode work (logging, evaluation, dynamic
+demonstrations, checkpoints) stays in Python: `training/state.py` keeps its bookkeeping, each
+episode ends in a `records.EpisodeRow`, and `runs/directory.py` writes the files of a run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import gymnasium as gym
+import keras
+import numpy as np
+import tensorflow as tf
+
+from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
+from dqfd_bc_keras.core.bc import BCModel, build_bc_model
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.demos.dataset import DemoDataset, concatenate
+from dqfd_bc_keras.demos.recording import Demonstrator, record, rollout
+from dqfd_bc_keras.envs.make import make_task
+from dqfd_bc_keras.envs.wrappers import CountInteractions, Tally
+from dqfd_bc_keras.errors import DivergedError
+from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy, evaluate
+from dqfd_bc_keras.seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed, eval_seed
+from dqfd_bc_keras.tasks import Rule
+from dqfd_bc_keras.training.interaction import Interaction
+from dqfd_bc_keras.training.records import DemoUpdate, EpisodeRow, EvalRow, Losses
+from dqfd_bc_keras.training.state import TrainingState, early_stop
+
+METRIC_FIELDS = EpisodeRow.columns()
+"""metrics.csv's columns, as the record spells them."""
+
+
+def demonstrations(config: Config, dataset: DemoDataset | None) -> DemoDataset | None:
+    """Step 1: the given dataset, or `demo_episodes` recorded from the scripted `expert`."""
+    if not config.uses_demos:
+        return None
+    return dataset if dataset is not None else record_demos(config, config.expert)
+
+
+def record_demos(config: Config, expert: str | Demonstrator | Rule) -> DemoDataset:
+    """`demo_episodes` episodes of `expert` (a name `make_demonstrator` takes, a callable, or one made) on the task."""
+    return record(
+        config.task,
+        expert,
+        config.demo_episodes,
+        seed=demo_seed(config.seed),
+        epsilon=config.expert_epsilon,
+        timeout=config.timeout,
+        max_steps=config.max_steps,
+        env_kwargs=config.env_kwargs,
+    )
+
+
+def fit_bc(config: Config, bc: BCModel, data: DemoDataset, epochs: int, fit_index: int) -> float:
+    """Fit (or refit, warm-started) π_bc on D_demo; returns its training accuracy.
+
+    The global seed is set from (run seed, fit index), so a resumed run refits identically.
+    """
+    seed = episode_seed(config.seed, fit_index, BC_FIT) % 2**31
+    keras.utils.set_random_seed(seed)
+    metrics = bc.fit_demos(data.obs, data.actions, epochs=epochs, batch_size=config.batch_size, seed=seed)
+    return metrics["accuracy"] if epochs else float("nan")
+
+
+def random_obs_scale(env: gym.Env, seed: int, steps: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """Input scaling for plain DQN, which has no demonstrations: states of a random policy."""
+    rng = np.random.default_rng(seed)
+    states, (obs, _) = [], env.reset(seed=seed)
+    for _ in range(steps):
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(env.action_space.n)))
+        states.append(obs)
+        if terminated or truncated:
+            obs, _ = env.reset(seed=int(rng.integers(2**31)))
+    return np.mean(states, axis=0), np.std(states, axis=0)
+
+
+def build_learner(
+    config: Config, data: DemoDataset | None, env: gym.Env, fit: bool
+) -> tuple[DQfDAgent, BCModel | None]:
+    """π_bc fitted on D_demo (BC-based losses; only built when `fit` is False, for a resume that
+    restores its weights), and the agent with D_demo loaded."""
+    keras.utils.set_random_seed(config.seed)
+    spec, n_actions = config.network_input, int(env.action_space.n)
+    bc = None
+    if config.uses_bc:
+        bc = build_bc_model(config, spec, n_actions, None if spec.image else data.obs_scale())
+        if fit:
+            fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
+        else:
+            bc.optimizer.build(bc.trainable_variables)
+    scale = None if data is not None or spec.image else random_obs_scale(env, config.seed)
+    return make_agent(config, data, bc, obs_scale=scale, spaces=(spec, n_actions)), bc
+
+
+class DynamicDemos:
+    """DQfD-BC's dynamic demonstrations (§5): D_demo grows with the agent's best episodes.
+
+    The paper: "when the final cumulative reward for each episode reaches a new high score,
+    transition samples are … inserted into the demonstration dataset". Two readings
+    (`Config.dynamic_demos`): `episodes` inserts the agent's own training episodes since the
+    last update whose return reaches the new best moving average (no extra interaction);
+    `rollouts` plays M fresh greedy episodes on a separate env (ALGORITHM.md §5; each of their
+    steps is an interaction and is counted).
+    """
+
+    def __init__(self, config: Config, data: DemoDataset, env: gym.Env) -> None:
+        self.config, self.env = config, env
+        self.episodes = data.episodes()
+        self.demo_average = float(np.mean(data.meta.episode_returns))
+        self.recent: list[DemoDataset] = []
+        """`episodes` mode: the agent's training episodes since the last update (at most W)."""
+
+    def observe(self, episode: DemoDataset) -> None:
+        """A training episode just ended (`episodes` mode)."""
+        self.recent = (self.recent + [episode])[-self.config.dynamic_window :]
+
+    @property
+    def dataset(self) -> DemoDataset:
+        return concatenate(self.episodes, source=self.episodes[0].meta.expert)
+
+    def due(self, state: TrainingState) -> bool:
+        """The moving average of the last W returns reaches a new best, at least the demos' average."""
+        W = self.config.dynamic_window
+        if len(state.returns) < W:
+            return False
+        average = float(np.mean(state.returns[-W:]))
+        if average > state.best_average and average >= self.demo_average:
+            state.best_average = average
+            return True
+        return False
+
+    def new_episodes(self, agent: DQfDAgent, state: TrainingState) -> list[DemoDataset]:
+        """The episodes this update inserts: M greedy roll-outs, or the recent training episodes
+        whose return reaches the new best average."""
+        c = self.config
+        if c.dynamic_demos == "rollouts":
+            seeds = [episode_seed(c.seed, state.episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
+            return rollout(
+                self.env,
+                GreedyPolicy.from_model(agent.q_network),
+                seeds,
+                task=c.task,
+                source="agent",
+                seed=c.seed,
+                env_kwargs=c.env_kwargs,
+            ).episodes()
+        chosen = [e for e in self.recent if e.meta.episode_returns[0] >= state.best_average]
+        self.recent = []
+        return chosen
+
+    def update(
+        self, agent: DQfDAgent, bc: BCModel, state: TrainingState, env_step: int, interactions: int
+    ) -> DemoUpdate | None:
+        """Insert the new episodes into D_demo (lowest returns dropped past capacity) and refit
+        π_bc, at `env_step` and `interactions` (the episode's last); None when there is nothing
+        new to insert."""
+        c = self.config
+        new = self.new_episodes(agent, state)
+        if not new:
+            return None
+        self.episodes += new
+        self.episodes.sort(key=lambda e: -e.meta.episode_returns[0])  # stable: older first among ties
+        while sum(len(e) for e in self.episodes) > c.demo_capacity and len(self.episodes) > 1:
+            self.episodes.pop()
+        data = self.dataset
+        state.bc_fits += 1
+        accuracy = fit_bc(c, bc, data, c.bc_refit_epochs, fit_index=state.bc_fits)
+        agent.set_demos(data.obs, data.actions, data.rewards, data.next_obs, data.terminated, data.truncated)
+        agent.refresh_expert_targets()
+        return DemoUpdate(
+            episode=state.episode,
+            env_step=env_step,
+            interactions=interactions,
+            moving_average=state.best_average,
+            mode=c.dynamic_demos,
+            new_returns=[e.meta.episode_returns[0] for e in new],
+            new_transitions=sum(len(e) for e in new),
+            demo_transitions=len(data),
+            demo_episodes=len(self.episodes),
+            bc_accuracy=accuracy,
+        )
+
+
+def run_evaluation(config: Config, agent: DQfDAgent, episodes: int, seed: int) -> EvalResult:
+    """Greedy episodes of the current Q-network on the plain env (and goal counts where that applies)."""
+    return evaluate(
+        GreedyPolicy.from_model(agent.q_network),
+        config.task,
+        episodes,
+        seed,
+        timeout=config.timeout,
+        max_steps=config.max_steps,
+        env_kwargs=config.env_kwargs,
+    )
+
+
+def evaluate_at(learner: Learner, state: TrainingState, points: list[int]) -> list[EvalRow]:
+    """One greedy evaluation of the current network, as a row at each grid point in `points`
+    (appended to `state.evals`)."""
+    config = learner.config
+    result = run_evaluation(config, learner.agent, config.eval_episodes, eval_seed(config.seed))
+    env_step = int(learner.interaction.env_steps.numpy())
+    rows = [
+        EvalRow(
+            env_step=env_step,
+            interactions=point,
+            episode=state.episode,
+            mean_return=result.mean_return,
+            std_return=result.std_return,
+            mean_goals=float(np.mean(result.goals)) if result.goals is not None else None,
+        )
+        for point in points
+    ]
+    state.evals.extend(rows)
+    return rows
+
+
+@dataclass
+class Learner:
+    """Everything a run trains: the agent, π_bc, the interaction loop, D_demo's episodes and
+    the tally of interactions its data came from."""
+
+    config: Config
+    agent: DQfDAgent
+    bc: BCModel | None
+    interaction: Interaction
+    dynamic: DynamicDemos | None
+    tally: Tally
+    demos: DemoDataset | None
+    """D_demo as given, before any interaction (None for plain DQN)."""
+
+    @property
+    def interactions(self) -> int:
+        return self.tally.count
+
+    def extend(self, total_steps: int) -> None:
+        """Raise the step budget to `total_steps`: the run goes on, ε's schedule stretched to the new budget."""
+        self.config = dataclasses.replace(self.config, total_steps=total_steps)
+        self.interaction.config = self.config
+        self.interaction.decay_steps.assign(self.config.epsilon_fraction * total_steps)
+        if self.dynamic is not None:
+            self.dynamic.config = self.config
+
+    def checkpoint(self) -> tf.train.Checkpoint:
+        extra = {"bc_optimizer": self.bc.optimizer} if self.bc is not None else {}
+        return tf.train.Checkpoint(
+            agent=self.agent.checkpoint(), env_steps=self.interaction.env_steps, rng=self.interaction.rng, **extra
+        )
+
+
+def build(config: Config, dataset: DemoDataset | None = None, fresh: bool = True) -> tuple[Learner, dict]:
+    """Steps 1–2: demonstrations, π_bc, the pre-trained agent; returns the learner and
+    pre-training's losses. `fresh=False` skips the fits: a resume restores their results."""
+    if config.deterministic:
+        tf.config.experimental.enable_op_determinism()
+    tally = Tally()
+    env = CountInteractions(task_env(config), tally)
+    data = demonstrations(config, dataset)
+    agent, bc = build_learner(config, data, env, fit=fresh)
+    pretrain = fresh and data is not None and config.pretrain_steps > 0
+    losses = agent.pretrain(config.pretrain_steps) if pretrain else {}
+    check_finite(losses, "pre-training")
+    agent.reset_metrics()
+    dynamic = None
+    if bc is not None and config.dynamic_demos != "off":
+        rollout_env = CountInteractions(task_env(config), tally)
+        dynamic = DynamicDemos(config, data, rollout_env)
+    record = dynamic is not None and config.dynamic_demos == "episodes"
+    return Learner(config, agent, bc, Interaction(agent, env, config, record), dynamic, tally, data), losses
+
+
+def task_env(config: Config) -> gym.Env:
+    """The task env of `config`: its env kwargs, time-limit mode and step limit."""
+    return make_task(config.task, timeout=config.timeout, max_steps=config.max_steps, env_kwargs=config.env_kwargs)
+
+
+def check_finite(losses: dict[str, float], where: str) -> None:
+    """Stop at the first non-finite loss term: a non-finite Q-value makes the TD terms
+    non-finite too, and nothing learned after it can be trusted or saved."""
+    bad = {name: value for name, value in losses.items() if not math.isfinite(float(value))}
+    if bad:
+        raise DivergedError(f"training diverged in {where}: " + ", ".join(f"{k} = {v}" for k, v in bad.items()))
+
+
+Evaluate = Callable[[list[int]], list[EvalRow]]
+"""Evaluates the current Q-network once and logs it at each of the given grid points (its rows)."""
+OnEpisode = Callable[[Learner, TrainingState, EpisodeRow], None]
+Callback = Callable[[EpisodeRow | EvalRow], object]
+"""A user's callback: given each episode's and each evaluation's row; `False` stops training."""
+
+
+class StopTraining(Exception):
+    """A user's callback returned False: training ends where it is (`train_episodes`' callers catch it)."""
+
+
+def train_with_callback(
+    learner: Learner, state: TrainingState, on_episode: OnEpisode, on_eval: Evaluate, callback: Callback | None
+) -> None:
+    """`train_episodes`, each episode's and evaluation's rows given to `callback` as well, until a
+    False from it stops training there (the Python API's and a run directory's one stopping rule)."""
+    on_episode, on_eval = _with_callback(on_episode, on_eval, callback)
+    try:
+        train_episodes(learner, state, on_episode, on_eval)
+    except StopTraining:
+        pass
+
+
+def _with_callback(on_episode: OnEpisode, on_eval: Evaluate, callback: Callback | None) -> tuple[OnEpisode, Evaluate]:
+    """`on_episode` and `on_eval`, each then giving its rows to `callback` (raising StopTraining at a False)."""
+    if callback is None:
+        return on_episode, on_eval
+
+    def tell(rows: list) -> None:
+        for row in rows:
+            if callback(row) is False:
+                raise StopTraining
+
+    def episode(learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
+        on_episode(learner, state, row)
+        tell([row])
+
+    def evaluate(points: list[int]) -> list[EvalRow]:
+        rows = on_eval(points)
+        tell(rows)
+        return rows
+
+    return episode, evaluate
+
+
+def evaluate_due(learner: Learner, state: TrainingState, on_eval: Evaluate) -> None:
+    """Evaluations at every grid point k·E the tally has reached. The network is the one that
+    acted at each of them: it learns only inside `Interaction.play`, which stops at the next
+    point, so several points crossed at once (demo roll-outs) share one evaluation."""
+    due = []
+    while state.next_eval <= learner.interactions:
+        due.append(state.next_eval)
+        state.next_eval += learner.config.eval_every
+    if due:
+        on_eval(due)
+
+
+def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode, on_eval: Evaluate) -> TrainingState:
+    """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs and saves,
+    `on_eval` evaluates at exactly every `eval_every` interactions."""
+    c, agent, interaction = learner.config, learner.agent, learner.interaction
+    steps = lambda: int(interaction.env_steps.numpy())  # noqa: E731
+    while steps() < c.total_steps and not state.stopped_early:
+        started = time.perf_counter()
+        obs, done = interaction.reset(episode_seed(c.seed, state.episode)), False
+        while not done and steps() < c.total_steps:
+            evaluate_due(learner, state, on_eval)
+            budget = min(c.total_steps - steps(), state.next_eval - learner.interactions)
+            obs, done = interaction.play(tf.constant(obs, agent.net_input.dtype), tf.constant(budget, tf.int64))
+            obs, done = obs.numpy(), bool(done)
+        stats = interaction.episode
+        losses = {name: float(value) for name, value in agent.losses_so_far().items()}
+        agent.reset_metrics()
+        check_finite(losses, f"episode {state.episode + 1} (env step {steps()})")
+        state.returns.append(stats.ret)
+        state.episode += 1
+        state.wall_time += time.perf_counter() - started
+        on_demos, off_demos = agent.imitation_weights()
+        row = EpisodeRow(
+            episode=state.episode,
+            env_step=steps(),
+            interactions=learner.interactions,
+            return_=stats.ret,
+            plain_return=stats.plain,
+            length=stats.length,
+            goals=stats.goals,
+            epsilon=float(interaction.epsilon()),
+            losses=Losses(**losses),
+            demo_size=int(agent.replay.demo_size.numpy()),
+            wall_time=state.wall_time,
+            imitation_weight_demo=on_demos,
+            imitation_weight_agent=off_demos,
+        )
+        state.metrics.append(row)
+        if learner.dynamic is not None:
+            if interaction.recorder is not None and done:
+                learner.dynamic.observe(interaction.recorder.dataset())
+            if learner.dynamic.due(state):
+                started = time.perf_counter()
+                update = learner.dynamic.update(agent, learner.bc, state, row.env_step, learner.interactions)
+                if update is not None:
+                    state.demo_updates.append(update)
+                state.wall_time += time.perf_counter() - started
+        state.stopped_early = early_stop(c, state.returns)
+        on_episode(learner, state, row)
+    evaluate_due(learner, state, on_eval)
+    if state.stopped_early and state.next_eval - c.eval_every <= learner.interactions:
+        # It learns nothing after the stop: the next grid point sees the final network (once: a
+        # resumed finished run has already evaluated past its tally).
+        point, state.next_eval = state.next_eval, state.next_eval + c.eval_every
+        on_eval([point])
+    return state

@@ -1,0 +1,204 @@
+"""What a run records, typed: one row per episode, one per evaluation, one per dynamic-demonstration
+update, and the demonstrations it started from. `runs/directory.py` writes them, the lab parses them back.
+
+A record's columns are its field names (a trailing `_` dropped: `return_` is the column `return`),
+so the CSV headers and JSON keys are spelled here and only here. A field with a default is one
+that older run directories lack; parsing fills it in, so every run ever written still loads.
+No TensorFlow, no numpy: reading a run's files needs neither.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+R = TypeVar("R", bound="Record")
+
+
+class Record:
+    """Columns, rows and parsing for a frozen dataclass of numbers, strings and lists of numbers;
+    a field that is itself a Record contributes its own columns in its place."""
+
+    @classmethod
+    def columns(cls) -> tuple[str, ...]:
+        """The column names in order: what a CSV header or a JSON object of the record holds."""
+        return tuple(
+            column
+            for name, kind in _fields(cls)
+            for column in (kind.columns() if _is_record(kind) else (_column(name),))
+        )
+
+    @classmethod
+    def required(cls) -> tuple[str, ...]:
+        """The columns every file holds (no default: written since the first version)."""
+        optional = {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
+        return tuple(
+            column
+            for name, kind in _fields(cls)
+            if name not in optional
+            for column in (kind.required() if _is_record(kind) else (_column(name),))
+        )
+
+    def to_row(self) -> dict[str, Any]:
+        """Column → value, in column order (values as they are: the writer formats them)."""
+        row: dict[str, Any] = {}
+        for name, kind in _fields(type(self)):
+            value = getattr(self, name)
+            row.update(value.to_row() if _is_record(kind) else {_column(name): value})
+        return row
+
+    @classmethod
+    def from_row(cls: type[R], row: Mapping[str, Any]) -> R:
+        """Parse a CSV row (strings) or a JSON object (numbers): each value converted to its
+        field's type, an empty cell or a missing optional column to None, unknown columns
+        ignored. A missing required column raises KeyError naming it; a bad value ValueError."""
+        defaults = {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
+        values = {}
+        for name, kind in _fields(cls):
+            if _is_record(kind):
+                values[name] = kind.from_row(row)
+            elif _column(name) in row:
+                values[name] = _convert(row[_column(name)], kind, _column(name))
+            elif name not in defaults:
+                raise KeyError(_column(name))
+        return cls(**values)
+
+    def __getitem__(self, column: str) -> Any:
+        """The value of `column` (as the file spells it), for code that picks a column by name."""
+        return self.to_row()[column]
+
+
+@functools.cache
+def _fields(cls: type) -> list[tuple[str, Any]]:
+    """(name, type) of each field of record class `cls`, resolved once per class: `get_type_hints`
+    costs far more than parsing a row, and the lab parses hundreds of thousands of them."""
+    hints = typing.get_type_hints(cls)
+    return [(f.name, hints[f.name]) for f in dataclasses.fields(cls)]
+
+
+def _column(name: str) -> str:
+    return name.removesuffix("_")
+
+
+def _is_record(kind: Any) -> bool:
+    return isinstance(kind, type) and issubclass(kind, Record)
+
+
+def _convert(value: Any, kind: Any, column: str) -> Any:
+    """`value` as `kind` (int, float, str, list[float], or any of them | None)."""
+    optional = isinstance(kind, types.UnionType)
+    if value is None or value == "":
+        if optional:
+            return None
+        raise ValueError(f"{column} has no value")
+    base = next(k for k in typing.get_args(kind) if k is not type(None)) if optional else kind
+    if typing.get_origin(base) is list:
+        if not isinstance(value, list):
+            raise ValueError(f"{column} must be a list, got {value!r}")
+        return [float(v) for v in value]
+    if base is int:
+        return int(float(value)) if isinstance(value, str) else int(value)
+    return base(value)
+
+
+@dataclass(frozen=True)
+class Losses(Record):
+    """The agent's loss terms, each a mean over the episode's gradient steps (NaN: none taken)."""
+
+    loss: float
+    """J(Q), the weighted sum of the terms below."""
+    td: float
+    n_step: float
+    expert: float
+    l2: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class EpisodeRow(Record):
+    """metrics.csv: one training episode, as it ended."""
+
+    episode: int
+    env_step: int
+    """The learner's env steps so far (what ε and the budget count)."""
+    interactions: int | None = None
+    """Every interaction so far, dynamic-demonstration roll-outs included (None: before it was kept)."""
+    return_: float
+    """Under the task's rewards (what the learner sees)."""
+    plain_return: float
+    """Under the plain env's rewards (what the field reports)."""
+    length: int
+    goals: int
+    epsilon: float
+    losses: Losses
+    demo_size: int
+    """Transitions in D_demo after the episode."""
+    wall_time: float
+    """Seconds of training so far."""
+    imitation_weight_demo: float | None = None
+    """The Bayesian likelihood's weight 1/(2σ²(s)) averaged over D_demo's rows after the episode
+    (None: the method reads no σ², or the run is from before it was kept)."""
+    imitation_weight_agent: float | None = None
+    """The same over D_replay's rows, the agent's own states (None also while D_replay is empty)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvalRow(Record):
+    """evals.csv: one greedy evaluation on the plain env, logged at one grid point of interactions."""
+
+    env_step: int
+    interactions: int
+    episode: int | None = None
+    mean_return: float
+    std_return: float | None = None
+    mean_goals: float | None = None
+    """None where the task counts no goals (an empty cell)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class DemoUpdate(Record):
+    """dynamic_demos.json: one update of D_demo with the agent's best episodes."""
+
+    episode: int
+    env_step: int
+    interactions: int | None = None
+    moving_average: float
+    mode: str | None = None
+    """`episodes` or `rollouts` (Config.dynamic_demos); None before it was kept."""
+    new_returns: list[float]
+    new_transitions: int | None = None
+    demo_transitions: int
+    demo_episodes: int
+    bc_accuracy: float
+
+
+DEMO_SOURCES = ("recorded", "file", "minari", "python")
+"""Where a run's demonstrations come from: recorded from its `expert` at the start, a file of ours
+given to it (`train.py --demos FILE`), a Minari dataset (`--demos minari:ID`), or a `DemoDataset`
+object given from Python (`DQfD(env, demos=dataset)`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class DemoSummary(Record):
+    """demonstrations.json: the D_demo a run started from, before any dynamic demonstration."""
+
+    transitions: int
+    episodes: int
+    expert: str
+    """The demonstrator its metadata names (for a Minari dataset, `minari:ID`)."""
+    episode_returns: list[float]
+    plain_returns: list[float]
+    """Return of each episode under the plain env's rewards."""
+    pretrain_steps: int
+    source: str | None = None
+    """One of DEMO_SOURCES; None in runs from before it was kept."""
+
+    def __post_init__(self) -> None:
+        if not self.plain_returns:
+            raise ValueError("no episode in plain_returns")
+        if self.source is not None and self.source not in DEMO_SOURCES:
+            raise ValueError(f"source {self.source!r} is not one of {DEMO_SOURCES}")
