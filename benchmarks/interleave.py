@@ -190,6 +190,37 @@ def add_arguments(parser: argparse.ArgumentParser, rounds: int = 3) -> None:
     parser.add_argument("--side", choices=SIDES, help=argparse.SUPPRESS)  # a child: run one side, print JSON
 
 
+def run_child(side: str, sides: dict[str, Callable[[], dict | None]]) -> int:
+    """The child's job: measure `side` in this process, print its figures as one JSON line."""
+    if side == "sb3":
+        # SB3's logger imports tensorboard, which imports TensorFlow when it is installed: keep it
+        # out (tensorboard falls back to its stub), so TensorFlow and torch never share a process.
+        sys.modules.setdefault("tensorflow", None)
+    print(json.dumps({"figures": sides[side](), "process": in_process()}))
+    return 0
+
+
+def run_rounds(
+    script: str, argv: list[str], plan: list[list[str]], verbose: bool
+) -> tuple[dict[str, list[dict] | None], dict[str, dict]]:
+    """Each round's sides in their own processes, in the planned order: figures per side and round
+    (None for a side that measured nothing), and each side's first process description."""
+    per_round: dict[str, list[dict] | None] = {side: [] for side in SIDES}
+    processes: dict[str, dict] = {}
+    for r, sides_in_round in enumerate(plan, start=1):
+        for side in sides_in_round:
+            child = run_side(script, argv, side, r)
+            figures = child["figures"]
+            processes.setdefault(side, child["process"])
+            if figures is None:
+                per_round[side] = None
+            elif per_round[side] is not None:
+                per_round[side].append(figures)
+            if verbose and figures is not None:
+                print(f"  round {r} {side:4s} " + "  ".join(f"{k} {v:.1f}" for k, v in figures.items()), flush=True)
+    return per_round, processes
+
+
 def main(
     name: str,
     script: str,
@@ -205,37 +236,19 @@ def main(
     `sides[side]()` measures one side in this process and returns its figures (or None: absent).
     `ratios` as in `summarise`; the first one is the headline `ratio`."""
     if args.side is not None:
-        if args.side == "sb3":
-            # SB3's logger imports tensorboard, which imports TensorFlow when it is installed: keep it
-            # out (tensorboard falls back to its stub), so TensorFlow and torch never share a process.
-            sys.modules.setdefault("tensorflow", None)
-        figures = sides[args.side]()
-        print(json.dumps({"figures": figures, "process": in_process()}))
-        return 0
+        return run_child(args.side, sides)
     if args.rounds < 1:
         sys.exit(f"{name}: --rounds must be ≥ 1")
     present = [side for side in SIDES if side != "sb3" or sb3_installed()]
     load_start, start = os.getloadavg(), time.perf_counter()
     plan = order(args.rounds, present)
-    per_round: dict[str, list[dict] | None] = {side: [] for side in SIDES}
     if not args.json:
         print(
             f"{name}: {args.rounds} rounds, each side in its own process, order per round: "
             + "; ".join(",".join(sides_) for sides_ in plan),
             flush=True,
         )
-    processes: dict[str, dict] = {}
-    for r, sides_in_round in enumerate(plan, start=1):
-        for side in sides_in_round:
-            child = run_side(script, argv, side, r)
-            figures = child["figures"]
-            processes.setdefault(side, child["process"])
-            if figures is None:
-                per_round[side] = None
-            elif per_round[side] is not None:
-                per_round[side].append(figures)
-            if not args.json and figures is not None:
-                print(f"  round {r} {side:4s} " + "  ".join(f"{k} {v:.1f}" for k, v in figures.items()), flush=True)
+    per_round, processes = run_rounds(script, argv, plan, verbose=not args.json)
     for side in SIDES:
         if side not in present or not per_round[side]:
             per_round[side] = None

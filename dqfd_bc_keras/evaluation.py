@@ -36,8 +36,8 @@ class GreedyPolicy:
     """argmax_a of a Keras model's output: an MLP's computed in NumPy on a copy of its weights, a
     convolutional network's by one compiled call of the model.
 
-    One MLP action costs ~10 µs this way, against ~400 µs for a tf.function call and ~55 ms for
-    `model.predict`: an evaluation of 100 CartPole episodes takes a second, not minutes. A
+    An MLP's action in NumPy costs a fraction of a graph call's fixed price, and `model.predict`
+    costs a thousand times more (docs/PERFORMANCE.md): evaluations take seconds, not minutes. A
     convolution's arithmetic is worth the call.
     """
 

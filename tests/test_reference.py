@@ -139,7 +139,7 @@ def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_mod
     keras.utils.set_random_seed(0)
     agent = make_agent(config, demos, bc_model)
     rows = GraphRows(agent, PRETRAIN + ROUNDS * LEARN)
-    ref = reference.Learner(
+    ref = reference.ReferenceLearner(
         config,
         agent.q_network.get_weights(),
         standardization(agent),

@@ -25,7 +25,7 @@ def close(actual, expected, atol=ATOL) -> None:
 
 def make_replay(**kwargs) -> PrioritizedReplay:
     options = dict(
-        obs_dim=2,
+        net_input=2,
         n_actions=2,
         capacity=8,
         demo_capacity=10,
@@ -539,7 +539,7 @@ def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
 
 
 def test_one_step_fields_round_trip():
-    replay = make_replay(obs_dim=2, n_actions=3, capacity=4, demo_capacity=4, n_step=2)
+    replay = make_replay(net_input=2, n_actions=3, capacity=4, demo_capacity=4, n_step=2)
     # flags per row (terminated, truncated): (0,0), (1,0), (0,1), (1,1)
     pi = [[0.1, 0.2, 0.7], [0.5, 0.25, 0.25], [0.0, 1.0, 0.0], [0.6, 0.3, 0.1]]
     replay.set_demos(

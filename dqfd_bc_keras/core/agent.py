@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 class MeanVector(keras.metrics.Metric):
     """Running means of named scalars in two variables: one update is two ops, where a
-    `keras.metrics.Mean` per scalar costs ~9 ops each in every learning step. Values come and
+    `keras.metrics.Mean` per scalar adds several ops each to every learning step. Values come and
     go by name, so a term added or reordered cannot land in another's column."""
 
     def __init__(self, names: tuple[str, ...], name: str = "mean_vector") -> None:
@@ -55,12 +55,12 @@ class MeanVector(keras.metrics.Metric):
 class DQfDAgent(keras.Model):
     """Q(s, ·; θ), the target network θ', θ_prior, and the learning step over a replay.
 
-    `obs_dim` is the width of a vector state, or the `NetworkInput` of frames and their torso."""
+    `net_input` is what the Q-network takes: a `NetworkInput`, or the width of a vector state."""
 
     def __init__(
         self,
         config: Config,
-        obs_dim: int | NetworkInput,
+        net_input: int | NetworkInput,
         n_actions: int,
         replay: PrioritizedReplay,
         bc_model: BCModel | None = None,
@@ -72,7 +72,7 @@ class DQfDAgent(keras.Model):
         self.config = config
         self.method = config.method
         self.expert_term = self.method.expert_term()
-        self.net_input = as_input(obs_dim)
+        self.net_input = as_input(net_input)
         self.obs_dim, self.n_actions = self.net_input.dim, int(n_actions)
         self.q_network = build_q_network(self.net_input, n_actions, config.hidden, obs_scale)
         self.target_network = build_q_network(

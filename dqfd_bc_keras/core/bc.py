@@ -18,7 +18,7 @@ import tensorflow as tf
 
 from dqfd_bc_keras.choices import UNCERTAINTIES
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.core.networks import NetworkInput, dense_stack, torso_layers
+from dqfd_bc_keras.core.networks import dense_stack, torso_layers
 from dqfd_bc_keras.core.optimizers import FusedAdam
 from dqfd_bc_keras.core.uncertainty import (
     NearestDemoVariance,
@@ -27,6 +27,7 @@ from dqfd_bc_keras.core.uncertainty import (
     policy_variance,
     reference_rows,
 )
+from dqfd_bc_keras.envs.network_input import NetworkInput, as_input
 from dqfd_bc_keras.envs.observations import Frames
 
 DISTANCE_SIDE = 21
@@ -261,8 +262,8 @@ class BCModel(keras.Model):
 
         Each epoch visits every pair once in a fresh random order (from `seed` and the epoch),
         in batches of `batch_size` (the last one smaller), through `train_step`; all epochs run
-        in one graph call. Keras's `fit` spent ~1.5 s per call here on its data pipeline and
-        callbacks, for a few hundred half-millisecond steps. Each fit draws an ensemble's
+        in one graph call: Keras's `fit` spent more on its data pipeline and callbacks than on
+        the steps themselves (docs/PERFORMANCE.md). Each fit draws an ensemble's
         bootstrap resamples afresh and a distance estimator's reference states. Returns the
         last epoch's metrics.
         """
@@ -326,7 +327,7 @@ class BCModel(keras.Model):
 
 def build_bc_model(
     config: Config,
-    obs_dim: int | NetworkInput,
+    net_input: int | NetworkInput,
     n_actions: int,
     obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> BCModel:
@@ -336,18 +337,18 @@ def build_bc_model(
     bayesian = config.bayesian_bc
     uncertainty = config.uncertainty if bayesian else "mc_dropout"
     mean, std = (None, None) if obs_scale is None else obs_scale
-    spec = obs_dim if isinstance(obs_dim, NetworkInput) else NetworkInput(int(obs_dim))
+    net_input = as_input(net_input)
     frames = (
         None
-        if spec.frames is None
-        else {"shape": list(spec.frames.shape), "scale": spec.frames.scale, "stack": spec.frames.stack}
+        if net_input.frames is None
+        else {"shape": list(net_input.frames.shape), "scale": net_input.frames.scale, "stack": net_input.frames.stack}
     )
     model = BCModel(
-        spec.dim,
+        net_input.dim,
         n_actions,
         hidden=config.bc_hidden,
         frames=frames,
-        torso=spec.torso,
+        torso=net_input.torso,
         dropout=config.bc_dropout if bayesian and uncertainty != "ensemble" else 0.0,
         prior_scale=config.bc_prior_scale if bayesian else None,
         mc_passes=config.mc_passes,

@@ -22,7 +22,7 @@ from typing import Any
 
 from dqfd_bc_keras.choices import DYNAMIC_MODES, PRIOR_CENTERS, TARGETS, TD_LOSSES, TIMEOUT_MODES, TORSOS, UNCERTAINTIES
 from dqfd_bc_keras.core.methods import Method, get_method, reading_saved_config
-from dqfd_bc_keras.envs.make import TaskSpaces, get_task, step_limit, task_spaces
+from dqfd_bc_keras.envs.make import TaskSpaces, get_task, step_limit
 from dqfd_bc_keras.envs.network_input import CONV_TORSOS, NetworkInput
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
 from dqfd_bc_keras.seeds import MAX_SEED
@@ -50,8 +50,9 @@ class Config:
 
     # --- task -------------------------------------------------------------------------------
     task: str = "cartpole"
-    """Task preset (tasks.TASKS, or `module:preset` registered by `module`), or the id of any Gymnasium env with Discrete actions and an
-    observation that `observations` flattens (`module:Env-v0` imports `module` first)."""
+    """Task preset (tasks.TASKS, or `module:preset` registered by `module`), or the id of any
+    Gymnasium env with Discrete actions and an observation that `observations` flattens
+    (`module:Env-v0` imports `module` first)."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments of the env's constructor (`gym.make(id, **env_kwargs)`), JSON values; part
     of the task: every env of the run, its demonstrations and its evaluations are made with them."""
@@ -233,11 +234,6 @@ class Config:
         return step_limit(self.task, self.max_steps)
 
     @property
-    def network_input(self) -> NetworkInput:
-        """What the networks take in this task: vectors or frames, and the torso that reads them."""
-        return task_spaces(self.task, self.env_kwargs).network_input(self.torso, self.timeout)
-
-    @property
     def method(self) -> Method:
         """The registered method `expert_loss` names (methods.py)."""
         return get_method(self.expert_loss)
@@ -265,7 +261,28 @@ class Config:
 
     def validate(self) -> Config:
         """Raise ConfigError for the first value the algorithm cannot use; return self."""
-        task = get_task(self.task)
+        self._check_kinds()
+        for name, ok, expected in self._ranges():
+            if not ok:
+                raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
+        check_demonstrator(self.expert, get_task(self.task))
+        if not self.uses_demos and self.total_steps < self.batch_size:
+            raise ConfigError(
+                f"total_steps={self.total_steps} is below batch_size={self.batch_size}: without "
+                "demonstrations there is no pre-training, so no gradient step would ever be taken"
+            )
+        if self.limit < self.n_step:
+            warnings.warn(
+                f"the episode limit {self.limit} is shorter than the n-step window n_step={self.n_step}: "
+                "every n-step return is cut at the end of its episode",
+                DqfdWarning,
+                stacklevel=2,
+            )
+        return self
+
+    def _check_kinds(self) -> None:
+        """Values of the wrong kind: env kwargs, a method that trains no Q-network, names outside
+        their choices, numbers that are not finite (inf or NaN passes every range check, or none)."""
         if not isinstance(self.env_kwargs, dict) or not all(isinstance(k, str) for k in self.env_kwargs):
             raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
         if not self.method.q_learning:
@@ -285,11 +302,14 @@ class Config:
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name}={getattr(self, name)!r} is not one of {allowed}")
-        for f in dataclasses.fields(self):  # inf or NaN passes every comparison below it, or none
+        for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if isinstance(value, float) and not math.isfinite(value):
                 raise ConfigError(f"{f.name} must be a finite number, got {value!r}")
-        checks = [
+
+    def _ranges(self) -> list[tuple[str, bool, str]]:
+        """(field, whether its value is in range, the range in words), in the order checked."""
+        return [
             ("seed", 0 <= self.seed <= MAX_SEED, f"in [0, {MAX_SEED}]"),
             ("gamma", 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
             ("n_step", self.n_step >= 1, "≥ 1"),
@@ -339,23 +359,6 @@ class Config:
             ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
             ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
         ]
-        check_demonstrator(self.expert, task)
-        for name, ok, expected in checks:
-            if not ok:
-                raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
-        if not self.uses_demos and self.total_steps < self.batch_size:
-            raise ConfigError(
-                f"total_steps={self.total_steps} is below batch_size={self.batch_size}: without "
-                "demonstrations there is no pre-training, so no gradient step would ever be taken"
-            )
-        if self.limit < self.n_step:
-            warnings.warn(
-                f"the episode limit {self.limit} is shorter than the n-step window n_step={self.n_step}: "
-                "every n-step return is cut at the end of its episode",
-                DqfdWarning,
-                stacklevel=2,
-            )
-        return self
 
     def check_memory(self, spaces: TaskSpaces) -> Config:
         """Raise ConfigError when a run's replay, networks and batch (`memory_needed`) need more
@@ -387,7 +390,7 @@ class Config:
         return dataclasses.asdict(self)
 
 
-def memory_needed(config: Config, spec: NetworkInput, n_actions: int) -> dict[str, int]:
+def memory_needed(config: Config, net_input: NetworkInput, n_actions: int) -> dict[str, int]:
     """Bytes a run of `config` holds at once, to an order of magnitude, by part:
 
     replay       per row of D_demo ∪ D_replay (replay.py), float32: the table's [s | s' | a, r,
@@ -400,15 +403,15 @@ def memory_needed(config: Config, spec: NetworkInput, n_actions: int) -> dict[st
                  s_{t+n} twice), twice for the backward pass; a BC refresh's mc_passes over 8192 states
     """
     rows = config.demo_capacity + config.replay_capacity
-    frames = spec.frames
-    columns = spec.dim if frames is None else frames.stack
+    frames = net_input.frames
+    columns = net_input.dim if frames is None else frames.stack
     replay = 4 * rows * ((2 * columns + 5 + n_actions) + (columns + 2) + 1)
     if frames is not None:
         replay += 2 * (rows + frames.stack) * math.prod(frames.frame_shape)
-    torso_params, torso_outputs, width = 0, math.prod(spec.shape), math.prod(spec.shape)
-    if frames is not None and spec.torso in CONV_TORSOS:
+    torso_params, torso_outputs, width = 0, math.prod(net_input.shape), math.prod(net_input.shape)
+    if frames is not None and net_input.torso in CONV_TORSOS:
         height, across, channels = *frames.shape[:2], (frames.shape[2] if len(frames.shape) == 3 else 1)
-        for filters, kernel, stride in CONV_TORSOS[spec.torso]:
+        for filters, kernel, stride in CONV_TORSOS[net_input.torso]:
             height, across = (height - kernel) // stride + 1, (across - kernel) // stride + 1
             torso_params += (kernel * kernel * channels + 1) * filters
             channels = filters

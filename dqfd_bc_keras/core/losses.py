@@ -69,7 +69,7 @@ def margin_loss(q: tf.Tensor, expert_actions: tf.Tensor, margin: float = 0.8) ->
     q: (B, A); expert_actions: (B,) int, the demonstrated (or BC-predicted) action a_E.
     """
     a_e = tf.cast(expert_actions, tf.int32)
-    l = margin * (1.0 - tf.one_hot(a_e, tf.shape(q)[1], dtype=q.dtype))
+    l = margin * (1.0 - tf.one_hot(a_e, tf.shape(q)[1], dtype=q.dtype))  # noqa: E741 (the paper's l(a_E, a))
     return tf.reduce_max(q + l, axis=1) - action_value(q, a_e)
 
 

@@ -34,23 +34,23 @@ __all__ = [
 
 
 def torso_layers(
-    spec: NetworkInput, obs_scale: tuple[np.ndarray, np.ndarray] | None = None
+    net_input: NetworkInput, obs_scale: tuple[np.ndarray, np.ndarray] | None = None
 ) -> list[keras.layers.Layer]:
     """The layers from an observation to the dense layers' input: standardisation (vectors), or
     the [0, 1] scaling, a channel axis for 2-D frames, the convolutions and a flatten (frames)."""
-    if spec.frames is None:
+    if net_input.frames is None:
         return [] if obs_scale is None else [normalization(*obs_scale)]
-    layers: list[keras.layers.Layer] = [keras.layers.Rescaling(spec.frames.scale, name="to_unit")]
-    if len(spec.frames.shape) == 2:
-        layers.append(keras.layers.Reshape((*spec.frames.shape, 1), name="channel"))
-    for i, (filters, kernel, stride) in enumerate(CONV_TORSOS.get(spec.torso, ())):
+    layers: list[keras.layers.Layer] = [keras.layers.Rescaling(net_input.frames.scale, name="to_unit")]
+    if len(net_input.frames.shape) == 2:
+        layers.append(keras.layers.Reshape((*net_input.frames.shape, 1), name="channel"))
+    for i, (filters, kernel, stride) in enumerate(CONV_TORSOS.get(net_input.torso, ())):
         layers.append(keras.layers.Conv2D(filters, kernel, strides=stride, activation="relu", name=f"conv_{i}"))
     layers.append(keras.layers.Flatten(name="flatten"))
     return layers
 
 
 def build_q_network(
-    spec: int | NetworkInput,
+    net_input: int | NetworkInput,
     n_actions: int,
     hidden: Sequence[int] = (64, 64),
     obs_scale: tuple[np.ndarray, np.ndarray] | None = None,
@@ -63,10 +63,10 @@ def build_q_network(
     fixed `Normalization` layer: CartPole's angle lives on a ±0.2 scale and its velocities on
     ±2, and the network learns the expert's rule far faster from standardised inputs.
     """
-    spec = as_input(spec)
-    obs = keras.Input(shape=spec.shape, dtype=spec.dtype, name="obs")
+    net_input = as_input(net_input)
+    obs = keras.Input(shape=net_input.shape, dtype=net_input.dtype, name="obs")
     q = obs
-    for layer in torso_layers(spec, obs_scale) + dense_stack(hidden, n_actions, out_name="q_values"):
+    for layer in torso_layers(net_input, obs_scale) + dense_stack(hidden, n_actions, out_name="q_values"):
         q = layer(q)
     return keras.Model(obs, q, name=name)
 

@@ -91,7 +91,7 @@ class Replay:
         self.max_p = max(self.max_p, self.p[rows].max())
 
 
-class Learner:
+class ReferenceLearner:
     """θ, θ', θ_prior, Adam's state and the replay; `config` is a Config (squared TD loss; no SQIL).
     θ = [W_1, b_1, …, W_L, b_L] (`build_q_network(…).get_weights()`'s layout), `obs_scale` = (μ, σ):
     Q(s, ·; θ) = W_L·relu(… relu(W_1·(s − μ)/σ + b_1) …) + b_L. `draw` picks each batch's rows."""
@@ -149,7 +149,8 @@ class Learner:
         rows, w = replay.sample(c.batch_size, self.beta(), self.draw)
         b, w = Transitions(*(x[rows] for x in replay.data)), np.float32(w)
         ret_n, s_n, discount_n = (np.array(x) for x in zip(*(replay.n_step(i) for i in rows), strict=True))
-        # Constant targets: y = r + γ(1 − terminated)·V'(s'),  y_n = Σ_{k<m} γ^k r_{t+k} + γ^m(1 − terminated)·V'(s_{t+m})
+        # Constant targets: y = r + γ(1 − terminated)·V'(s'),
+        #                   y_n = Σ_{k<m} γ^k r_{t+k} + γ^m(1 − terminated)·V'(s_{t+m})
         v, v_n = np.split(self.next_values(np.concatenate([b.next_obs, s_n])), 2)
         y, y_n = b.rewards + np.float32(c.gamma) * (1 - np.float32(b.terminated)) * v, ret_n + discount_n * v_n
         with tf.GradientTape() as tape:
@@ -193,7 +194,7 @@ class Learner:
             # max_a [Q(s, a) + l(a_E, a)] − Q(s, a_E), l = margin where a ≠ a_E: a_E is the
             # demonstrated action, on D_demo only (DQfD), or argmax π̄_bc, on every row (DQfD-BC).
             a_e = b.actions if kind == "margin" else b.pi_bc.argmax(1)
-            l = np.float32(c.margin * (np.arange(q.shape[1]) != a_e[:, None]))
+            l = np.float32(c.margin * (np.arange(q.shape[1]) != a_e[:, None]))  # noqa: E741 (the paper's l)
             q_e = tf.gather_nd(q, np.stack([np.arange(len(a_e)), a_e], 1))
             return tf.reduce_mean((w * demo if kind == "margin" else w) * (tf.reduce_max(q + l, 1) - q_e))
         if kind == "ce":  # H(π_bc, p_Q) = −Σ_a π_bc(a|s) log p_Q(a|s),  p_Q = softmax(Q/T)

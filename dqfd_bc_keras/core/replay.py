@@ -76,10 +76,9 @@ class SumTree(tf.Module):
 
     Sampling is a cumulative sum and a binary search (`tf.searchsorted`) per level; an update
     rewrites the leaves and re-sums their blocks: a dozen TensorFlow ops in all, where a
-    32-ary tree of 150k leaves takes five levels of a dozen each. Every op costs µs here
-    (README "Performance"); a 1-D cumulative sum of thousands of block sums costs ~7 µs, but
-    one along rows wider than ~100 costs far more (~250 µs for 64 rows of 388), hence narrow
-    blocks. The total is re-summed from the block sums on each read, so rounding never
+    32-ary tree of 150k leaves takes five levels of a dozen each: every op has a fixed cost
+    here, and a cumulative sum along wide rows costs far more than one along a long vector
+    (docs/PERFORMANCE.md), hence narrow blocks. The total is re-summed from the block sums on each read, so rounding never
     accumulates.
     """
 
@@ -140,7 +139,7 @@ class PrioritizedReplay(tf.Module):
 
     def __init__(
         self,
-        obs_dim: int | NetworkInput,
+        net_input: int | NetworkInput,
         n_actions: int,
         capacity: int = 100_000,
         demo_capacity: int = 50_000,
@@ -154,10 +153,10 @@ class PrioritizedReplay(tf.Module):
         super().__init__()
         if capacity < n_step:
             raise ConfigError(f"replay capacity must be ≥ n_step={n_step}, got {capacity}")
-        spec = as_input(obs_dim)
-        self.frames = spec.frames
+        net_input = as_input(net_input)
+        self.frames = net_input.frames
         """The frames' layout when observations are frames (then s and s' columns hold pool indices)."""
-        self.obs_dim = spec.dim if self.frames is None else self.frames.stack
+        self.obs_dim = net_input.dim if self.frames is None else self.frames.stack
         """Columns of s (and of s') in the table: features, or the pool indices of the stacked frames."""
         self.n_actions = int(n_actions)
         self.capacity, self.demo_capacity = int(capacity), int(demo_capacity)

@@ -34,8 +34,8 @@ import numpy as np
 
 from dqfd_bc_keras.choices import TIMEOUT_MODES
 from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta, validate
-from dqfd_bc_keras.envs.make import TaskSpec, effective_kwargs, get_task, task_spaces
-from dqfd_bc_keras.envs.observations import describe
+from dqfd_bc_keras.envs.make import TaskSpaces, TaskSpec, effective_kwargs, get_task, task_spaces
+from dqfd_bc_keras.envs.observations import ObservationLayout, describe
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, one_line
 
 _ABSENT = object()
@@ -106,26 +106,11 @@ def _check_spaces(
         )
 
 
-def from_minari(
-    dataset_id: str,
-    task: str,
-    timeout: str = "bootstrap",
-    env_kwargs: dict[str, Any] | None = None,
-    max_transitions: int | None = None,
-) -> DemoDataset:
-    """Read the Minari dataset `dataset_id` from the local cache as demonstrations for `task`
-    made with `env_kwargs`.
-
-    Never downloads. Refuses, in one line naming the dataset: a missing dataset (and where it
-    looked), another env, other env kwargs (compared with the registration's defaults filled
-    in on both sides), other spaces, a shaped-reward task, `timeout="time-aware"` (there is no
-    time feature to add) and incomplete episodes. Observations are flattened as the task's are
-    (`observations`). `naive` records every truncation as a termination, as our naive mode
-    does; `bootstrap` keeps Gymnasium's flags.
-    """
-    env_kwargs = dict(env_kwargs or {})
+def _open_checked(
+    where: Path, dataset_id: str, task: str, timeout: str, env_kwargs: dict[str, Any], max_transitions: int | None
+) -> tuple[Any, TaskSpaces]:
+    """The Minari dataset, opened and checked against the task before any episode is read."""
     minari = _minari()
-    where = Path(f"minari:{dataset_id}")
     if timeout not in TIMEOUT_MODES:
         raise ConfigError(f"unknown timeout mode {timeout!r}; expected one of {TIMEOUT_MODES}")
     if timeout == "time-aware":
@@ -162,11 +147,10 @@ def from_minari(
         raise DemoFileError(
             where, f"was recorded with env kwargs {json.dumps(recorded)}, but the task is made with {json.dumps(made)}"
         )
-    layout = spaces.layout
-    if layout.image:
+    if spaces.layout.image:
         raise DemoFileError(
             where,
-            f"task {task!r} observes frames ({layout.text()}); reading Minari datasets of "
+            f"task {task!r} observes frames ({spaces.layout.text()}); reading Minari datasets of "
             "frames is not supported yet: convert it to an .npz (docs/DEMONSTRATIONS.md)",
         )
     if max_transitions is not None and source.total_steps > max_transitions:
@@ -175,8 +159,66 @@ def from_minari(
             f"holds {source.total_steps} transitions, more than demo_capacity={max_transitions} "
             "(raise it with --set demo_capacity=N)",
         )
-    _check_spaces(where, (source.observation_space, source.action_space), task, layout.space, spaces.n_actions)
+    _check_spaces(where, (source.observation_space, source.action_space), task, spaces.layout.space, spaces.n_actions)
+    return source, spaces
 
+
+def _transitions(
+    where: Path, index: int, episode: Any, layout: ObservationLayout, timeout: str
+) -> tuple[np.ndarray, ...]:
+    """Episode `index` as the columns of `ARRAYS`, refused in one line if it is empty, incomplete,
+    ends early or does not fit the task's observation space."""
+    steps = len(episode.rewards)
+    try:
+        observations = layout.flatten(episode.observations, batch=steps + 1)
+    except (KeyError, IndexError, TypeError, ValueError) as error:
+        raise DemoFileError(
+            where,
+            f"episode {index} has {steps} steps and observations that do not fit "
+            f"{describe(layout.space)} × {steps + 1} ({one_line(error)})",
+        ) from None
+    terminated = np.asarray(episode.terminations, dtype=bool)
+    truncated = np.asarray(episode.truncations, dtype=bool) & ~terminated
+    if steps == 0:
+        raise DemoFileError(where, f"episode {index} has no steps")
+    if not (terminated[-1] or truncated[-1]):
+        raise DemoFileError(where, f"episode {index} is incomplete: its last step is neither terminated nor truncated")
+    if (terminated[:-1] | truncated[:-1]).any():
+        raise DemoFileError(where, f"episode {index} ends (terminated or truncated) before its last step")
+    if timeout == "naive":
+        terminated, truncated = terminated | truncated, np.zeros_like(truncated)
+    return (
+        observations[:-1],
+        np.asarray(episode.actions, dtype=np.int64).reshape(-1),
+        np.asarray(episode.rewards, dtype=np.float32),
+        observations[1:],
+        terminated,
+        truncated,
+        np.full(steps, index, np.int64),
+    )
+
+
+def from_minari(
+    dataset_id: str,
+    task: str,
+    timeout: str = "bootstrap",
+    env_kwargs: dict[str, Any] | None = None,
+    max_transitions: int | None = None,
+) -> DemoDataset:
+    """Read the Minari dataset `dataset_id` from the local cache as demonstrations for `task`
+    made with `env_kwargs`.
+
+    Never downloads. Refuses, in one line naming the dataset: a missing dataset (and where it
+    looked), another env, other env kwargs (compared with the registration's defaults filled
+    in on both sides), other spaces, a shaped-reward task, `timeout="time-aware"` (there is no
+    time feature to add) and incomplete episodes. Observations are flattened as the task's are
+    (`observations`). `naive` records every truncation as a termination, as our naive mode
+    does; `bootstrap` keeps Gymnasium's flags.
+    """
+    env_kwargs = dict(env_kwargs or {})
+    where = Path(f"minari:{dataset_id}")
+    source, spaces = _open_checked(where, dataset_id, task, timeout, env_kwargs, max_transitions)
+    layout = spaces.layout
     columns: dict[str, list[np.ndarray]] = {name: [] for name in ARRAYS}
     returns: list[float] = []
     try:
@@ -184,43 +226,13 @@ def from_minari(
     except Exception as error:
         raise DemoFileError(where, f"cannot be read ({one_line(error)})") from None
     for index, episode in enumerate(episodes):
-        steps = len(episode.rewards)
-        try:
-            observations = layout.flatten(episode.observations, batch=steps + 1)
-        except (KeyError, IndexError, TypeError, ValueError) as error:
-            raise DemoFileError(
-                where,
-                f"episode {index} has {steps} steps and observations that do not fit "
-                f"{describe(layout.space)} × {steps + 1} ({one_line(error)})",
-            ) from None
-        terminated = np.asarray(episode.terminations, dtype=bool)
-        truncated = np.asarray(episode.truncations, dtype=bool) & ~terminated
-        if steps == 0:
-            raise DemoFileError(where, f"episode {index} has no steps")
-        if not (terminated[-1] or truncated[-1]):
-            raise DemoFileError(
-                where, f"episode {index} is incomplete: its last step is neither terminated nor truncated"
-            )
-        if (terminated[:-1] | truncated[:-1]).any():
-            raise DemoFileError(where, f"episode {index} ends (terminated or truncated) before its last step")
-        if timeout == "naive":
-            terminated, truncated = terminated | truncated, np.zeros_like(truncated)
-        rewards = np.asarray(episode.rewards, dtype=np.float32)
-        values = (
-            observations[:-1],
-            np.asarray(episode.actions, dtype=np.int64).reshape(-1),
-            rewards,
-            observations[1:],
-            terminated,
-            truncated,
-            np.full(steps, index, np.int64),
-        )
-        for name, value in zip(ARRAYS, values, strict=True):
+        for name, value in zip(ARRAYS, _transitions(where, index, episode, layout, timeout), strict=True):
             columns[name].append(value)
-        returns.append(float(np.sum(rewards, dtype=np.float64)))
+        returns.append(float(np.sum(columns["rewards"][-1], dtype=np.float64)))
     if not returns:
         raise DemoFileError(where, "the dataset is empty")
 
+    spec = get_task(task)
     meta = DemoMeta(
         task=task,
         env_id=spec.env_id,

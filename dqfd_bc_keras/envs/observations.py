@@ -3,8 +3,9 @@ or frames kept in their own shape for a convolutional torso.
 
 A one-dimensional `Box` passes unchanged. A `Box` of 2 or 3 dimensions of `uint8` or `bool`
 values at the top level (MinAtar's 10×10×C grids, Atari's 84×84×4 frames, MiniGrid's 7×7×3 view
-alone) is a frame: it stays in its shape as `uint8` (`Frames`), and the replay stores it as such. Every other supported space is flattened by
-`FlattenObservation`, always in this order (the order of `gymnasium.spaces.flatten`):
+alone) is a frame: it stays in its shape as `uint8` (`Frames`), and the replay stores it as such.
+Every other supported space is flattened by `FlattenObservation`, always in this order (the order
+of `gymnasium.spaces.flatten`):
 
     Box of any shape        its values in C order (row by row), as float32
     Discrete(n, start)      a one-hot vector of n (x − start is the hot index)

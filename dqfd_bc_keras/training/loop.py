@@ -17,6 +17,7 @@ episode ends in a `records.EpisodeRow`, and `runs/directory.py` writes the files
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
@@ -33,7 +34,7 @@ from dqfd_bc_keras.core.bc import BCModel, build_bc_model
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.demos.dataset import DemoDataset, concatenate
 from dqfd_bc_keras.demos.recording import Demonstrator, record, rollout
-from dqfd_bc_keras.envs.make import make_task
+from dqfd_bc_keras.envs.make import checked_spaces, make_task
 from dqfd_bc_keras.envs.wrappers import CountInteractions, Tally
 from dqfd_bc_keras.errors import DivergedError
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy, evaluate
@@ -97,16 +98,17 @@ def build_learner(
     """π_bc fitted on D_demo (BC-based losses; only built when `fit` is False, for a resume that
     restores its weights), and the agent with D_demo loaded."""
     keras.utils.set_random_seed(config.seed)
-    spec, n_actions = config.network_input, int(env.action_space.n)
+    net_input = checked_spaces(config).network_input(config.torso, config.timeout)
+    n_actions = int(env.action_space.n)
     bc = None
     if config.uses_bc:
-        bc = build_bc_model(config, spec, n_actions, None if spec.image else data.obs_scale())
+        bc = build_bc_model(config, net_input, n_actions, None if net_input.image else data.obs_scale())
         if fit:
             fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
         else:
             bc.optimizer.build(bc.trainable_variables)
-    scale = None if data is not None or spec.image else random_obs_scale(env, config.seed)
-    return make_agent(config, data, bc, obs_scale=scale, spaces=(spec, n_actions)), bc
+    scale = None if data is not None or net_input.image else random_obs_scale(env, config.seed)
+    return make_agent(config, data, bc, obs_scale=scale, spaces=(net_input, n_actions)), bc
 
 
 class DynamicDemos:
@@ -282,8 +284,8 @@ def build(config: Config, dataset: DemoDataset | None = None, fresh: bool = True
     if bc is not None and config.dynamic_demos != "off":
         rollout_env = CountInteractions(task_env(config), tally)
         dynamic = DynamicDemos(config, data, rollout_env)
-    record = dynamic is not None and config.dynamic_demos == "episodes"
-    return Learner(config, agent, bc, Interaction(agent, env, config, record), dynamic, tally, data), losses
+    keep_episodes = dynamic is not None and config.dynamic_demos == "episodes"
+    return Learner(config, agent, bc, Interaction(agent, env, config, keep_episodes), dynamic, tally, data), losses
 
 
 def task_env(config: Config) -> gym.Env:
@@ -316,10 +318,8 @@ def train_with_callback(
     """`train_episodes`, each episode's and evaluation's rows given to `callback` as well, until a
     False from it stops training there (the Python API's and a run directory's one stopping rule)."""
     on_episode, on_eval = _with_callback(on_episode, on_eval, callback)
-    try:
+    with contextlib.suppress(StopTraining):
         train_episodes(learner, state, on_episode, on_eval)
-    except StopTraining:
-        pass
 
 
 def _with_callback(on_episode: OnEpisode, on_eval: Evaluate, callback: Callback | None) -> tuple[OnEpisode, Evaluate]:
