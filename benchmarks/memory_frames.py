@@ -33,7 +33,6 @@ def measure(shape: list[int], stack: int, transitions: int) -> dict:
     sys.path.insert(0, str(REPO))
     import numpy as np
 
-    import dqfd_bc_keras  # noqa: F401  (threads)
     from dqfd_bc_keras.core.networks import NetworkInput
     from dqfd_bc_keras.core.replay import PrioritizedReplay
     from dqfd_bc_keras.envs.observations import Frames
@@ -43,8 +42,6 @@ def measure(shape: list[int], stack: int, transitions: int) -> dict:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) * 1024
         return 0
-
-    import tensorflow as tf  # noqa: F401  (loaded before the first reading)
 
     frames = None if len(shape) == 1 else Frames(tuple(shape), 1 / 255, stack)
     spec = NetworkInput(int(np.prod(shape)), frames)
@@ -92,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
             check=True,
         )
         m = json.loads(done.stdout.strip().splitlines()[-1])
-        mb = lambda b: f"{b * scale / 1e6:,.1f}"  # noqa: E731
+        mb = lambda b: f"{b * scale / 1e6:,.1f}"
         print(
             f"{name:30} {mb(m['total']):>10} {mb(m['variables'].get('frame pool', 0)):>16} "
             f"{mb(m['rss_growth']):>11} {mb(m['as_float32']):>13} {mb(m['as_uint8_stacks']):>18}"

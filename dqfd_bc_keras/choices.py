@@ -22,6 +22,8 @@ DYNAMIC_MODES = ("episodes", "rollouts", "off")
 roll-outs, or not at all."""
 TORSOS = ("auto", "mlp", "minatar", "nature")
 """What reads the observation (`Config.torso`, network_input.py)."""
+EXPERT_NAMES = ("strong", "imperfect")
+"""The scripted experts every package preset has (`Config.expert`, tasks/): a strong one and an imperfect one."""
 POLICY_FILES = {"q": "q_network.keras", "bc": "bc_model.keras"}
 """What `evaluate.py --policy` names: a run directory's model file."""
 LOSS_TERMS = ("loss", "td", "n_step", "expert", "l2")

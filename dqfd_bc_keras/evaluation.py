@@ -8,7 +8,6 @@ reports its metric, the flags reached per episode on the task env (the paper's F
 from __future__ import annotations
 
 import json
-import statistics
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ from dqfd_bc_keras.choices import POLICY_FILES, TIMEOUT_MODES
 from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.uncertainty import EnsembleDense
-from dqfd_bc_keras.envs.episodes import play
+from dqfd_bc_keras.envs.episodes import EvalResult, play
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
 
@@ -125,70 +124,6 @@ def model_kind(model: keras.Model) -> str:
     if len(getattr(model, "inputs", None) or ()) == 1 and len(model.outputs) == 1:
         return "q"
     raise ModelFileError(f"model {model.name!r} is neither a Q-network nor a BC model")
-
-
-@dataclass
-class EvalResult:
-    """Greedy episodes of one policy: returns and lengths on the plain env, goals on the task env."""
-
-    task: str
-    policy: str
-    """"q" (the Q-network), "bc" (the BC model) or, for any other callable, "custom"."""
-    seed: int
-    """Episode i was reset with seed + i."""
-    returns: list[float]
-    lengths: list[int]
-    goals: list[int] | None = None
-    """Flags reached per episode (goal-count tasks only)."""
-    timeout: str = "bootstrap"
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def mean_return(self) -> float:
-        return statistics.fmean(self.returns)
-
-    @property
-    def std_return(self) -> float:
-        return statistics.pstdev(self.returns)
-
-    def to_dict(self) -> dict:
-        result = {
-            "task": self.task,
-            "env_id": get_task(self.task).env_id,
-            "policy": self.policy,
-            "timeout": self.timeout,
-            "episodes": len(self.returns),
-            "seed": self.seed,
-            "returns": self.returns,
-            "mean_return": self.mean_return,
-            "std_return": self.std_return,
-            "min_return": min(self.returns),
-            "max_return": max(self.returns),
-            "lengths": self.lengths,
-        }
-        if self.goals is not None:
-            result.update(goals=self.goals, mean_goals=statistics.fmean(self.goals))
-        if self.env_kwargs:
-            result["env_kwargs"] = self.env_kwargs
-        return result
-
-    def summary(self) -> str:
-        n, env_id = len(self.returns), get_task(self.task).env_id
-        lines = [
-            f"{self.task}{'' if env_id == self.task else f' ({env_id})'}, {self.policy} policy, {n} greedy episodes "
-            f"(seeds {self.seed}..{self.seed + n - 1})",
-            f"return {self.mean_return:.2f} ± {self.std_return:.2f}  "
-            f"(min {min(self.returns):g}, max {max(self.returns):g}, {solved_text(self.task)})",
-            f"length {statistics.fmean(self.lengths):.1f} steps on average",
-        ]
-        if self.goals is not None:
-            lines.append(f"goals per episode {statistics.fmean(self.goals):.2f} on average: {self.goals}")
-        return "\n".join(lines)
-
-
-def solved_text(task: str) -> str:
-    threshold = get_task(task).solved_return
-    return "no solved threshold" if threshold is None else f"solved at {threshold:g}"
 
 
 def evaluate(

@@ -1,14 +1,28 @@
-"""Fixtures shared by the learning tests: the strong CartPole expert's demonstrations and one
-fitted BC model per kind of fit (fitted once per session: each fit takes a few seconds)."""
+"""Fixtures shared by the tests: the strong CartPole expert's demonstrations, one fitted BC model per
+kind of fit and one finished `--quick` run per expert loss (each made once per session, as the first
+test asks for it), and the process-wide state every test leaves as it found it."""
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
 
 import keras
 import pytest
+from helpers import Answer, call, forgetting
 
 import dqfd_bc_keras  # noqa: F401  (first: TF settings; custom objects, Gymnasium ids)
 from dqfd_bc_keras.core.bc import build_bc_model
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.demos import DemoDataset, record
+
+
+@pytest.fixture(autouse=True)
+def forget_what_the_test_registered(tmp_path_factory) -> Iterator[None]:
+    """A command run in this process, or a user's module it imports from the test's temporary
+    directory, must not change what a later test on the same worker sees."""
+    with forgetting(tmp_path_factory.getbasetemp()):
+        yield
 
 
 @pytest.fixture(scope="session")
@@ -36,3 +50,28 @@ def bc_models(demos) -> dict:
         by_fit[fit] = build_bc_model(config, 4, 2, demos.obs_scale())
         by_fit[fit].fit_demos(demos.obs, demos.actions, epochs=config.bc_epochs)
     return {name: by_fit[m.bc_fit] for name, m in METHODS.items() if m.uses_bc}
+
+
+@dataclass(frozen=True)
+class QuickRun:
+    """A finished `train.py --quick` run (seed 0) and what the command answered."""
+
+    out: Path
+    answer: Answer
+
+
+@pytest.fixture(scope="session")
+def quick_run(tmp_path_factory) -> Callable[[str], QuickRun]:
+    """`quick_run(loss)`: `train.py --quick --expert-loss LOSS --out …`, trained in this process when a
+    test first asks for it, then shared. Read-only: a test that changes a run copies `out` first."""
+    finished: dict[str, QuickRun] = {}
+
+    def train(loss: str = "bayes") -> QuickRun:
+        if loss not in finished:
+            out = tmp_path_factory.mktemp(f"quick-{loss}") / "run"
+            answer = call("train.py", "--quick", "--expert-loss", loss, "--out", out)
+            assert answer.returncode == 0, answer.stderr
+            finished[loss] = QuickRun(out, answer)
+        return finished[loss]
+
+    return train

@@ -1,6 +1,7 @@
 """The claims analysis on synthetic run directories whose every number is known by hand."""
 
 import csv
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -11,13 +12,14 @@ from scipy import stats as sps
 
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.evaluation import EvalResult
 from dqfd_bc_keras.experiments import arms as grouping
 from dqfd_bc_keras.experiments import claims as analysis
 from dqfd_bc_keras.experiments import metrics
 from dqfd_bc_keras.experiments import plans as planning
 from dqfd_bc_keras.experiments import report as results
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
-from dqfd_bc_keras.experiments.data import FinishedRun, load_runs
+from dqfd_bc_keras.experiments.data import FinishedRun, Provenance, load_runs
 from dqfd_bc_keras.experiments.efficiency import ArmSteps
 from dqfd_bc_keras.experiments.lab_settings import (
     LAB_SETTINGS,
@@ -29,8 +31,10 @@ from dqfd_bc_keras.experiments.lab_settings import (
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
 from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.runs.directory import EVAL_FIELDS
+from dqfd_bc_keras.runs.writers import write_demonstrations
 from dqfd_bc_keras.tasks import TASKS
 from dqfd_bc_keras.training.loop import METRIC_FIELDS
+from dqfd_bc_keras.training.records import DemoSummary
 
 # cartpole-200 naive: an episode of length L < 200 is a fall, task return L − 1 − 100, plain L
 SOLVER = [50] * 5 + [200] + [80] + [200] * 10  # peak at 6, collapse at 7, rule fires at 17
@@ -78,7 +82,25 @@ def make_run(path: Path, rows: list[dict], evals: list[float] = (0.0,), final: f
         }
         for i, m in enumerate(evals)
     ]
-    return FinishedRun(path, config, metrics, evaluations, {"task": config.task, "mean_return": final})
+    demos = DemoSummary(
+        transitions=1000,
+        episodes=5,
+        expert=config.expert,
+        episode_returns=[100.0] * 5,
+        plain_returns=[100.0] * 5,
+        pretrain_steps=config.pretrain_steps,
+        source="recorded",
+    )
+    return FinishedRun(
+        path,
+        config,
+        metrics,
+        evaluations,
+        EvalResult(config.task, "q", 0, [final], [1], timeout=config.timeout),
+        demos if config.uses_demos else None,
+        [],
+        Provenance(None, None, None, {}),
+    )
 
 
 def write_run(run: FinishedRun) -> None:
@@ -89,7 +111,10 @@ def write_run(run: FinishedRun) -> None:
             writer = csv.DictWriter(f, fieldnames=fields)
             writer.writeheader()
             writer.writerows(rows)
-    (run.path / "eval.json").write_text(json.dumps(run.final))
+    (run.path / "eval.json").write_text(json.dumps(run.final.to_dict()))
+    (run.path / "provenance.json").write_text(json.dumps(dataclasses.asdict(run.provenance)))
+    if run.demonstrations is not None:
+        write_demonstrations(run.path, run.demonstrations)
 
 
 def arm(runs: list[FinishedRun]) -> ArmRuns:
@@ -355,10 +380,10 @@ def test_c2_paper_reading_is_selected_and_judged_on_collapses(tmp_path):
     c1_200, today, paper = analysis.CLAIMS[0].settings[1], *analysis.CLAIMS[1].settings
     assert paper.reading.startswith("the paper's reading") and today.reading.startswith("today's reading")
     [(bayes, ce)] = paper.pairs(arms)
-    assert (bayes.config["early_stop_window"], bayes.config["total_steps"]) == (0, 60_000)
-    assert ce.config["expert_loss"] == "ce"
+    assert (bayes.config.early_stop_window, bayes.config.total_steps) == (0, 60_000)
+    assert ce.config.expert_loss == "ce"
     [(bayes_today, _)] = today.pairs(arms)
-    assert bayes_today.config["early_stop_window"] == 10
+    assert bayes_today.config.early_stop_window == 10
     assert [p[0] for p in c1_200.pairs(arms)] == [bayes_today, bayes]  # the preset pair is C1's reference
     result = analysis.judge(analysis.CLAIMS[1], bayes, ce)
     collapsed, falls = result.comparisons
@@ -499,7 +524,7 @@ def test_the_reference_pair_is_the_one_at_the_preset(tmp_path):
     arms = grouping.group_arms(runs)
     assert sorted(grouping.preset_distance(a) for a in arms) == [0, 0, 1, 1]
     bayes, ce = grouping.bayes_ce_pairs(arms, "mountaincar-goals", "bootstrap")[0]
-    assert (bayes.config["total_steps"], ce.config["total_steps"], len(bayes.runs)) == (100_000, 100_000, 1)
+    assert (bayes.config.total_steps, ce.config.total_steps, len(bayes.runs)) == (100_000, 100_000, 1)
 
 
 def test_report_quotes_the_sweep_log(tmp_path):
@@ -548,7 +573,7 @@ def _arm_of(tmp_path, name: str, values: list[list[int]], **fields) -> ArmRuns:
         make_run(tmp_path / name / str(seed), cartpole_rows(lengths), seed=seed, task="cartpole", **fields)
         for seed, lengths in enumerate(values)
     ]
-    return ArmRuns(runs[0].config.to_dict(), runs, name)
+    return ArmRuns(runs[0].config, runs, name)
 
 
 def test_ablations_pair_with_the_full_arm_and_are_judged_against_the_margin(tmp_path):
@@ -599,7 +624,7 @@ def test_a_task_has_the_lab_settings_registered_under_its_name_else_none(users_t
     assert ArmSteps(users_task, "bayes", [None], [0.0], 55.0).target == 3.0
     assert lab_settings("cartpole-200") is NO_SETTINGS and lab_settings("Acrobot-v1") is NO_SETTINGS
     full, prior = (
-        ArmRuns(run.config.to_dict(), [run], name)
+        ArmRuns(run.config, [run], name)
         for name, run in (
             ("full", make_run(tmp_path / "full", cartpole_rows([100] * 5), task="cartpole-200")),
             ("prior", make_run(tmp_path / "prior", cartpole_rows([100] * 5), task="cartpole-200", bayes_prior=False)),
@@ -650,7 +675,7 @@ def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_p
             for seed, e in enumerate(evals)
             for i in [int(name[-1])]
         ]
-        return ArmRuns(runs[0].config.to_dict(), runs, name)
+        return ArmRuns(runs[0].config, runs, name)
 
     fast, slow = [[0.0, 500.0]] * 3, [[0.0, 0.0, 500.0]] * 3
     arms = [

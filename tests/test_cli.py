@@ -11,7 +11,6 @@ import pytest
 import dqfd_bc_keras
 from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.errors import ModelFileError
-from dqfd_bc_keras.experiments.__main__ import BACKENDS
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -92,6 +91,19 @@ def test_help_answers_before_tensorflow_is_imported(args, expected):
         (("train.py", "--task", "CartPole-v1"), "did you mean --env CartPole-v1?"),
         (("train.py", "--task", "cartpol"), "argument --task: invalid choice: 'cartpol'; did you mean cartpole?"),
         (
+            ("train.py", "--task", "my_taskz:short-pole"),
+            "argument --task: 'my_taskz:short-pole': no module named 'my_taskz' (is its directory on PYTHONPATH?)",
+        ),
+        (
+            ("train.py", "--env", "my_envz:Maze-v0"),
+            "argument --env: unknown task 'my_envz:Maze-v0': no module named 'my_envz' (is its directory on "
+            "PYTHONPATH?)",
+        ),
+        (
+            ("train.py", "--expert-loss", "my_methodz:HALF_CE", "--quick"),
+            "expert_loss='my_methodz:HALF_CE': no module named 'my_methodz' (is its directory on PYTHONPATH?)",
+        ),
+        (
             ("train.py", "--env", "cartpol"),
             "Environment `cartpol` doesn't exist. Did you mean: `CartPole`?); did you mean --task cartpole?",
         ),
@@ -125,7 +137,8 @@ def test_a_task_name_not_a_preset_lists_the_presets():
         ("sigma0=1", "error: --set 'sigma0=1': unknown Config field 'sigma0'; did you mean sigma0_sq?"),
         (
             "zzz=1",
-            "error: --set 'zzz=1': unknown Config field 'zzz'; Config's fields are listed in dqfd_bc_keras/core/config.py",
+            "error: --set 'zzz=1': unknown Config field 'zzz'; Config's fields are listed in "
+            "dqfd_bc_keras/core/config.py",
         ),
     ],
 )
@@ -143,15 +156,6 @@ def test_expert_loss_takes_any_name_and_config_refuses_an_unknown_one():
     assert done.code == 2 and len(done.stderr) == 1 and "expert_loss='magic'" in done.stderr[0], done.stderr
     assert not (REPO / "unused").exists()
     assert_answered_without_tensorflow(done)
-
-
-def test_the_labs_light_choices_are_its_modules_names():
-    """Spelled beside the lab's parser so that a bad name is refused before TensorFlow loads."""
-    from dqfd_bc_keras.experiments import __main__ as lab
-    from dqfd_bc_keras.experiments import sweep
-
-    assert BACKENDS == sweep.BACKENDS
-    assert lab.RUNS_PER_WORKER == sweep.RUNS_PER_WORKER
 
 
 def test_the_package_imports_without_tensorflow_and_sets_its_threads_when_it_loads():
@@ -173,4 +177,4 @@ def test_load_model_registers_the_custom_objects_first():
     with pytest.raises(ModelFileError, match="no such file"):
         dqfd_bc_keras.load_model(REPO / "models" / "nothing.keras")
     with pytest.raises(AttributeError, match="no attribute 'Nope'"):
-        dqfd_bc_keras.Nope  # noqa: B018
+        dqfd_bc_keras.Nope  # noqa: B018  (the attribute access is what raises)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import call
 
 from dqfd_bc_keras.demos import ARRAYS, DemoDataset, load, record, save
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, OutputExistsError
@@ -190,6 +191,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def cli(*args, cwd=REPO):
+    """`python -m dqfd_bc_keras.demos ARGS` as a process of its own, as a user runs it."""
     return subprocess.run(
         [sys.executable, "-m", "dqfd_bc_keras.demos", *args],
         capture_output=True,
@@ -228,7 +230,7 @@ def test_cli_record_and_inspect(tmp_path):
     ],
 )
 def test_cli_errors_are_one_line_and_exit_2(tmp_path, args, message):
-    done = cli(*args, cwd=tmp_path)
+    done = call("dqfd_bc_keras.demos", *args, cwd=tmp_path)
     assert done.returncode == 2
     assert message in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
@@ -238,9 +240,9 @@ def test_cli_errors_are_one_line_and_exit_2(tmp_path, args, message):
 def test_cli_does_not_overwrite_without_force(tmp_path):
     out = tmp_path / "d.npz"
     args = ["record", "--task", "cartpole", "--expert", "strong", "--episodes", "1", "--out", str(out)]
-    assert cli(*args).returncode == 0
+    assert call("dqfd_bc_keras.demos", *args).returncode == 0
     before = out.read_bytes()
-    again = cli(*args[:-2], "--seed", "5", "--out", str(out))
+    again = call("dqfd_bc_keras.demos", *args[:-2], "--seed", "5", "--out", str(out))
     assert again.returncode == 2 and "exists; pass --force" in again.stderr
     assert out.read_bytes() == before
-    assert cli(*args, "--force").returncode == 0
+    assert call("dqfd_bc_keras.demos", *args, "--force").returncode == 0

@@ -9,11 +9,11 @@ import pytest
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.demos.experts import expert_returns
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.evaluation import EvalResult
 from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import (
     EFFICIENCY_FILE,
     SB3_METHOD,
-    TEACHER,
     ArmSteps,
     efficiency_section,
     interaction_evals,
@@ -25,6 +25,7 @@ from dqfd_bc_keras.experiments.efficiency import (
     table,
     teacher_table,
     teacher_verdict,
+    teachers,
 )
 from dqfd_bc_keras.training.loop import METRIC_FIELDS
 
@@ -32,15 +33,20 @@ INF = np.inf
 
 
 def write_run(path, evals: list[dict], final: float = 500.0) -> None:
-    """A complete run directory as the lab reads it (config, metrics, evals.csv, eval.json)."""
+    """A complete run directory of plain DQN as the lab reads it (config, metrics, evals.csv with the
+    columns of `evals`' rows, eval.json, provenance.json)."""
     path.mkdir(parents=True)
-    (path / "config.json").write_text(json.dumps(Config.for_task("cartpole").to_dict()))
+    (path / "config.json").write_text(json.dumps(Config.for_task("cartpole", expert_loss="none").to_dict()))
+    evals = [{"episode": 0, "std_return": 0.0, "mean_goals": None, **row} for row in evals]
     for name, table_rows in (("metrics.csv", [{f: 0.0 for f in METRIC_FIELDS}]), ("evals.csv", evals)):
         with (path / name).open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(table_rows[0]))
             writer.writeheader()
             writer.writerows(table_rows)
-    (path / "eval.json").write_text(json.dumps({"task": "cartpole", "mean_return": final}))
+    (path / "eval.json").write_text(json.dumps(EvalResult("cartpole", "q", 0, [final], [500]).to_dict()))
+    (path / "provenance.json").write_text(
+        json.dumps({"code_commit": None, "rules_commit": None, "dirty": None, "versions": {}})
+    )
 
 
 def test_our_steps_are_interactions_not_env_steps(tmp_path):
@@ -54,13 +60,15 @@ def test_our_steps_are_interactions_not_env_steps(tmp_path):
     )
     [run] = load_runs(tmp_path)
     assert interaction_evals(run) == [(0.0, 9.0), (1000.0, 300.0), (2000.0, 480.0)]
-    arm = ArmSteps.of("cartpole", "bayes", [interaction_evals(run)], [run.final["mean_return"]], 475.0)
+    arm = ArmSteps.of("cartpole", "bayes", [interaction_evals(run)], [run.final.mean_return], 475.0)
     assert arm.first == [2000.0]
 
 
 def test_a_run_without_the_interactions_column_is_named_in_the_error(tmp_path):
     write_run(tmp_path / "old", [{"env_step": 1000, "mean_return": 500.0}])
-    with pytest.raises(ConfigError, match=r"old/evals.csv: no column\(s\) \['interactions'\] in the header"):
+    with pytest.raises(
+        ConfigError, match=r"old/evals.csv: no column\(s\) \['interactions'\] in the header: written by"
+    ):
         load_runs(tmp_path)
 
 
@@ -155,9 +163,9 @@ def test_teacher_rule_reads_the_ci_of_the_median():
     assert teacher_table(arms()) == []  # no teacher rule on the paper's tasks
 
 
-@pytest.mark.parametrize("task", sorted(TEACHER))
+@pytest.mark.parametrize("task", sorted(teachers()))
 def test_teacher_means_are_the_measured_ones(task):
-    assert round(expert_returns(task, "imperfect", episodes=100, seed=0).mean(), 2) == TEACHER[task]
+    assert round(expert_returns(task, "imperfect", episodes=100, seed=0).mean(), 2) == teachers()[task]
 
 
 def test_section_reads_the_file_and_quotes_no_numbers_of_its_own(tmp_path):

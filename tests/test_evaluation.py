@@ -1,19 +1,16 @@
 """Greedy evaluation: the NumPy policy against Keras, episodes played (`episodes.play`) on the plain
 env, loading errors, and `evaluate.py` end to end."""
 
-import importlib.util
 import json
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import keras
 import numpy as np
 import pytest
+from helpers import Answer, call
 
 import dqfd_bc_keras  # noqa: F401  (first: TF settings, BCModel registered)
-from dqfd_bc_keras.commands.cli import run
 from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.networks import build_q_network
@@ -204,39 +201,29 @@ def cases(run_dir, tmp_path_factory) -> dict[str, list[str]]:
 
 
 @pytest.fixture(scope="module")
-def script(cases) -> dict[str, tuple[int, str, str]]:
-    """{case: (exit code, stdout, stderr)} of evaluate.py as its own process, for the cases a
-    user meets first; the processes run together, since each pays a ~4 s TensorFlow import."""
-    procs = {
-        name: subprocess.Popen(
-            [sys.executable, "evaluate.py", *cases[name]],
-            cwd=REPO,
-            text=True,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-        )
-        for name in ("json", "bc", "corrupt")
-    }
-    return {name: (proc.wait(timeout=300), proc.stdout.read(), proc.stderr.read()) for name, proc in procs.items()}
+def script(cases) -> dict[str, Answer]:
+    """{case: what evaluate.py answers}, for the cases a user meets first."""
+    return {name: call("evaluate.py", *cases[name]) for name in ("json", "bc", "corrupt")}
 
 
 def test_script_prints_and_writes_the_json_result(script, cases):
-    code, stdout, stderr = script["json"]
-    assert code == 0, stderr
-    result = json.loads(stdout)
+    done = script["json"]
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
     assert set(result) >= KEYS and (result["task"], result["policy"], result["episodes"]) == ("cartpole", "q", 2)
     assert json.loads(Path(cases["json"][-1]).read_text()) == result
 
 
 def test_script_plays_the_bc_model_and_prints_a_summary(script):
-    code, stdout, stderr = script["bc"]
-    assert code == 0, stderr
-    assert "bc_model.keras" in stdout and "bc policy, 2 greedy episodes (seeds 3..4)" in stdout
+    done = script["bc"]
+    assert done.returncode == 0, done.stderr
+    assert "bc_model.keras" in done.stdout and "bc policy, 2 greedy episodes (seeds 3..4)" in done.stdout
 
 
 def test_script_error_is_one_line_and_exit_2(script):
-    code, stdout, stderr = script["corrupt"]
-    assert (code, stdout) == (2, "") and len(stderr.splitlines()) == 1 and "corrupt.keras: corrupt" in stderr
+    done = script["corrupt"]
+    assert (done.returncode, done.stdout) == (2, "") and len(done.stderr.splitlines()) == 1
+    assert "corrupt.keras: corrupt" in done.stderr
 
 
 @pytest.mark.parametrize(
@@ -251,18 +238,10 @@ def test_script_error_is_one_line_and_exit_2(script):
         ("zero episodes", "--episodes: must be a positive integer"),
     ],
 )
-def test_cli_errors_are_one_line_and_exit_2(cases, capsys, case, problem):
-    """The script's `cli.run(main)` in this process: the same path, without another TF import."""
-    spec = importlib.util.spec_from_file_location("evaluate_script", REPO / "evaluate.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    try:
-        code = run(module.main, cases[case])
-    except SystemExit as exit:  # argparse's errors
-        code = exit.code
-    stdout, stderr = capsys.readouterr()
-    assert (code, stdout) == (2, "")
-    assert len(stderr.splitlines()) == 1 and problem in stderr, stderr
+def test_cli_errors_are_one_line_and_exit_2(cases, case, problem):
+    done = call("evaluate.py", *cases[case])
+    assert (done.returncode, done.stdout) == (2, "")
+    assert len(done.stderr.splitlines()) == 1 and problem in done.stderr, done.stderr
 
 
 def test_video_records_one_mp4_per_episode_and_never_overwrites(tmp_path):

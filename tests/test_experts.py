@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from dqfd_bc_keras.choices import EXPERT_NAMES
 from dqfd_bc_keras.commands.experts import main
-from dqfd_bc_keras.demos.experts import EXPERT_NAMES, expert_returns, make_expert
+from dqfd_bc_keras.demos.experts import expert_returns, make_expert
 from dqfd_bc_keras.envs.make import task_spaces
 from dqfd_bc_keras.tasks import TASKS, families, family_preset
 

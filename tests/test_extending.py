@@ -2,9 +2,9 @@
 and suite, each in a module of their own outside the package. The modules are the doc's python blocks
 and the commands its bash blocks, read from the doc when the tests run, so the tests follow the doc
 when it changes. Each recipe runs in tmp_path (the user's directory, where the modules are written)
-with the repository on PYTHONPATH, standing in for the installed package; the doc's own `PYTHONPATH=.`
-adds tmp_path. `dqfd-train` and `dqfd-evaluate` run as the repository's train.py and evaluate.py (the
-same programs as the entry points).
+with the package as this process imports it; the doc's own `PYTHONPATH=.` adds tmp_path. Each command
+is answered in this process by the program the command names (`helpers.call`), and forgets what it
+imported and registered when it ends, as its own process would (the suite's workers are processes).
 
 Budgets: the method's commands are the doc's as written (`--quick`, and evaluate's 100 episodes of a
 quick run); the preset's training gets `--quick` (the doc's preset trains 20,000 steps); the suite's
@@ -12,31 +12,22 @@ run gets `--seeds 1` and a run of seconds (the doc's suite is 3 arms × 5 seeds 
 
 import csv
 import json
-import os
 import re
 import runpy
 import shlex
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import tensorflow as tf
+from helpers import Answer, call
 
 from dqfd_bc_keras.core import expert_terms
 from dqfd_bc_keras.core.agent import make_agent
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.core.methods import METHODS
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "EXTENDING.md"
-PROGRAMS = {
-    "dqfd-train": [sys.executable, str(REPO / "train.py")],
-    "dqfd-evaluate": [sys.executable, str(REPO / "evaluate.py")],
-    "python": [sys.executable],
-}
-"""The doc's programs as this checkout runs them."""
 TINY_RUN = [
     arg
     for setting in (
@@ -65,23 +56,17 @@ def recipe(heading: str) -> tuple[dict[str, str], list[str]]:
     return modules, commands
 
 
-def run(line: str, *extra: str, cwd: Path) -> subprocess.CompletedProcess:
+def run(line: str, *extra: str, cwd: Path) -> Answer:
     """One of the doc's command lines, typed in `cwd`, with `extra` arguments appended; its leading
-    `NAME=VALUE` words set the environment (`PYTHONPATH=.`: `cwd`, then the repository)."""
-    words = shlex.split(line)
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    `PYTHONPATH=.` puts `cwd` on the path. Like a process of its own, a command imports a user's
+    module only where its own line says so."""
+    words, path = shlex.split(line), []
     while "=" in words[0]:
         name, _, value = words.pop(0).partition("=")
-        env[name] = os.pathsep.join([str(cwd / value), str(REPO)]) if name == "PYTHONPATH" else value
-    return subprocess.run(
-        [*PROGRAMS[words[0]], *words[1:], *extra],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=900,
-        check=False,
-    )
+        assert name == "PYTHONPATH", f"the doc sets {name}, which these tests do not pass on"
+        path.append(cwd / value)
+    program, *args = words[2:] if words[:2] == ["python", "-m"] else words
+    return call(program, *args, *extra, cwd=cwd, path=path)
 
 
 def write(modules: dict[str, str], where: Path) -> None:
@@ -105,13 +90,10 @@ def test_the_method_recipe_trains_and_evaluates_with_the_users_method(tmp_path):
 
 @pytest.fixture
 def users_method(tmp_path, monkeypatch):
-    """The doc's method module, importable in this process; forgotten afterwards."""
+    """The doc's method module, importable in this process (conftest forgets it after the test)."""
     modules, _ = recipe("A method (an expert loss)")
     write(modules, tmp_path)
     monkeypatch.syspath_prepend(str(tmp_path))
-    yield
-    METHODS.pop("half_ce", None)
-    sys.modules.pop("my_methods", None)
 
 
 def test_the_recipes_method_is_the_j_e_the_agent_learns_with(users_method, demos, bc_models):
@@ -131,7 +113,7 @@ def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_p
     modules, (train,) = recipe("A task preset, or a task family")
     write(modules, tmp_path)
     done = run(train, "--quick", cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
+    assert (done.returncode, done.stderr) == (0, "")
     (out,) = [path.parent for path in (tmp_path / "runs").glob("*/config.json")]
     config = json.loads((out / "config.json").read_text())
     assert (config["task"], config["expert"]) == (re.search(r"--task (\S+)", train)[1], "lean")
@@ -153,6 +135,9 @@ def test_the_suite_recipe_runs_its_arms_and_reports_them(tmp_path):
     arms = runpy.run_path(str(tmp_path / f"{module}.py"))[name]
     done = run(sweep, "--seeds", "1", *TINY_RUN, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[0] == (
+        f"{module}:{name}: {len(arms)} runs, 0 already complete, {len(arms)} to run on 2 local worker(s)"
+    )
     results = tmp_path / re.search(r"--out (\S+)", sweep)[1]
     configs = [json.loads(p.read_text()) for p in results.glob("*/seed0/config.json")]
     assert arms and len(configs) == len(list(results.glob("*/seed0/complete.json"))) == len(arms)

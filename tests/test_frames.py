@@ -1,16 +1,14 @@
 """Frames: uint8 observations through the replay's frame pool, the convolutional networks and the
-estimators, the torso's choice, and MinAtar and Atari runs through train.py and evaluate.py."""
+estimators, the torso's choice, and MinAtar and Atari runs through train.py and evaluate.py (answered
+in this process)."""
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import keras
 import numpy as np
 import pytest
 import tensorflow as tf
+from helpers import python as run
 
 from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
@@ -20,15 +18,7 @@ from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.envs.observations import Frames
 from dqfd_bc_keras.errors import ConfigError
 
-REPO = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "tests")])}
 BREAKOUT = "ale_py:ALE/Breakout-v5"
-
-
-def run(*args, timeout=600):
-    return subprocess.run(
-        [sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=REPO, env=ENV
-    )
 
 
 # --- the frame pool -----------------------------------------------------------------------------
@@ -39,7 +29,7 @@ def episodes_of_frames(rng, lengths, shape, stack):
     stack shifting one frame a step and starting as copies of its first frame (as Atari's)."""
     out = []
     for length in lengths:
-        frame = lambda: rng.integers(0, 256, shape, dtype=np.uint8)  # noqa: E731
+        frame = lambda: rng.integers(0, 256, shape, dtype=np.uint8)
         obs = np.repeat(frame()[..., None], stack, axis=-1) if stack > 1 else frame()
         for t in range(length):
             nxt = np.concatenate([obs[..., 1:], frame()[..., None]], axis=-1) if stack > 1 else frame()

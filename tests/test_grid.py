@@ -94,7 +94,7 @@ def test_the_grid_is_every_method_on_every_cell_of_each_task_with_plain_dqn_once
     ],
 )
 def test_help_and_hurt_read_the_ratio_interval_against_1(method, dqn, expected):
-    entry = lambda steps: Entry(np.array(steps, float), np.full(5, 500.0))  # noqa: E731
+    entry = lambda steps: Entry(np.array(steps, float), np.full(5, 500.0))
     assert effect(entry(method), entry(dqn)) == expected
 
 
@@ -132,7 +132,9 @@ def test_the_summary_line_counts_pairs_and_calls_a_grid_short_of_its_seeds_provi
         monkeypatch.setattr(
             summarising,
             "collect",
-            lambda arms, directory, task: ([never, matched], table(ce_seeds)) if task == "mountaincar" else ([], {}),
+            lambda arms, directory, task, n=ce_seeds: (
+                ([never, matched], table(n)) if task == "mountaincar" else ([], {})
+            ),
         )
         line = (
             "Demonstration quality × quantity (mountaincar): a method with demonstrations is faster than DQN in 1 of 2 "

@@ -10,13 +10,14 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
+from helpers import python as run
 
 minari = pytest.importorskip("minari")
 
-from dqfd_bc_keras.demos import ARRAYS, DemoDataset, record, rollout  # noqa: E402
-from dqfd_bc_keras.demos.minari import _check_spaces, from_minari, to_minari  # noqa: E402
-from dqfd_bc_keras.envs import make as envs  # noqa: E402
-from dqfd_bc_keras.errors import ConfigError, DemoFileError  # noqa: E402
+from dqfd_bc_keras.demos import ARRAYS, DemoDataset, record, rollout  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.demos.minari import _check_spaces, from_minari, to_minari  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.envs import make as envs  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.errors import ConfigError, DemoFileError  # noqa: E402  (after the importorskip guards)
 
 
 @pytest.fixture(autouse=True)
@@ -235,23 +236,8 @@ def test_without_minari_says_how_to_install(monkeypatch, mountaincar):
 
 def test_cli_export_then_train_from_the_minari_dataset(cache, tmp_path):
     """A user's path: record a plain env with a rule, publish it with `demos export`, train on it
-    with `train.py --demos minari:ID` (all subprocesses, the same local cache)."""
+    with `train.py --demos minari:ID` (the commands, answered in this process, share the local cache)."""
     import json
-    import os
-    import subprocess
-    from pathlib import Path
-
-    repo = Path(__file__).resolve().parents[1]
-    env = {
-        **os.environ,
-        "MINARI_DATASETS_PATH": str(cache),
-        "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")]),
-    }
-
-    def run(*args):
-        return subprocess.run(
-            [sys.executable, *map(str, args)], capture_output=True, text=True, cwd=repo, env=env, timeout=300
-        )
 
     demos = tmp_path / "chain.npz"
     assert (
@@ -310,9 +296,6 @@ def test_env_kwargs_are_compared_with_the_datasets_env_spec(cache, tmp_path):
     refused without the kwargs or with others, in one line naming both; trained on with them."""
     import dataclasses
     import json
-    import os
-    import subprocess
-    from pathlib import Path
 
     import toy_envs  # noqa: F401  (registers ToyChain-v0)
 
@@ -341,33 +324,19 @@ def test_env_kwargs_are_compared_with_the_datasets_env_spec(cache, tmp_path):
     data = from_minari("toy/chain7-v0", "toy_envs:ToyChain-v0", env_kwargs={"size": 7, "observe": "flat"})
     assert data.meta.env_kwargs == {"size": 7, "observe": "flat"} and data.obs.shape == (120, 7)
 
-    repo = Path(__file__).resolve().parents[1]
-    env = {
-        **os.environ,
-        "MINARI_DATASETS_PATH": str(cache),
-        "PYTHONPATH": os.pathsep.join([str(repo), str(repo / "tests")]),
-    }
     out = tmp_path / "run"
-    done = subprocess.run(
-        [
-            sys.executable,
-            "train.py",
-            "--env",
-            "toy_envs:ToyChain-v0",
-            "--env-kwargs",
-            "size=7",
-            "--demos",
-            "minari:toy/chain7-v0",
-            "--quick",
-            "--quiet",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        cwd=repo,
-        env=env,
-        timeout=300,
+    done = run(
+        "train.py",
+        "--env",
+        "toy_envs:ToyChain-v0",
+        "--env-kwargs",
+        "size=7",
+        "--demos",
+        "minari:toy/chain7-v0",
+        "--quick",
+        "--quiet",
+        "--out",
+        out,
     )
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "eval.json").read_text())["lengths"] == [6, 6]

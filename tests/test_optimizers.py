@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-import dqfd_bc_keras  # noqa: F401
+import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras.core.optimizers import FusedAdam
 
 SHAPES = [(4, 64), (64,), (64, 2), ()]

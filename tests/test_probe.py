@@ -1,6 +1,9 @@
 """The reliability probe of issue O: each test is a defect a user met, driven through the command the
 user typed (`train.py`, `evaluate.py`, `python -m ...`), and checks what they see: the exit code, one
-line naming what to change, and nothing written or damaged.
+line naming what to change, and nothing written or damaged. A command runs as its own process
+(`command`) where the process is what the test checks: its imports (an answer before TensorFlow), a
+kill, two runners, a fresh process without a user's module; elsewhere it answers in this process
+(`helpers.call`). The plug-in modules are docs/EXTENDING.md's, read by tests/test_extending.py.
 
 Issue O's list, one section each: run directories and --force; the lab's sweeps and reports; Atari and
 env ids; values and sizes checked before TensorFlow loads; users' plug-ins. A later round adds its own
@@ -23,36 +26,26 @@ import tempfile
 import zipfile
 from argparse import ArgumentTypeError
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import keras
 import numpy as np
 import pytest
 import tensorflow as tf
+from helpers import Answer, call
 from test_cli import importers
+from test_extending import recipe, write
 from test_reliability import ENV, REPO, evaluate_main, one_line, train_main, tree
 
 from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.commands.cli import env_kwarg
 from dqfd_bc_keras.core.config import Config, machine_memory, memory_needed
 from dqfd_bc_keras.demos import record, save
-from dqfd_bc_keras.envs.make import make_task
+from dqfd_bc_keras.envs.make import checked_spaces, make_task
 from dqfd_bc_keras.runs import directory as runs
 
 NO_TENSORFLOW = 'raise ImportError("tensorflow is blocked by the test")\n'
 """A `tensorflow` package first on the path: a command that imports TensorFlow fails with this."""
-
-
-@dataclass
-class Answer:
-    """What a command answered: its exit code, its stdout, its own stderr (without `-X importtime`'s
-    lines and the ALE's banner, which are not the command's), and the modules importtime timed."""
-
-    returncode: int
-    stdout: str
-    stderr: str
-    imports: list[str]
 
 
 def command(*args: object, cwd: Path = REPO, path: Sequence[str | Path] = (), block_tensorflow: bool = False) -> Answer:
@@ -108,11 +101,10 @@ TINY_RUN = ["--quick", "--quiet", "--set", "total_steps=300", "--set", "pretrain
 """A run of a few seconds: one checkpoint after ckpt-0, one evaluation."""
 
 
-@pytest.fixture(scope="module")
-def finished(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("finished") / "run"
-    assert cli.run(train_main, [*TINY_RUN, "--out", str(out)]) == 0
-    return out
+@pytest.fixture
+def finished(quick_run) -> Path:
+    """The session's finished quick run (read-only: a test copies it before it changes it)."""
+    return quick_run().out
 
 
 def _checkpoint(run: Path) -> Path:
@@ -169,8 +161,9 @@ def test_an_empty_existing_directory_is_trained_into(tmp_path, capsys):
 
 KILL_AT_FIRST_CHECKPOINT = """
 import os, signal, sys
-from dqfd_bc_keras import cli, runs
+from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.commands.train import main
+from dqfd_bc_keras.runs import directory as runs
 runs.RunDirectory.save_checkpoint = lambda self: os.kill(os.getpid(), signal.SIGKILL)
 sys.exit(cli.run(main, sys.argv[1:]))
 """
@@ -433,7 +426,7 @@ def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_
         )
     before = tree(suite)
     results = tmp_path / "report" / "RESULTS.md"
-    done = command(*LAB, "report", suite, "--results", results)
+    done = call("dqfd_bc_keras.experiments", "report", suite, "--results", results)
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     assert done.stdout.startswith(f"wrote {results}, ")
     text = results.read_text()
@@ -449,38 +442,17 @@ def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_
     assert tree(suite) == before
 
 
-def documented_suite() -> str:
-    """The module docs/EXTENDING.md's suite recipe tells the user to write."""
-    text = (REPO / "docs" / "EXTENDING.md").read_text()
-    return re.search(r"```python\n(# my_suites\.py\n.*?)```", text, re.S)[1]
-
-
-def test_the_documented_suite_recipe_runs_a_module_name_suite(tmp_path):
-    (tmp_path / "my_suites.py").write_text(documented_suite())
-    done = command(
-        *LAB, "run", "my_suites:SIGMAS", "--out", "results", "--seeds", "1", *TINY_SWEEP, cwd=tmp_path, path=["."]
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[0] == "my_suites:SIGMAS: 3 runs, 0 already complete, 3 to run on 2 local worker(s)"
-    configs = [json.loads(p.read_text()) for p in (tmp_path / "results").glob("*/seed0/config.json")]
-    assert len(list((tmp_path / "results").glob("*/seed0/complete.json"))) == 3
-    assert sorted(c["sigma0_sq"] for c in configs) == [0.1, 0.5, 2.0]
-    assert {(c["task"], c["timeout"], c["expert_loss"], c["total_steps"]) for c in configs} == {
-        ("cartpole", "bootstrap", "bayes", 100)
-    }
-
-
 def test_a_module_name_suite_that_is_not_there_is_refused_in_one_line(tmp_path):
-    (tmp_path / "my_suites.py").write_text(documented_suite())
+    write(recipe("A suite of runs")[0], tmp_path)
     for suite, message in (
         (
             "my_suites:SIGMA",
-            "error: suite 'my_suites:SIGMA': cannot import it (AttributeError: module 'my_suites' has "
-            "no attribute 'SIGMA')",
+            "error: suite 'my_suites:SIGMA': my_suites (my_suites.py) has no non-empty list of "
+            "experiments.suites.Arm 'SIGMA'; it has SIGMAS",
         ),
         (
             "my_suite:SIGMAS",
-            "error: suite 'my_suite:SIGMAS': cannot import it (ModuleNotFoundError: No module named 'my_suite')",
+            "error: suite 'my_suite:SIGMAS': no module named 'my_suite' (is its directory on PYTHONPATH?)",
         ),
     ):
         done = command(*LAB, "run", suite, "--out", "results", cwd=tmp_path, path=["."])
@@ -520,7 +492,7 @@ TINY_PONG = [
 
 def test_atari_evaluation_plays_max_steps_agent_steps_and_plain_dqn_needs_no_demo_capacity(tmp_path):
     # demo_capacity=10 is below the limit 50: sized D_demo only for a method with demonstrations.
-    done = command(
+    done = call(
         "train.py",
         "--env",
         PONG,
@@ -535,7 +507,7 @@ def test_atari_evaluation_plays_max_steps_agent_steps_and_plain_dqn_needs_no_dem
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "a" / "eval.json").read_text())
     assert result["lengths"] == [50]  # not 50 emulator frames (about 12 agent steps)
-    done = command("evaluate.py", tmp_path / "a", "--episodes", "2", "--max-steps", "30")
+    done = call("evaluate.py", tmp_path / "a", "--episodes", "2", "--max-steps", "30")
     assert done.returncode == 0, done.stderr
     assert "length 30.0 steps on average" in done.stdout
 
@@ -548,7 +520,7 @@ def test_a_method_with_demonstrations_still_needs_demo_capacity_for_an_episode(t
 
 def test_atari_ram_trains_on_a_128_byte_vector_with_the_step_limit_in_agent_steps(tmp_path):
     (tmp_path / "ram_rules.py").write_text("def fire(obs):\n    return 1\n")
-    done = command(
+    done = call(
         "train.py",
         "--env",
         PONG,
@@ -590,12 +562,13 @@ def test_atari_ram_keeps_the_no_op_starts_and_the_frame_skip():
     [
         (
             ['obs_type="ram"', "frame_stack=2"],
-            "error: --env-kwargs frame_stack: not with obs_type='ram', which observes the console's 128 bytes, not frames",
+            "error: --env-kwargs frame_stack: not with obs_type='ram', which observes the console's 128 bytes, "
+            "not frames",
         ),
         (
             ['obs_type="rgb"'],
-            "error: --env-kwargs obs_type: expected 'grayscale' (the screen as frames) or 'ram' (the console's 128 bytes), "
-            "got 'rgb'",
+            "error: --env-kwargs obs_type: expected 'grayscale' (the screen as frames) or 'ram' (the console's "
+            "128 bytes), got 'rgb'",
         ),
     ],
 )
@@ -707,7 +680,7 @@ def test_env_kwargs_refuses_a_value_it_would_otherwise_pass_on_as_a_string(text,
 
 def test_is_slippery_false_reaches_the_env_and_config_json_as_false(tmp_path):
     out = tmp_path / "run"
-    done = command(
+    done = call(
         "train.py",
         "--env",
         "FrozenLake-v1",
@@ -746,7 +719,8 @@ def test_malformed_env_kwargs_json_is_one_line_before_tensorflow(tmp_path):
 def test_the_default_configs_need_far_less_memory_than_any_machine_has():
     for task in ("cartpole", "mountaincar"):
         config = Config.for_task(task)
-        needed = sum(memory_needed(config, config.network_input, 3).values())
+        net_input = checked_spaces(config).network_input(config.torso, config.timeout)
+        needed = sum(memory_needed(config, net_input, 3).values())
         assert 1 * 2**20 < needed < min(1 * 2**30, machine_memory() / 10)
 
 
@@ -929,8 +903,8 @@ def test_a_demonstrator_rule_that_fails_is_one_line_before_tensorflow_and_leaves
         (
             "import numpy\nimport not_installed_pkg\n" + MY_RULES,
             "my_rules:bad",
-            "demonstrator my_rules:bad: importing my_rules raised ModuleNotFoundError: No module named 'not_installed_pkg' "
-            "(my_rules.py:2)",
+            "demonstrator my_rules:bad: importing my_rules raised ModuleNotFoundError: No module named "
+            "'not_installed_pkg' (my_rules.py:2)",
         ),
         (
             "def bad(obs)\n    return 0\n",
@@ -989,7 +963,7 @@ def test_a_rule_that_raises_while_demonstrations_are_recorded_is_one_line_and_le
         "calls = 0\n\n\ndef bad(obs):\n    global calls\n    calls += 1\n"
         "    if calls > 5:\n        raise RuntimeError(f'call {calls}')\n    return 0\n"
     )
-    done = command(
+    done = call(
         "train.py",
         "--env",
         "CartPole-v1",
@@ -1006,48 +980,8 @@ def test_a_rule_that_raises_while_demonstrations_are_recorded_is_one_line_and_le
     assert left_in(tmp_path) == ["my_rules.py"]  # the new run's directory is removed
 
 
-MY_TASKS = """from dqfd_bc_keras.tasks import TaskSpec, register_task
-
-
-def lean(obs):
-    return int(obs[2] + obs[3] > 0)
-
-
-register_task(TaskSpec("short-pole", "CartPole-v1", family="short-pole", max_steps=60, fall_penalty=-10.0,
-                       defaults={"total_steps": 20_000}, experts={"lean": lean}))
-"""
-"""docs/EXTENDING.md's preset, as it is written there."""
-
-
-def test_the_extending_recipe_is_the_preset_these_tests_train():
-    assert MY_TASKS in (REPO / "docs" / "EXTENDING.md").read_text().replace("# my_tasks.py\n", "")
-
-
-def test_a_users_preset_without_an_imperfect_expert_demonstrates_with_its_own(tmp_path):
-    (tmp_path / "my_tasks.py").write_text(MY_TASKS)
-    out = tmp_path / "run"
-    done = command(
-        "train.py",
-        "--task",
-        "my_tasks:short-pole",
-        "--quick",
-        "--quiet",
-        "--set",
-        "total_steps=60",
-        "--set",
-        "pretrain_steps=5",
-        "--out",
-        out,
-        cwd=tmp_path,
-        path=[tmp_path],
-    )
-    assert (done.returncode, done.stderr) == (0, "")
-    assert json.loads((out / "config.json").read_text())["expert"] == "lean"
-    assert json.loads((out / "demonstrations.json").read_text())["expert"] == "lean"
-
-
 def test_a_users_preset_refuses_an_expert_it_does_not_have_before_tensorflow(tmp_path):
-    (tmp_path / "my_tasks.py").write_text(MY_TASKS)
+    write(recipe("A task preset, or a task family")[0], tmp_path)
     done = command(
         "train.py",
         "--task",
@@ -1067,19 +1001,6 @@ def test_a_users_preset_refuses_an_expert_it_does_not_have_before_tensorflow(tmp
     assert left_in(tmp_path) == ["my_tasks.py"]
 
 
-MY_METHODS = """from dqfd_bc_keras import losses
-from dqfd_bc_keras.core.methods import Method
-
-
-def half_ce(agent, q, batch):
-    j_e = losses.cross_entropy_loss(q, batch.pi_bc, agent.config.temperature)
-    return 0.5 * losses.weighted_mean(j_e, batch.weights)
-
-
-HALF_CE = Method("half_ce", "half of DQfD-BC's cross-entropy", bc_fit="mle", term=half_ce, reads=("temperature",))
-"""
-
-
 def unlocked_tree(run: Path) -> dict:
     """`tree(run)` without the lock file, which each command that opens the run takes."""
     return {name: data for name, data in tree(run).items() if Path(name).name != ".lock"}
@@ -1088,9 +1009,9 @@ def unlocked_tree(run: Path) -> dict:
 def test_a_run_of_a_users_method_evaluates_without_its_module_and_resume_says_it_is_missing(tmp_path):
     code = tmp_path / "code"
     code.mkdir()
-    (code / "my_methods.py").write_text(MY_METHODS)
+    write(recipe("A method (an expert loss)")[0], code)
     out = tmp_path / "run"
-    trained = command(
+    trained = call(
         "train.py",
         "--expert-loss",
         "my_methods:HALF_CE",
@@ -1113,8 +1034,7 @@ def test_a_run_of_a_users_method_evaluates_without_its_module_and_resume_says_it
     resumed = command("train.py", "--out", out, "--resume", "--quiet", cwd=tmp_path)
     assert (resumed.returncode, resumed.stderr) == (
         2,
-        "error: expert_loss='my_methods:HALF_CE': cannot import it (ModuleNotFoundError: No module named "
-        "'my_methods'); keep your module importable (on PYTHONPATH or installed)\n",
+        "error: expert_loss='my_methods:HALF_CE': no module named 'my_methods' (is its directory on PYTHONPATH?)\n",
     )
     assert unlocked_tree(out) == before
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from helpers import call
 from toy_envs import Chain
 
 from dqfd_bc_keras import DQfD, demos
@@ -40,27 +41,20 @@ def walk_right(obs):
     return 1
 
 
-def test_the_same_metrics_as_train_py(tmp_path):
-    """DQfD(preset, seed, QUICK's fields).learn(N) gives train.py --quick's metrics.csv, wall time aside."""
+def test_the_same_metrics_as_train_py(quick_run):
+    """DQfD(preset, seed, QUICK's fields).learn(N) gives train.py --quick's metrics.csv (seed 0, the
+    default loss), wall time aside."""
     fields = {key: value for key, value in QUICK.items() if key != "total_steps"}
     model = DQfD("cartpole", seed=0, **fields).learn(QUICK["total_steps"])
-    done = subprocess.run(
-        [sys.executable, "train.py", "--quick", "--quiet", "--seed", "0", "--out", tmp_path / "run"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-    )
-    assert done.returncode == 0, done.stderr
-    with open(tmp_path / "run" / "metrics.csv") as file:
+    run = quick_run().out
+    with open(run / "metrics.csv") as file:
         expected = [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(file)]
     ours = [
         {k: "" if v is None else str(v) for k, v in row.to_row().items() if k != "wall_time"}
         for row in model.state.metrics
     ]
     assert ours == expected and len(ours) > 1
-    assert json.loads((tmp_path / "run" / "config.json").read_text())["expert"] == model.config.expert == "imperfect"
+    assert json.loads((run / "config.json").read_text())["expert"] == model.config.expert == "imperfect"
 
 
 def test_an_env_object_a_callable_expert_callbacks_save_load(tmp_path):
@@ -160,24 +154,16 @@ def test_demonstrations_as_a_dataset_a_file_and_a_minari_id(tmp_path, monkeypatc
     )
     assert DQfD("CartPole-v1", kinds["minari"]).config.expert == "demonstrations from minari:cartpole/mine-v0"
 
-    done = subprocess.run(
-        [
-            sys.executable,
-            "train.py",
-            "--env",
-            "CartPole-v1",
-            "--demos",
-            tmp_path / "d.npz",
-            "--quick",
-            "--quiet",
-            "--out",
-            tmp_path / "cli",
-        ],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
+    done = call(
+        "train.py",
+        "--env",
+        "CartPole-v1",
+        "--demos",
+        tmp_path / "d.npz",
+        "--quick",
+        "--quiet",
+        "--out",
+        tmp_path / "cli",
     )
     assert done.returncode == 0, done.stderr
     cli = json.loads((tmp_path / "cli" / "config.json").read_text())["expert"]
@@ -269,10 +255,13 @@ def test_a_method_made_in_the_script_is_registered_and_said_at_save(tmp_path):
     assert model.config.expert_loss == "script_margin"
     with pytest.warns(DqfdWarning, match="the method 'script_margin' \\(registered in this process"):
         model.save(tmp_path / "run")
-    script = (
+    script = (  # a new process, where the method is not registered: learning more, then dqfd-evaluate
+        f"import sys\n"
         f"from dqfd_bc_keras import DQfD\n"
+        f"from dqfd_bc_keras.commands import cli, evaluate\n"
         f"try:\n    DQfD.load({str(tmp_path / 'run')!r}).learn(10)\n"
-        f"except Exception as error:\n    print(type(error).__name__, error)\n"
+        f"except Exception as error:\n    print(type(error).__name__, error, flush=True)\n"
+        f"sys.exit(cli.run(evaluate.main, [{str(tmp_path / 'run')!r}, '--episodes', '2']))\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", script],
@@ -283,13 +272,6 @@ def test_a_method_made_in_the_script_is_registered_and_said_at_save(tmp_path):
     )
     assert "ConfigError expert_loss='script_margin' is not one of" in done.stdout, done.stderr
     assert "registered again with dqfd_bc_keras.core.methods.register" in done.stdout
-    done = subprocess.run(
-        [sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
     assert done.returncode == 0 and "2 greedy episodes" in done.stdout, done.stderr  # evaluating needs no method
 
 
@@ -324,14 +306,8 @@ def test_a_learn_more_stopped_before_config_json_resumes_with_train_py(tmp_path,
     with pytest.raises(KeyboardInterrupt):
         model.learn(150)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 150
-    done = subprocess.run(
-        [sys.executable, "train.py", "--resume", "--quiet", "--out", tmp_path / "run"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-    )
+    monkeypatch.undo()  # the resume is a new command: nothing stops it
+    done = call("train.py", "--resume", "--quiet", "--out", tmp_path / "run")
     assert done.returncode == 0, done.stderr
     assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 300
     assert json.loads((tmp_path / "run" / "complete.json").read_text())["env_steps"] == 300

@@ -34,7 +34,7 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-import dqfd_bc_keras  # noqa: F401
+import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras.core import reference
 from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
 from dqfd_bc_keras.core.config import Config

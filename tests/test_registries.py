@@ -17,9 +17,11 @@ from dqfd_bc_keras.core.methods import BAYES_FIELDS, METHODS, Method, get_method
 from dqfd_bc_keras.demos import record
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arms import BAYES_ONLY
-from dqfd_bc_keras.experiments.efficiency import TEACHER
-from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS, lab_settings
-from dqfd_bc_keras.experiments.suites import EFFICIENCY_TASKS
+from dqfd_bc_keras.experiments.efficiency import teachers
+from dqfd_bc_keras.experiments.estimators import calibrated_tasks
+from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS, LabSettings, lab_settings, register_lab_settings
+from dqfd_bc_keras.experiments.suites import efficiency_tasks
+from dqfd_bc_keras.plugins import ImportFailed, ModuleMissing, NameMissing, NotAReference, WrongKind, load, parse
 from dqfd_bc_keras.tasks import TASKS, family_preset
 
 BC_FIT = {
@@ -82,9 +84,11 @@ def test_the_registry_holds_every_builtin_method_and_config_derives_from_it():
 def test_an_unknown_method_and_behavioural_cloning_alone_are_refused_by_validation():
     with pytest.raises(ConfigError, match=r"expert_loss='bayse' is not one of \('margin', 'bc_margin'"):
         Config.for_task("cartpole", expert_loss="bayse")
-    with pytest.raises(ConfigError, match="expert_loss='no_such_module:X': cannot import it"):
+    with pytest.raises(ConfigError, match="expert_loss='no_such_module:X': no module named 'no_such_module'"):
         Config.for_task("cartpole", expert_loss="no_such_module:X")
-    with pytest.raises(ConfigError, match="expert_loss='json:dumps': dumps is a function, not a dqfd_bc_keras"):
+    with pytest.raises(ConfigError, match=r"expert_loss='json:X': json \(.*json/__init__.py\) has no dqfd_bc_"):
+        get_method("json:X")
+    with pytest.raises(ConfigError, match=r"'json:dumps': dumps is not a dqfd_bc_keras.core.methods.Method \(it is"):
         get_method("json:dumps")
     with pytest.raises(ConfigError, match="'bc-alone' trains no Q-network"):
         Config.for_task("cartpole", expert_loss="bc-alone")
@@ -98,11 +102,10 @@ def package(table: dict) -> dict:
 
 
 def test_the_lab_tables_derive_from_the_lab_settings():
-    assert {t: s.efficiency_demos for t, s in LAB_SETTINGS.items() if s.efficiency_demos} == EFFICIENCY_TASKS
-    assert {t: s.teacher_return for t, s in LAB_SETTINGS.items() if s.teacher_return is not None} == TEACHER
-    assert package(EFFICIENCY_TASKS) == {"cartpole": 5, "mountaincar": 10, "acrobot": 10, "lunarlander": 10}
-    assert package(TEACHER) == {"acrobot": -112.68, "lunarlander": 129.03}
-    assert [lab_settings(t).target_ratio for t in package(EFFICIENCY_TASKS)] == [10.0, 10.0, 5.0, 5.0]
+    assert package(efficiency_tasks()) == {"cartpole": 5, "mountaincar": 10, "acrobot": 10, "lunarlander": 10}
+    assert package(teachers()) == {"acrobot": -112.68, "lunarlander": 129.03}
+    assert [t for t in calibrated_tasks() if t in package(LAB_SETTINGS)] == ["cartpole", "mountaincar"]
+    assert [lab_settings(t).target_ratio for t in package(efficiency_tasks())] == [10.0, 10.0, 5.0, 5.0]
     assert package({t: s.ablation_metric for t, s in LAB_SETTINGS.items() if s.ablation_metric}) == {
         "cartpole": "mean_train_return",
         "mountaincar-goals": "goals_first30",
@@ -122,9 +125,84 @@ def test_a_users_preset_is_a_config_and_a_family_in_process(user_code, monkeypat
     assert record("my_tasks:short-pole", "lean", episodes=1).meta.expert == "lean"
 
 
+def test_lab_settings_registered_later_reach_the_lab_tables(user_code, monkeypatch):
+    """The tables are read when asked: a user's module registers its settings after the lab is imported."""
+    monkeypatch.syspath_prepend(str(user_code))
+    Config.for_task("my_tasks:short-pole")  # imports the module, which registers its lab settings
+    assert "short-pole" not in efficiency_tasks() and "short-pole" not in teachers()
+    register_lab_settings("short-pole", LabSettings(efficiency_demos=4, teacher_return=41.5, calibrate=True))
+    assert (efficiency_tasks()["short-pole"], teachers()["short-pole"]) == (4, 41.5)
+    assert calibrated_tasks()[-1] == "short-pole"
+
+
 @pytest.fixture(autouse=True)
 def _forget_user_presets():
     yield
     TASKS.pop("short-pole", None)
     LAB_SETTINGS.pop("short-pole", None)
     sys.modules.pop("my_tasks", None)
+
+
+PLUGIN = """
+import json
+
+
+def go_left(obs):
+    return 0
+
+
+def _private(obs):
+    return 1
+
+
+WIDTH = 3
+"""
+
+
+@pytest.mark.parametrize(
+    "source, reference, error, message",
+    [
+        (PLUGIN, "my_plugin", NotAReference, "expected module:NAME"),
+        (PLUGIN, "my_plugn:go_left", ModuleMissing, "no module named 'my_plugn' (is its directory on PYTHONPATH?)"),
+        (
+            "import numpy\nimport not_installed_pkg\n",
+            "my_plugin:go_left",
+            ImportFailed,
+            "importing my_plugin raised ModuleNotFoundError: No module named 'not_installed_pkg' (my_plugin.py:2)",
+        ),
+        (
+            "x = 1 / 0\n",
+            "my_plugin:x",
+            ImportFailed,
+            "importing my_plugin raised ZeroDivisionError: division by zero (my_plugin.py:1)",
+        ),
+        (
+            PLUGIN,
+            "my_plugin:go_right",
+            NameMissing,
+            "my_plugin (my_plugin.py) has no function 'go_right'; it has go_left",
+        ),
+        (PLUGIN, "my_plugin:WIDTH", WrongKind, "WIDTH is not a function (it is of type int)"),
+    ],
+    ids=["no-colon", "module-missing", "import-error-inside", "raises-inside", "name-missing", "wrong-kind"],
+)
+def test_a_module_name_reference_fails_in_one_typed_line(tmp_path, monkeypatch, source, reference, error, message):
+    """Every caller of plugins.load (methods, rules, suites) and plugins.import_module (presets, env ids)
+    reads these: the module missing told apart from an ImportError its own code raises."""
+    (tmp_path / "my_plugin.py").write_text(source)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delitem(sys.modules, "my_plugin", raising=False)
+    with pytest.raises(error) as raised:
+        load(reference, f"rule {reference!r}", callable, "function")
+    assert str(raised.value) == f"rule {reference!r}: {message}"
+    assert "\n" not in str(raised.value) and isinstance(raised.value, ConfigError)
+
+
+def test_a_module_name_reference_gives_what_it_names(tmp_path, monkeypatch):
+    (tmp_path / "my_plugin.py").write_text(PLUGIN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "my_plugin", raising=False)
+    assert load("my_plugin:go_left", "rule", callable, "function")(None) == 0
+    assert load("my_plugin:WIDTH", "width") == 3
+    assert parse("pkg.mod:Env-v0") == ("pkg.mod", "Env-v0") and parse("ALE/Pong-v5") is None and parse(":x") is None

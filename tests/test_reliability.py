@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tensorflow as tf
+from helpers import call
 
 from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.core.config import QUICK, Config
@@ -61,12 +62,10 @@ def tree(path: Path) -> dict:
     return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
 
 
-@pytest.fixture(scope="module")
-def finished(tmp_path_factory) -> Path:
-    """A finished `train.py --quick` run."""
-    out = tmp_path_factory.mktemp("finished") / "run"
-    assert cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]) == 0
-    return out
+@pytest.fixture
+def finished(quick_run) -> Path:
+    """The session's finished `train.py --quick` run (read-only: a test copies it before it changes it)."""
+    return quick_run().out
 
 
 # --- checkpoints: an atomic switch ----------------------------------------------------------------
@@ -219,10 +218,12 @@ def test_a_second_writer_is_refused_with_the_holders_pid_and_force_deletes_nothi
 
 
 def test_a_lock_is_exclusive_within_a_process_too(tmp_path):
-    with DirectoryLock(tmp_path / "run"):
-        with pytest.raises(RunDirectoryError, match=f"is in use by process {os.getpid()}"):
-            with DirectoryLock(tmp_path / "run"):
-                pass
+    with (
+        DirectoryLock(tmp_path / "run"),
+        pytest.raises(RunDirectoryError, match=f"is in use by process {os.getpid()}"),
+        DirectoryLock(tmp_path / "run"),
+    ):
+        pass
 
 
 # --- corrupt or mismatched state -------------------------------------------------------------------
@@ -486,7 +487,7 @@ def test_sigterm_stops_a_run_like_ctrl_c_and_it_resumes(tmp_path):
     assert process.returncode == 143, err
     assert err == "interrupted (SIGTERM); a training run continues from its last checkpoint with --resume\n"
     assert (out / ".lock").read_text() == ""  # released on the way out
-    resumed = subprocess.run([*args, "--resume"], cwd=REPO, env=ENV, capture_output=True, text=True, timeout=300)
+    resumed = call("train.py", *args[2:], "--resume")  # the resume itself needs no process of its own
     assert resumed.returncode == 0, resumed.stderr
     assert (out / "eval.json").is_file()
 

@@ -16,14 +16,14 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("minatar")
 
-import gymnasium as gym  # noqa: E402
-from gymnasium import spaces  # noqa: E402
-from stable_baselines3.dqn.policies import CnnPolicy  # noqa: E402
-from torch.nn import functional as F  # noqa: E402
+import gymnasium as gym  # noqa: E402  (after the importorskip guards)
+from gymnasium import spaces  # noqa: E402  (after the importorskip guards)
+from stable_baselines3.dqn.policies import CnnPolicy  # noqa: E402  (after the importorskip guards)
+from torch.nn import functional as F  # noqa: E402  (after the importorskip guards)
 
-from dqfd_bc_keras.errors import ConfigError  # noqa: E402
-from dqfd_bc_keras.experiments.sb3_pixels import MinAtarCNN, hyperparameters, minatar_env_id, policy_kwargs  # noqa: E402
-from dqfd_bc_keras.seeds import eval_seed  # noqa: E402
+from dqfd_bc_keras.errors import ConfigError  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.experiments.sb3_pixels import MinAtarCNN, hyperparameters, minatar_env_id, policy_kwargs  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.seeds import eval_seed  # noqa: E402  (after the importorskip guards)
 
 ROOT = Path(__file__).resolve().parents[1]
 MODULE = "dqfd_bc_keras.experiments.sb3_pixels"

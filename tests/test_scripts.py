@@ -1,4 +1,6 @@
-"""train.py and evaluate.py as a user runs them: subprocesses, tiny budgets, exit codes."""
+"""train.py and evaluate.py as a user runs them: tiny budgets, exit codes, one-line errors. The
+commands answer in this process (`helpers.call`), and the finished quick runs are the session's
+(`quick_run`); `python train.py` itself runs where a process is killed and resumed."""
 
 import csv
 import json
@@ -10,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import call
 
 REPO = Path(__file__).resolve().parents[1]
 LOSSES = ("bayes", "ce", "bc_margin", "margin", "none")
@@ -24,38 +27,10 @@ def run(name, *args, timeout=300):
     return subprocess.run(script(name, *args), capture_output=True, text=True, timeout=timeout, cwd=REPO, env=ENV)
 
 
-@pytest.fixture(scope="module")
-def quick_runs(tmp_path_factory):
-    """`train.py --quick` once per expert loss, two at a time (one per core)."""
-    root = tmp_path_factory.mktemp("runs")
-    done = {}
-    pending = list(LOSSES)
-    active: dict[str, subprocess.Popen] = {}
-    while pending or active:
-        while pending and len(active) < 2:
-            loss = pending.pop(0)
-            active[loss] = subprocess.Popen(
-                script("train.py", "--quick", "--expert-loss", loss, "--out", root / loss),
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-                cwd=REPO,
-                env=ENV,
-            )
-        for loss, process in list(active.items()):
-            if process.poll() is not None:
-                out, err = process.communicate()
-                done[loss] = (process.returncode, out, err, root / loss)
-                del active[loss]
-        time.sleep(0.2)
-    return done
-
-
 @pytest.mark.parametrize("loss", LOSSES)
-def test_quick_training_writes_a_complete_run(quick_runs, loss):
-    code, out, err, run_dir = quick_runs[loss]
-    assert code == 0, err
-    assert "cartpole (CartPole-v1), q policy, 2 greedy episodes" in out and "interactions in all" in out
+def test_quick_training_writes_a_complete_run(quick_run, loss):
+    run_dir, done = quick_run(loss).out, quick_run(loss).answer
+    assert "cartpole (CartPole-v1), q policy, 2 greedy episodes" in done.stdout and "interactions in all" in done.stdout
     expected = {"config.json", "metrics.csv", "evals.csv", "q_network.keras", "eval.json", "learning_curve.png", "tb"}
     if loss != "none":
         expected.add("demonstrations.json")
@@ -68,9 +43,8 @@ def test_quick_training_writes_a_complete_run(quick_runs, loss):
 
 
 @pytest.mark.parametrize("loss", LOSSES)
-def test_evaluate_reads_a_quick_run(quick_runs, loss, tmp_path):
-    run_dir = quick_runs[loss][3]
-    done = run("evaluate.py", run_dir, "--episodes", 3, "--json", "--out", tmp_path / "e.json")
+def test_evaluate_reads_a_quick_run(quick_run, loss, tmp_path):
+    done = call("evaluate.py", quick_run(loss).out, "--episodes", 3, "--json", "--out", tmp_path / "e.json")
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert result["task"] == "cartpole" and result["episodes"] == 3 and len(result["returns"]) == 3
@@ -81,7 +55,7 @@ def test_resume_after_sigkill_reproduces_the_uninterrupted_run(tmp_path):
     """Same seed, op determinism: a run killed mid-way and resumed writes the same metrics."""
     args = ["--quick", "--set", "total_steps=2500", "--set", "checkpoint_every=500", "--quiet"]
     whole, cut = tmp_path / "whole", tmp_path / "cut"
-    assert run("train.py", *args, "--out", whole).returncode == 0
+    assert call("train.py", *args, "--out", whole).returncode == 0  # in this process: the same run
     process = subprocess.Popen(
         script("train.py", *args, "--out", cut), cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
@@ -113,10 +87,10 @@ def one_line_error(done, message):
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
 
 
-def test_train_refuses_to_overwrite_a_run(quick_runs):
-    run_dir = quick_runs["bayes"][3]
+def test_train_refuses_to_overwrite_a_run(quick_run):
+    run_dir = quick_run("bayes").out
     before = (run_dir / "metrics.csv").read_bytes()
-    one_line_error(run("train.py", "--quick", "--out", run_dir), "already holds a run; pass --resume")
+    one_line_error(call("train.py", "--quick", "--out", run_dir), "already holds a run; pass --resume")
     assert (run_dir / "metrics.csv").read_bytes() == before
 
 
@@ -134,34 +108,17 @@ def test_train_refuses_to_overwrite_a_run(quick_runs):
     ],
 )
 def test_train_rejects_bad_input_in_one_line(args, message):
-    one_line_error(run("train.py", "--quick", *args), message)
+    one_line_error(call("train.py", "--quick", *args), message)
 
 
 def test_train_rejects_demos_of_another_task(tmp_path):
     demos = tmp_path / "mc.npz"
-    assert (
-        subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "dqfd_bc_keras.demos",
-                "record",
-                "--task",
-                "mountaincar",
-                "--expert",
-                "strong",
-                "--episodes",
-                "1",
-                "--out",
-                demos,
-            ],
-            cwd=REPO,
-            env=ENV,
-        ).returncode
-        == 0
+    recorded = call(
+        "dqfd_bc_keras.demos", "record", "--task", "mountaincar", "--expert", "strong", "--episodes", 1, "--out", demos
     )
+    assert recorded.returncode == 0, recorded.stderr
     one_line_error(
-        run("train.py", "--quick", "--demos", demos, "--out", tmp_path / "x"),
+        call("train.py", "--quick", "--demos", demos, "--out", tmp_path / "x"),
         "was recorded on task 'mountaincar', not on the requested 'cartpole'",
     )
     assert not (tmp_path / "x").exists()

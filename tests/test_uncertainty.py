@@ -5,8 +5,9 @@ import keras
 import numpy as np
 import pytest
 import tensorflow as tf
+from helpers import call
 
-import dqfd_bc_keras  # noqa: F401
+import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
 from dqfd_bc_keras.core.agent import make_agent
 from dqfd_bc_keras.core.bc import BCModel, build_bc_model
 from dqfd_bc_keras.core.config import Config
@@ -149,7 +150,7 @@ def test_the_agent_stores_the_estimators_variance_and_recomputes_it_after_a_refi
     bc.fit_demos(demos.obs, demos.actions, epochs=2)
     agent = make_agent(config, demos, bc)
     rows = agent.replay.stored_indices()
-    stored = lambda: tf.gather(agent.replay.table, rows)[:, agent.replay.SIGMA_SQ].numpy()  # noqa: E731
+    stored = lambda: tf.gather(agent.replay.table, rows)[:, agent.replay.SIGMA_SQ].numpy()
     np.testing.assert_allclose(stored(), bc.predictive(tf.constant(demos.obs))[1], rtol=1e-6)
     bc.fit_demos(held_out.obs, held_out.actions, epochs=1)  # other references: σ² of D_demo rises
     agent.refresh_expert_targets()
@@ -207,33 +208,22 @@ def test_a_run_logs_the_imitation_weight_on_and_off_the_demonstrations(tmp_path,
     1/(2(σ0² + v)) with v = 1/4 (CartPole's largest policy variance), 1.43, and 5, and below 5 once
     the agent leaves the demonstrations. ce reads no σ²: no weight (its columns are empty)."""
     import csv
-    import subprocess
-    import sys
-    from pathlib import Path
 
-    repo = Path(__file__).resolve().parents[1]
-    done = subprocess.run(
-        [
-            sys.executable,
-            "train.py",
-            "--task",
-            "cartpole",
-            "--quick",
-            "--expert-loss",
-            "bayes",
-            "--set",
-            "uncertainty=distance",
-            "--set",
-            "sigma0_sq=0.1",
-            "--set",
-            "dynamic_demos=off",
-            "--out",
-            tmp_path / "bayes",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        cwd=repo,
+    done = call(
+        "train.py",
+        "--task",
+        "cartpole",
+        "--quick",
+        "--expert-loss",
+        "bayes",
+        "--set",
+        "uncertainty=distance",
+        "--set",
+        "sigma0_sq=0.1",
+        "--set",
+        "dynamic_demos=off",
+        "--out",
+        tmp_path / "bayes",
     )
     assert done.returncode == 0, done.stderr
     rows = list(csv.DictReader((tmp_path / "bayes" / "metrics.csv").open()))

@@ -77,10 +77,17 @@ def chosen_task(args: argparse.Namespace) -> str | None:
 def task_preset(text: str) -> str:
     """argparse type of `--task`: a preset's name, or `module:preset` (importing `module` registers
     it). A Gymnasium id suggests `--env`, a near miss the preset it resembles."""
+    from dqfd_bc_keras.plugins import PluginError, import_module, parse
     from dqfd_bc_keras.tasks import TASKS, find_preset
 
     if find_preset(text) is not None:
         return text
+    parsed = parse(text)
+    if parsed is not None:
+        try:
+            import_module(parsed[0], repr(text))  # a module missing or raising says so, not "use --env"
+        except PluginError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
     if ":" in text or re.search(r"-v\d+$", text):
         raise argparse.ArgumentTypeError(
             f"{text!r} is a Gymnasium env id, not a task preset: did you mean --env {text}?"

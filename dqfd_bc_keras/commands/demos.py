@@ -14,9 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from dqfd_bc_keras.choices import TIMEOUT_MODES
+from dqfd_bc_keras.choices import EXPERT_NAMES, TIMEOUT_MODES
 from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, seed
-from dqfd_bc_keras.demos.experts import EXPERT_NAMES
 from dqfd_bc_keras.demos.minari import to_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import record

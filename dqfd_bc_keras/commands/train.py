@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from dqfd_bc_keras import demos
-from dqfd_bc_keras.choices import TARGETS, TIMEOUT_MODES
+from dqfd_bc_keras.choices import EXPERT_NAMES, TARGETS, TIMEOUT_MODES
 from dqfd_bc_keras.commands.cli import (
     ArgumentParser,
     add_task_arguments,
@@ -35,7 +35,7 @@ from dqfd_bc_keras.commands.cli import (
 )
 from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
 from dqfd_bc_keras.core.methods import METHODS
-from dqfd_bc_keras.demos.experts import EXPERT_NAMES, try_demonstrator
+from dqfd_bc_keras.demos.experts import try_demonstrator
 from dqfd_bc_keras.envs.make import checked_spaces, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.files import DirectoryLock

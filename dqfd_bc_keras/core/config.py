@@ -213,12 +213,18 @@ class Config:
     @classmethod
     def from_dict(cls, fields: dict) -> Config:
         """The inverse of `to_dict` (a saved config.json, whose derived `observation` record is
-        skipped); unknown keys are an error."""
-        known = {f.name for f in dataclasses.fields(cls)}
+        skipped). Every field must be there: the value a file lacks is not known (a default may
+        have changed since it was written). Unknown keys are an error too."""
+        known = [f.name for f in dataclasses.fields(cls)]
         fields = {k: v for k, v in fields.items() if k not in DERIVED_KEYS}
-        unknown = sorted(set(fields) - known)
+        unknown = sorted(set(fields) - set(known))
         if unknown:
             raise ConfigError(f"unknown config field(s) {unknown}")
+        missing = [name for name in known if name not in fields]
+        if missing:
+            raise ConfigError(
+                f"no {missing}: written by an older version? Read the run with that version, or train it again"
+            )
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
         with reading_saved_config():  # its method (the user's) is imported to train, not to read its settings
             return cls.for_task(values.pop("task", "cartpole"), **values)

@@ -20,7 +20,6 @@ TensorFlow: reading a config.json does not load it.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -28,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.plugins import PluginError, WrongKind, load, parse
 
 BC_FITS = ("none", "mle", "map")
 """How a method fits π_bc: not at all, by maximum likelihood (ce, bc_margin), or MAP with dropout (bayes)."""
@@ -87,11 +87,11 @@ class Method:
         """The callable J_E (a "module:function" term imported now)."""
         if not isinstance(self.term, str):
             return self.term
-        module, _, name = self.term.partition(":")
-        return getattr(importlib.import_module(module), name)
+        return load(self.term, f"method {self.name!r}: term {self.term}", callable, "function")
 
 
 _TERMS = "dqfd_bc_keras.core.expert_terms"
+_METHOD = "dqfd_bc_keras.core.methods.Method"
 METHODS: dict[str, Method] = {}
 """Every registered method by name; `get_method` also imports a user's `module:NAME`."""
 
@@ -171,8 +171,7 @@ def get_method(name: str) -> Method:
     """The method called `name`, or a user's `module:NAME` (a `Method` object in an importable module)."""
     if name in METHODS:
         return METHODS[name]
-    module, sep, attribute = name.rpartition(":")
-    if not sep or not module:
+    if parse(name) is None:
         if _SAVED.get():  # a run of a Method a script registered (DQfD(expert_loss=Method(...)))
             return Method(name, "a method a script registered, not registered here")
         raise ConfigError(
@@ -181,19 +180,11 @@ def get_method(name: str) -> Method:
             "again with dqfd_bc_keras.core.methods.register)"
         )
     try:
-        method = getattr(importlib.import_module(module), attribute)
-    except (ImportError, AttributeError) as error:
-        if _SAVED.get():
-            return Method(name, f"a method of your own that cannot be imported here ({type(error).__name__})")
-        raise ConfigError(
-            f"expert_loss={name!r}: cannot import it ({type(error).__name__}: {error}); keep your "
-            "module importable (on PYTHONPATH or installed)"
-        ) from None
-    if not isinstance(method, Method):
-        raise ConfigError(
-            f"expert_loss={name!r}: {attribute} is a {type(method).__name__}, not a dqfd_bc_keras.core.methods.Method"
-        )
-    return method
+        return load(name, f"expert_loss={name!r}", lambda value: isinstance(value, Method), _METHOD)
+    except PluginError as error:
+        if _SAVED.get() and not isinstance(error, WrongKind):
+            return Method(name, f"a method of your own that cannot be imported here ({error})")
+        raise
 
 
 def method_fields() -> set[str]:

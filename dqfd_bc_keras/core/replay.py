@@ -78,8 +78,8 @@ class SumTree(tf.Module):
     rewrites the leaves and re-sums their blocks: a dozen TensorFlow ops in all, where a
     32-ary tree of 150k leaves takes five levels of a dozen each: every op has a fixed cost
     here, and a cumulative sum along wide rows costs far more than one along a long vector
-    (docs/PERFORMANCE.md), hence narrow blocks. The total is re-summed from the block sums on each read, so rounding never
-    accumulates.
+    (docs/PERFORMANCE.md), hence narrow blocks. The total is re-summed from the block sums on
+    each read, so rounding never accumulates.
     """
 
     WIDTH = 64
@@ -290,7 +290,7 @@ class PrioritizedReplay(tf.Module):
 
     def rows(self, obs, actions, rewards, next_obs, terminated, truncated, pi_bc, sigma_sq) -> tf.Tensor:
         """Pack (n, ...) transition arrays into (n, width) table rows."""
-        column = lambda x: tf.cast(tf.reshape(x, [-1, 1]), tf.float32)  # noqa: E731
+        column = lambda x: tf.cast(tf.reshape(x, [-1, 1]), tf.float32)
         return tf.concat(
             [
                 tf.cast(obs, tf.float32),

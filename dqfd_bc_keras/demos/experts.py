@@ -10,8 +10,8 @@ on observations from a time-aware wrapper that appends a remaining-time feature 
 
 from __future__ import annotations
 
+from dqfd_bc_keras.choices import EXPERT_NAMES
 from dqfd_bc_keras.demos.recording import Demonstrator, expert_returns, make_demonstrator, make_expert, try_demonstrator
-from dqfd_bc_keras.tasks import EXPERT_NAMES
 
 __all__ = ["EXPERT_NAMES", "Demonstrator", "expert_returns", "make_demonstrator", "make_expert", "try_demonstrator"]
 

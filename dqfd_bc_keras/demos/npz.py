@@ -5,9 +5,10 @@ File format (version 1), readable with `numpy.load(path, allow_pickle=False)`: t
 `demos.dataset.ARRAYS`, and
 
     meta  0-d str: JSON {format_version, task, env_id, timeout, obs_dim, n_actions, expert,
-                         epsilon, seed, episode_returns, plain_returns, env_kwargs, observation}
+                         epsilon, seed, episode_returns, plain_returns, env_kwargs, observation,
+                         obs_shape}
 
-`env_kwargs` and `observation` are optional (files written before they existed load as {} and "").
+Every key is in every file (`obs_shape` null for flat observations); a file without one is refused.
 """
 
 from __future__ import annotations
@@ -85,30 +86,8 @@ def load(
     check_layout(path, meta, {name: headers[name] for name in ARRAYS})
     dataset = DemoDataset(**{name: _read(path, name) for name in ARRAYS}, meta=meta)
     validate(path, dataset)
-    if task is not None and meta.task != task:
-        raise DemoFileError(path, f"was recorded on task {meta.task!r}, not on the requested {task!r}")
-    if task is not None and meta.env_kwargs != dict(env_kwargs or {}):
-        raise DemoFileError(
-            path,
-            f"was recorded with env kwargs {json.dumps(meta.env_kwargs)}, not the "
-            f"requested {json.dumps(dict(env_kwargs or {}))}",
-        )
-    if task is not None:  # the task's spaces now, which its env's package may have changed since
-        spaces = task_spaces(task, env_kwargs)
-        features = spaces.input_dim(meta.timeout)
-        frames = None if spaces.layout.frames is None else list(spaces.layout.frames.shape)
-        if meta.obs_shape != frames:
-            raise DemoFileError(
-                path,
-                f"holds observations of shape {meta.obs_shape or [meta.obs_dim]}, but task "
-                f"{task} observes {frames or [features]}",
-            )
-        if meta.obs_dim != features or meta.n_actions != spaces.n_actions:
-            raise DemoFileError(
-                path,
-                f"holds observations of {meta.obs_dim} features and {meta.n_actions} actions, "
-                f"but task {task} has {features} features and {spaces.n_actions} actions",
-            )
+    if task is not None:
+        _check_task(path, meta, task, env_kwargs)
     if timeout is not None and meta.timeout != timeout:
         raise DemoFileError(
             path,
@@ -116,6 +95,33 @@ def load(
             "(the flags at the time limit differ; record it again with --timeout)",
         )
     return dataset
+
+
+def _check_task(path: Path, meta: DemoMeta, task: str, env_kwargs: dict[str, Any] | None) -> None:
+    """That the file was recorded on `task` made with `env_kwargs`, whose spaces are still what it holds."""
+    if meta.task != task:
+        raise DemoFileError(path, f"was recorded on task {meta.task!r}, not on the requested {task!r}")
+    if meta.env_kwargs != dict(env_kwargs or {}):
+        raise DemoFileError(
+            path,
+            f"was recorded with env kwargs {json.dumps(meta.env_kwargs)}, not the "
+            f"requested {json.dumps(dict(env_kwargs or {}))}",
+        )
+    spaces = task_spaces(task, env_kwargs)  # the task's spaces now, which its env's package may have changed since
+    features = spaces.input_dim(meta.timeout)
+    frames = None if spaces.layout.frames is None else list(spaces.layout.frames.shape)
+    if meta.obs_shape != frames:
+        raise DemoFileError(
+            path,
+            f"holds observations of shape {meta.obs_shape or [meta.obs_dim]}, but task {task} observes "
+            f"{frames or [features]}",
+        )
+    if meta.obs_dim != features or meta.n_actions != spaces.n_actions:
+        raise DemoFileError(
+            path,
+            f"holds observations of {meta.obs_dim} features and {meta.n_actions} actions, "
+            f"but task {task} has {features} features and {spaces.n_actions} actions",
+        )
 
 
 HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
@@ -193,7 +199,17 @@ META_TYPES: dict[str, tuple[type, ...]] = {
     "observation": (str,),
     "obs_shape": (list, type(None)),
 }
-"""The JSON type of each meta field (a bool is not a number here)."""
+"""The JSON type of each field of `DemoMeta`, each in every file's meta (a bool is not a number here)."""
+
+
+def _check_types(path: Path, fields: dict[str, Any]) -> None:
+    for key, kinds in META_TYPES.items():
+        value = fields[key]
+        if isinstance(value, bool) or not isinstance(value, kinds):
+            raise DemoFileError(path, f"meta's {key} must be {' or '.join(k.__name__ for k in kinds)}, got {value!r}")
+    for key in ("episode_returns", "plain_returns"):
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in fields[key]):
+            raise DemoFileError(path, f"meta's {key} must be a list of numbers")
 
 
 def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
@@ -207,19 +223,13 @@ def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
         raise DemoFileError(path, "meta must be a JSON object")
     if fields.get("format_version") != FORMAT_VERSION:
         raise DemoFileError(path, f"format_version {fields.get('format_version')!r} is not {FORMAT_VERSION}")
-    names = {field.name for field in dataclasses.fields(DemoMeta)}
-    optional = {"env_kwargs", "observation", "obs_shape"}
-    missing = sorted(names - optional - fields.keys())
+    missing = [key for key in META_TYPES if key not in fields]
     if missing:
-        raise DemoFileError(path, f"meta lacks {missing}")
-    for key, kinds in META_TYPES.items():
-        value = fields.get(key)
-        if key in fields and (isinstance(value, bool) or not isinstance(value, kinds)):
-            raise DemoFileError(path, f"meta's {key} must be {' or '.join(k.__name__ for k in kinds)}, got {value!r}")
-    for key in ("episode_returns", "plain_returns"):
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in fields[key]):
-            raise DemoFileError(path, f"meta's {key} must be a list of numbers")
-    meta = DemoMeta(**{key: fields[key] for key in names if key in fields})
+        raise DemoFileError(
+            path, f"meta lacks {missing}: written by an older version? Record the demonstrations again with this one"
+        )
+    _check_types(path, fields)
+    meta = DemoMeta(**{key: fields[key] for key in META_TYPES})
     try:
         get_task(meta.task)
     except ConfigError as error:

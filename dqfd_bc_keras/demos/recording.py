@@ -11,52 +11,29 @@ before TensorFlow loads.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dqfd_bc_keras.choices import EXPERT_NAMES
 from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta
 from dqfd_bc_keras.envs.episodes import play
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_spaces
 from dqfd_bc_keras.errors import ConfigError, DqfdError, one_line
+from dqfd_bc_keras.plugins import load, raised_at, where
 from dqfd_bc_keras.seeds import demo_seed
-from dqfd_bc_keras.tasks import EXPERT_NAMES, NOT_REMADE, Rule, check_demonstrator, families, family_preset
+from dqfd_bc_keras.tasks import NOT_REMADE, Rule, check_demonstrator, families, family_preset
 
 if TYPE_CHECKING:
     from dqfd_bc_keras.core.config import Config
 
 
-def _where(filename: str, line: int | None = None) -> str:
-    """A source location as the user would look it up: relative to the working directory when under it."""
-    path = Path(filename)
-    try:
-        path = path.resolve().relative_to(Path.cwd())
-    except (OSError, ValueError):
-        pass
-    return f"{path}:{line}" if line else str(path)
-
-
-def _raised_at(error: BaseException, file: str | None) -> str:
-    """Where `error` was raised: its innermost frame in the user's `file` (else its innermost frame
-    outside the import machinery), as file:line; a SyntaxError names its own line."""
-    if isinstance(error, SyntaxError) and error.filename:
-        return _where(error.filename, error.lineno)
-    frames = [frame for frame in traceback.extract_tb(error.__traceback__) if not frame.filename.startswith("<")]
-    own = [frame for frame in frames if frame.filename == file]
-    frame = (own or frames)[-1] if frames else None
-    return _where(frame.filename, frame.lineno) if frame else "no source file"
-
-
 def _defined_at(rule: Rule) -> str:
     """The file:line of `rule`'s definition (a function's), else its module's name."""
     code = getattr(rule, "__code__", None)
-    return _where(code.co_filename, code.co_firstlineno) if code else getattr(rule, "__module__", "?")
+    return where(code.co_filename, code.co_firstlineno) if code else getattr(rule, "__module__", "?")
 
 
 def _check_choice(kind: str, value: str, choices: Sequence[str]) -> None:
@@ -88,7 +65,7 @@ class Demonstrator:
         except Exception as error:
             code = getattr(self.rule, "__code__", None)
             raise ConfigError(
-                f"{self.name} raised {one_line(error)} ({_raised_at(error, code.co_filename if code else None)})"
+                f"{self.name} raised {one_line(error)} ({raised_at(error, code.co_filename if code else None)})"
             ) from None
         try:
             value = np.asarray(action)
@@ -127,47 +104,6 @@ def make_expert(family: str, name: str, epsilon: float = 0.0, seed: int | None =
     )
 
 
-def _import_rule(spec: str) -> Rule:
-    """The function `spec` (module:function) names; a one-line error naming the user's file when
-    the module cannot be imported, raises while importing, or has no such function."""
-    module, _, name = spec.partition(":")
-    try:
-        imported = importlib.import_module(module)
-    except ModuleNotFoundError as error:
-        if error.name is not None and (module == error.name or module.startswith(f"{error.name}.")):
-            raise ConfigError(
-                f"demonstrator {spec}: no module named {error.name!r} (is its directory on PYTHONPATH?)"
-            ) from None
-        problem = error
-    except Exception as error:  # the module's own code raised while it was imported
-        problem = error
-    else:
-        rule = getattr(imported, name, None)
-        if rule is None:
-            functions = sorted(
-                key
-                for key, value in vars(imported).items()
-                if callable(value) and not key.startswith("_") and getattr(value, "__module__", None) == module
-            )
-            where = _where(getattr(imported, "__file__", None) or module)
-            raise ConfigError(
-                f"demonstrator {spec}: {module} ({where}) has no function {name!r}; "
-                f"it has {', '.join(functions) or 'none'}"
-            )
-        if not callable(rule):
-            raise ConfigError(f"demonstrator {spec}: {name} is not a function (it is of type {type(rule).__name__})")
-        return rule
-    try:
-        found = importlib.util.find_spec(module)
-    except (ImportError, ValueError):
-        found = None
-    what = f"SyntaxError: {problem.msg}" if isinstance(problem, SyntaxError) else one_line(problem)  # no (file, line)
-    raise ConfigError(
-        f"demonstrator {spec}: importing {module} raised {what} "
-        f"({_raised_at(problem, found.origin if found else None)})"
-    )
-
-
 def make_demonstrator(
     spec: str, task: str, epsilon: float = 0.0, seed: int | None = None, env_kwargs: dict | None = None
 ) -> Demonstrator:
@@ -195,7 +131,7 @@ def make_demonstrator(
 
         rule: Rule = load_policy(spec, None, task, env_kwargs=env_kwargs or {})[0]
     else:
-        rule = _import_rule(spec)
+        rule = load(spec, f"demonstrator {spec}", callable, "function")
     return Demonstrator(spec, rule, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed))
 
 

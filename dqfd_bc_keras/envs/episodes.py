@@ -1,16 +1,21 @@
 """A policy played on an env for one complete episode per seed: the one loop behind greedy
 evaluations, videos, recorded demonstrations, dynamic demonstrations' roll-outs and the experts'
-returns. It steps the env it is given, so the wrappers on it (`wrappers.CountInteractions`)
+returns; and `EvalResult`, what greedy episodes of a policy scored (light: the lab reads it
+without TensorFlow). It steps the env it is given, so the wrappers on it (`wrappers.CountInteractions`)
 count every step as they always do, and an episode ends at terminated or truncated alike.
 """
 
 from __future__ import annotations
 
+import statistics
 from collections.abc import Callable, Iterable
-from typing import NamedTuple, Protocol
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple, Protocol
 
 import gymnasium as gym
 import numpy as np
+
+from dqfd_bc_keras.envs.make import get_task
 
 
 class Watcher(Protocol):
@@ -58,3 +63,67 @@ def play(
         if progress is not None:
             progress(done)
     return played
+
+
+@dataclass
+class EvalResult:
+    """Greedy episodes of one policy: returns and lengths on the plain env, goals on the task env."""
+
+    task: str
+    policy: str
+    """"q" (the Q-network), "bc" (the BC model) or, for any other callable, "custom"."""
+    seed: int
+    """Episode i was reset with seed + i."""
+    returns: list[float]
+    lengths: list[int]
+    goals: list[int] | None = None
+    """Flags reached per episode (goal-count tasks only)."""
+    timeout: str = "bootstrap"
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def mean_return(self) -> float:
+        return statistics.fmean(self.returns)
+
+    @property
+    def std_return(self) -> float:
+        return statistics.pstdev(self.returns)
+
+    def to_dict(self) -> dict:
+        result = {
+            "task": self.task,
+            "env_id": get_task(self.task).env_id,
+            "policy": self.policy,
+            "timeout": self.timeout,
+            "episodes": len(self.returns),
+            "seed": self.seed,
+            "returns": self.returns,
+            "mean_return": self.mean_return,
+            "std_return": self.std_return,
+            "min_return": min(self.returns),
+            "max_return": max(self.returns),
+            "lengths": self.lengths,
+        }
+        if self.goals is not None:
+            result.update(goals=self.goals, mean_goals=statistics.fmean(self.goals))
+        if self.env_kwargs:
+            result["env_kwargs"] = self.env_kwargs
+        return result
+
+    def summary(self) -> str:
+        n, env_id = len(self.returns), get_task(self.task).env_id
+        lines = [
+            f"{self.task}{'' if env_id == self.task else f' ({env_id})'}, {self.policy} policy, {n} greedy episodes "
+            f"(seeds {self.seed}..{self.seed + n - 1})",
+            f"return {self.mean_return:.2f} ± {self.std_return:.2f}  "
+            f"(min {min(self.returns):g}, max {max(self.returns):g}, {solved_text(self.task)})",
+            f"length {statistics.fmean(self.lengths):.1f} steps on average",
+        ]
+        if self.goals is not None:
+            lines.append(f"goals per episode {statistics.fmean(self.goals):.2f} on average: {self.goals}")
+        return "\n".join(lines)
+
+
+def solved_text(task: str) -> str:
+    threshold = get_task(task).solved_return
+    return "no solved threshold" if threshold is None else f"solved at {threshold:g}"

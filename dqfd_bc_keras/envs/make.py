@@ -1,11 +1,12 @@
 """Tasks: the paper's (ALGORITHM.md §6) and ours as presets, or any Gymnasium env by its id.
 
 A task is a preset name (the registry in `tasks/`: cartpole, cartpole-200, mountaincar,
-mountaincar-goals, acrobot, lunarlander, or a user's `module:preset`) or the id of any registered Gymnasium env with a `Discrete` action
-space and an observation space that `observations` can flatten (`"module:Env-v0"` imports
-`module` first, as `gym.make` does); `get_task` turns either into a `TaskSpec`. Keyword
-arguments for the env's constructor (`env_kwargs`, e.g. FlappyBird's `use_lidar=False`) go
-with the task everywhere an env is made; `task_spaces` checks them and the spaces once.
+mountaincar-goals, acrobot, lunarlander, or a user's `module:preset`) or the id of any registered
+Gymnasium env with a `Discrete` action space and an observation space that `observations` can
+flatten (`"module:Env-v0"` imports `module` first, as `gym.make` does); `get_task` turns either
+into a `TaskSpec`. Keyword arguments for the env's constructor (`env_kwargs`, e.g. FlappyBird's
+`use_lidar=False`) go with the task everywhere an env is made; `task_spaces` checks them and the
+spaces once.
 
 A task env is built from the plain Gymnasium env (made with `env_kwargs`) with no time limit
 of its own, then (the wrappers are in `wrappers.py`)
@@ -30,10 +31,8 @@ from __future__ import annotations
 import copy
 import difflib
 import functools
-import importlib
 import inspect
 import json
-import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -52,6 +51,7 @@ from dqfd_bc_keras.envs.observations import (
 )
 from dqfd_bc_keras.envs.wrappers import FallPenalty, ForgetLastAction, GoalCount, TimeFeature, TimeLimitMode
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.plugins import import_module, parse
 from dqfd_bc_keras.tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
 from dqfd_bc_keras.tasks.minatar import require_minatar
 
@@ -80,13 +80,12 @@ def env_task(env_id: str) -> TaskSpec:
     A one-line `ConfigError` for an id that is not registered (after importing the module of a
     `module:Env-v0` id); its spaces are checked by `task_spaces`, with the run's env kwargs.
     """
-    module, _, bare = env_id.rpartition(":")
+    module, bare = parse(env_id) or (None, env_id)
+    imported = None if module is None else import_module(module, f"unknown task {env_id!r}")
     try:
-        if module:
-            importlib.import_module(module)
         spec = gym.spec(bare)
-    except (gym.error.Error, ImportError) as error:
-        if module and module in sys.modules and inspect.isclass(getattr(sys.modules[module], bare, None)):
+    except gym.error.Error as error:
+        if inspect.isclass(getattr(imported, bare, None)):
             raise ConfigError(_class_not_id(module, bare)) from None
         raise ConfigError(
             f"unknown task {env_id!r}: neither a preset ({', '.join(sorted(TASKS))}) nor a "
@@ -383,7 +382,7 @@ def env_id_of(
             pass  # kwargs no later process could pass: registered as an object below
     if isinstance(env, gym.Env):
         name, instance = type(env.unwrapped).__name__, env
-        make: Callable[[], gym.Env] = lambda: _copy_or_same(instance)  # noqa: E731
+        make: Callable[[], gym.Env] = lambda: _copy_or_same(instance)
     elif callable(env):
         name, make = getattr(env, "__qualname__", type(env).__name__).replace(".<locals>.", "."), env
     else:

@@ -14,15 +14,11 @@ from importlib.util import find_spec
 from pathlib import Path
 
 from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
-from dqfd_bc_keras.experiments.suites import ALL, EFFICIENCY_TASKS, GRID_TASKS, SUITES, on_task, suite_arms
+from dqfd_bc_keras.experiments.names import BACKENDS, RUNS_PER_WORKER
+from dqfd_bc_keras.experiments.suites import ALL, GRID_TASKS, SUITES, efficiency_tasks, on_task, suite_arms
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
-BACKENDS = ("local", "ray")
-"""`run --backend`: sweep.BACKENDS, spelled here so that a wrong name is refused before TensorFlow
-loads (a test keeps the two equal)."""
-RUNS_PER_WORKER = 25
-"""`run --runs-per-worker`'s default: sweep.RUNS_PER_WORKER, spelled here for the same reason."""
 
 
 def comma_list(allowed: Sequence[str], what: str):
@@ -186,9 +182,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     eff.add_argument(
         "--tasks",
-        type=comma_list(EFFICIENCY_TASKS, "task"),
-        default=list(EFFICIENCY_TASKS),
-        help=f"the tasks to run (default: all of {', '.join(EFFICIENCY_TASKS)})",
+        type=comma_list(list(efficiency_tasks()), "task"),
+        default=list(efficiency_tasks()),
+        help=f"the tasks to run (default: all of {', '.join(efficiency_tasks())})",
     )
     eff.add_argument("--json", action="store_true", help="one JSON list with every arm's row (∞ as Infinity)")
     args = parser.parse_args(argv)

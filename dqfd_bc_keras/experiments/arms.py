@@ -8,31 +8,39 @@ a bayes arm may differ from its ce arm in, follow from the methods' declarations
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 from dataclasses import dataclass
 
 import numpy as np
 
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.core.methods import METHODS, get_method, method_fields
+from dqfd_bc_keras.core.methods import METHODS, method_fields
 from dqfd_bc_keras.experiments.data import FinishedRun
 from dqfd_bc_keras.experiments.metrics import PER_RUN
 
 BAYES_ONLY = tuple(sorted(set(METHODS["bayes"].reads) - set(METHODS["ce"].reads)))
-"""Config fields only the bayes loss reads (methods.py): a bayes arm pairs with the ce arm equal in every other field."""
+"""Config fields only the bayes loss reads (methods.py): a bayes arm pairs with the ce arm equal in
+every other field."""
 
 
 @dataclass
 class ArmRuns:
     """The runs of one configuration (all fields but the seed)."""
 
-    config: dict
+    config: Config
+    """Its runs' configuration, with the seed of its first run (`fields` leaves the seed out)."""
     runs: list[FinishedRun]
     name: str = ""
 
+    @functools.cached_property
+    def fields(self) -> dict[str, object]:
+        """Every config field but the seed, by name: what tells two arms apart."""
+        return {k: v for k, v in self.config.to_dict().items() if k != "seed"}
+
     @property
     def setting(self) -> str:
-        return f"{self.config['task']}/{self.config['timeout']}"
+        return f"{self.config.task}/{self.config.timeout}"
 
     @property
     def label(self) -> str:
@@ -45,7 +53,7 @@ class ArmRuns:
 def find_arm(arms: list[ArmRuns], config: Config) -> ArmRuns | None:
     """The arm whose runs have `config` (its seed aside), if any ran."""
     fields = {k: v for k, v in config.to_dict().items() if k != "seed"}
-    return next((a for a in arms if a.config == fields), None)
+    return next((a for a in arms if a.fields == fields), None)
 
 
 def common_seeds(first: ArmRuns, second: ArmRuns) -> tuple[ArmRuns, ArmRuns]:
@@ -63,28 +71,28 @@ def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:
     arms: dict[str, ArmRuns] = {}
     for run in runs:
         fields = {k: v for k, v in run.config.to_dict().items() if k != "seed"}
-        arm = arms.setdefault(json.dumps(fields, sort_keys=True), ArmRuns(fields, []))
+        arm = arms.setdefault(json.dumps(fields, sort_keys=True), ArmRuns(run.config, []))
         if all(r.config.seed != run.config.seed for r in arm.runs):  # a run repeated elsewhere counts once
             arm.runs.append(run)
     for arm in arms.values():
         arm.runs.sort(key=lambda r: r.config.seed)
-        peers = [a.config for a in arms.values() if a.setting == arm.setting]
+        peers = [a.fields for a in arms.values() if a.setting == arm.setting]
         varying = [
             k
-            for k in arm.config
+            for k in arm.fields
             if k not in ("task", "timeout", "expert_loss")
             and len({json.dumps(p[k]) for p in peers}) > 1
-            and not (k in method_fields() and k not in get_method(arm.config["expert_loss"]).reads)
+            and not (k in method_fields() and k not in arm.config.method.reads)
         ]
-        arm.name = " ".join([arm.config["expert_loss"], *(f"{k}={arm.config[k]}" for k in varying)])
+        arm.name = " ".join([arm.config.expert_loss, *(f"{k}={arm.fields[k]}" for k in varying)])
     return sorted(arms.values(), key=lambda a: a.label)
 
 
 def preset_distance(arm: ArmRuns, overrides: tuple[tuple[str, object], ...] = ()) -> int:
     """How many config fields besides the loss (and the timeout) differ from the task preset with
     `overrides`: 0 for the paper's and the baselines' arms, more for a sensitivity or benchmark variant."""
-    preset = Config.for_task(arm.config["task"], **dict(overrides)).to_dict()
-    return sum(v != preset[k] for k, v in arm.config.items() if k not in ("expert_loss", "timeout"))
+    preset = Config.for_task(arm.config.task, **dict(overrides)).to_dict()
+    return sum(v != preset[k] for k, v in arm.fields.items() if k not in ("expert_loss", "timeout"))
 
 
 def bayes_ce_pairs(
@@ -95,19 +103,19 @@ def bayes_ce_pairs(
     reference pair first: the one closest to the task preset with `overrides`."""
 
     def strip(arm: ArmRuns) -> dict:
-        return {k: v for k, v in arm.config.items() if k not in ("expert_loss", *BAYES_ONLY)}
+        return {k: v for k, v in arm.fields.items() if k not in ("expert_loss", *BAYES_ONLY)}
 
     def selected(arm: ArmRuns) -> bool:
         return (
-            arm.config["task"] == task
-            and timeout in (None, arm.config["timeout"])
-            and all(arm.config[k] == v for k, v in overrides)
+            arm.config.task == task
+            and timeout in (None, arm.config.timeout)
+            and all(arm.fields[k] == v for k, v in overrides)
         )
 
     pairs = [
-        (b, next((c for c in arms if c.config["expert_loss"] == "ce" and strip(c) == strip(b)), None))
+        (b, next((c for c in arms if c.config.expert_loss == "ce" and strip(c) == strip(b)), None))
         for b in arms
-        if b.config["expert_loss"] == "bayes" and selected(b)
+        if b.config.expert_loss == "bayes" and selected(b)
     ]
     return sorted(pairs, key=lambda p: (p[1] is None, preset_distance(p[0], overrides), -len(p[0].runs), p[0].label))
 

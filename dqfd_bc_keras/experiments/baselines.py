@@ -148,7 +148,7 @@ def ours(suite: list[Arm], seeds: int, out: Path, complete_only: bool = False) -
                 a.task,
                 a.expert_loss,
                 map(interaction_evals, runs),
-                [r.final["mean_return"] for r in runs],
+                [r.final.mean_return for r in runs],
                 get_task(a.task).solved_return,
             )
         )
@@ -172,7 +172,7 @@ def sb3_run(task: str, seed: int, budget: int, every: int, path: Path) -> None:
             self.evals: list[tuple[int, float]] = []
 
         def _evaluate(self) -> None:
-            policy = lambda obs: int(self.model.predict(obs, deterministic=True)[0])  # noqa: E731
+            policy = lambda obs: int(self.model.predict(obs, deterministic=True)[0])
             result = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=eval_seed(seed))
             self.evals.append((self.num_timesteps, result.mean_return))
 

@@ -34,13 +34,12 @@ def _span(values: list[int]) -> str:
 
 
 def demo_source(demos: DemoSummary) -> str:
-    """Where a run's demonstrations came from, as its demonstrations.json says (a run from before
-    `source` was kept recorded them from its expert: that is all it could do then)."""
+    """Where a run's demonstrations came from, as its demonstrations.json says."""
     if demos.source == "file":
         return f"{demos.episodes} episodes from a file"
     if demos.source == "minari":
         return f"{demos.episodes} episodes from {demos.expert}"
-    return f"{demos.episodes} × {demos.expert or 'unknown expert'}"
+    return f"{demos.episodes} × {demos.expert}"
 
 
 def baseline_row(arm: ArmRuns) -> str:
@@ -50,16 +49,13 @@ def baseline_row(arm: ArmRuns) -> str:
     median = f"{np.median(steps):,.0f}" if 2 * reached > len(steps) else "—"
     final = Summary.of(arm.values("final_eval"))
     source, transitions, pretrain, teacher, beats = "—", "0", "—", "none", "—"
-    if arm.config["expert_loss"] != "none":
-        pretrain = f"{arm.config['pretrain_steps']:,}"
+    if arm.config.expert_loss != "none":
+        pretrain = f"{arm.config.pretrain_steps:,}"
         records = [r.demonstrations for r in arm.runs]
-        if None in records:
-            source = transitions = teacher = "unknown"
-        else:
-            demonstrator = float(np.mean([r.demonstrator_return for r in arm.runs]))
-            source = " · ".join(sorted({demo_source(d) for d in records}))
-            transitions = _span([d.transitions for d in records])
-            teacher, beats = f"{demonstrator:.1f}", f"{final.mean - demonstrator:+.1f}"
+        demonstrator = float(np.mean([r.demonstrator_return for r in arm.runs]))
+        source = " · ".join(sorted({demo_source(d) for d in records}))
+        transitions = _span([d.transitions for d in records])
+        teacher, beats = f"{demonstrator:.1f}", f"{final.mean - demonstrator:+.1f}"
     return (
         f"| {arm.setting} | {arm.name} | {len(arm.runs)} | {source} | {transitions} | {pretrain} | "
         f"{final.format()} | {Summary.of(arm.values('mean_train_return')).format()} | "

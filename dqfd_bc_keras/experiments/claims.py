@@ -122,7 +122,7 @@ def judge_c1(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     large p never does. episodes_to_solve is reported, not judged (medians, runs that never solved
     ranked last, Mann–Whitney U): an episode count has no scale on which a margin could be fixed in
     advance, and its censored runs leave a difference of means undefined."""
-    margin = RETURN_MARGIN * bayes.runs[0].config.limit
+    margin = RETURN_MARGIN * bayes.config.limit
     returns = compare("mean_train_return", bayes, ce)
     return _verdict(
         _equivalence(returns, margin), [returns, compare("episodes_to_solve", bayes, ce)], bayes, ce, margin
@@ -137,7 +137,7 @@ def judge_c2(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     the shares equal, i.e. the TOST_LEVEL CI of bayes − ce lies within ±SHARE_MARGIN; does not hold:
     that CI lies wholly outside ±SHARE_MARGIN; else inconclusive. Fisher's exact test on the share
     and collapses per run (Mann–Whitney U) are reported beside it."""
-    share = compare("unfinished" if bayes.config["early_stop_window"] else "collapsed", bayes, ce)
+    share = compare("unfinished" if bayes.config.early_stop_window else "collapsed", bayes, ce)
     comparisons = [share, compare("collapses", bayes, ce)]
     struck = [bool(arm.values("collapsed").any()) for arm in (bayes, ce)]
     if not any(struck):
@@ -153,7 +153,7 @@ def judge_c3(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     """holds: TOST at ALPHA on mean_train_return, i.e. the TOST_LEVEL CI of bayes − ce lies within
     ±RETURN_MARGIN × limit; does not hold: that CI lies wholly outside ±RETURN_MARGIN × limit; else
     inconclusive."""
-    margin = RETURN_MARGIN * bayes.runs[0].config.limit
+    margin = RETURN_MARGIN * bayes.config.limit
     returns = compare("mean_train_return", bayes, ce)
     return _verdict(_equivalence(returns, margin), [returns], bayes, ce, margin)
 
@@ -281,20 +281,20 @@ def ablation_pairs(arms: list[ArmRuns]) -> list[tuple[str, ArmRuns, ArmRuns]]:
     which the ablated arm switches off and the full arm has as the preset does."""
 
     def without(arm: ArmRuns, key: str) -> dict:
-        return {k: v for k, v in arm.config.items() if k != key}
+        return {k: v for k, v in arm.fields.items() if k != key}
 
     return [
         (key, *common_seeds(ablated, full))
         for key, off in ABLATED.items()
         for ablated in arms
-        if ablated.config[key] == off and lab_settings(ablated.config["task"]).ablation_metric
+        if ablated.fields[key] == off and lab_settings(ablated.config.task).ablation_metric
         for full in arms
-        if full.config[key] == _preset(full, key) and without(full, key) == without(ablated, key)
+        if full.fields[key] == _preset(full, key) and without(full, key) == without(ablated, key)
     ]
 
 
 def _preset(arm: ArmRuns, key: str) -> object:
-    return Config.for_task(arm.config["task"]).to_dict()[key]
+    return Config.for_task(arm.config.task).to_dict()[key]
 
 
 def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
@@ -304,9 +304,9 @@ def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
     wholly below −margin; else inconclusive."""
     if min(len(full.runs), len(ablated.runs)) < 2:
         return Verdict("inconclusive (n < 2)")
-    metric = lab_settings(full.config["task"]).ablation_metric
+    metric = lab_settings(full.config.task).ablation_metric
     fraction = ABLATION_MARGINS[metric]
-    margin = GOALS_MARGIN if fraction is None else fraction * full.runs[0].config.limit
+    margin = GOALS_MARGIN if fraction is None else fraction * full.config.limit
     comparison = compare(metric, full, ablated)
     low, high = comparison.tost
     if equivalent(comparison.tost, margin):
@@ -329,14 +329,14 @@ def dynamic_default(arms: list[ArmRuns]) -> tuple[str | None, list[tuple[ArmRuns
 
     # Returns the default (None until all 4 pairs have run) and each pair with its winner.
     def rest(arm: ArmRuns) -> dict:
-        return {k: v for k, v in arm.config.items() if k != "dynamic_demos"}
+        return {k: v for k, v in arm.fields.items() if k != "dynamic_demos"}
 
     pairs = []
     for first in arms:
-        if first.config["dynamic_demos"] != DYNAMIC_MODES[0]:
+        if first.config.dynamic_demos != DYNAMIC_MODES[0]:
             continue
         for second in arms:
-            if second.config["dynamic_demos"] == DYNAMIC_MODES[1] and rest(second) == rest(first):
+            if second.config.dynamic_demos == DYNAMIC_MODES[1] and rest(second) == rest(first):
                 pair = common_seeds(first, second)
                 medians = [np.median(a.values("interactions_to_threshold")) for a in pair]
                 winner = "tie" if medians[0] == medians[1] else DYNAMIC_MODES[int(medians[1] < medians[0])]

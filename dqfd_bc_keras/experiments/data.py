@@ -9,19 +9,21 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import lzma
 import os
 import tarfile
 import tempfile
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 import numpy as np
 
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.files import atomic_path
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
@@ -35,40 +37,38 @@ RUN_FILES = (
     "metrics.csv",
     "evals.csv",
     "eval.json",
-    "dynamic_demos.json",
-    "demonstrations.json",
     "provenance.json",
+    "demonstrations.json",
+    "dynamic_demos.json",
 )
-"""What the lab reads of a run directory; the first four are in every complete run (eval.json,
-written last, marks a run complete), the others only where they apply."""
-REQUIRED = RUN_FILES[:4]
+"""What the lab reads of a run directory; the first five are in every complete run, demonstrations.json
+in every run of a method with demonstrations, dynamic_demos.json once D_demo has been updated."""
+REQUIRED = RUN_FILES[:5]
 ROWS: dict[str, type[EpisodeRow] | type[EvalRow]] = {"metrics.csv": EpisodeRow, "evals.csv": EvalRow}
 """The record each row of a run's CSV files parses into."""
 BENCHMARK_FILES = ("efficiency.json", "sb3-dqn", "calibration.json", "bc-alone")
 """Files the report reads besides the runs: `experiments efficiency`'s table and SB3's
 runs, `calibrate`'s measurements and BC alone's results (`imitation.py`)."""
 ARCHIVE_SUFFIX = ".tar.xz"
+OLDER = "written by an older version? Read the run with that version, or train it again"
+"""What a run file that lacks a column or field of this version's format is taken for, and the way on."""
 
 
 @dataclass(frozen=True)
 class Provenance:
-    """provenance.json: the code and the claims rules a run was trained with."""
+    """provenance.json: the code and the claims rules a run was trained with (what the lab reads of it)."""
 
-    code_commit: str | None = None
-    rules_commit: str | None = None
-    dirty: bool = False
+    code_commit: str | None
+    """None: trained outside a git checkout."""
+    rules_commit: str | None
+    dirty: bool | None
     """Trained from a working tree with uncommitted changes: the commit alone does not reproduce it."""
-    versions: dict = field(default_factory=dict)
+    versions: dict[str, str]
 
     @classmethod
     def of(cls, fields: dict) -> Provenance:
-        """Keys it lacks are unknown (None), or clean."""
-        return cls(
-            fields.get("code_commit"),
-            fields.get("rules_commit"),
-            bool(fields.get("dirty", False)),
-            dict(fields.get("versions") or {}),
-        )
+        _require(fields, [f.name for f in dataclasses.fields(cls)])
+        return cls(**{f.name: fields[f.name] for f in dataclasses.fields(cls)})
 
 
 @dataclass
@@ -80,28 +80,26 @@ class FinishedRun:
     config: Config
     metrics: list[EpisodeRow]
     evals: list[EvalRow]
-    final: dict
-    """eval.json: the final evaluation (`evaluation.EvalResult.to_dict`)."""
-    demonstrations: DemoSummary | None = None
-    """None for plain DQN, and for a run from before demonstrations.json was written."""
-    dynamic_demos: list[DemoUpdate] = field(default_factory=list)
+    final: EvalResult
+    """eval.json: the final evaluation."""
+    demonstrations: DemoSummary | None
+    """demonstrations.json; None for plain DQN, the one method without demonstrations."""
+    dynamic_demos: list[DemoUpdate]
     """dynamic_demos.json: one entry per dynamic-demonstration update."""
-    provenance: Provenance | None = None
+    provenance: Provenance
 
     def column(self, name: str) -> np.ndarray:
-        """metrics.csv's column `name`, one value per episode (None, a column older runs lack: NaN)."""
+        """metrics.csv's column `name`, one value per episode (an empty cell: NaN)."""
         return np.array([row[name] for row in self.metrics], dtype=float)
 
     @property
-    def demo_transitions(self) -> int | None:
-        """Demonstration transitions the run started from: 0 for plain DQN, None if not recorded."""
-        if not self.config.uses_demos:
-            return 0
-        return None if self.demonstrations is None else self.demonstrations.transitions
+    def demo_transitions(self) -> int:
+        """Demonstration transitions the run started from (0 for plain DQN)."""
+        return 0 if self.demonstrations is None else self.demonstrations.transitions
 
     @property
     def demonstrator_return(self) -> float | None:
-        """Mean plain return of those demonstrations: None for plain DQN or if not recorded."""
+        """Mean plain return of those demonstrations: None for plain DQN."""
         return None if self.demonstrations is None else float(np.mean(self.demonstrations.plain_returns))
 
 
@@ -111,6 +109,19 @@ class RunFileError(ConfigError):
     def __init__(self, file: PurePosixPath, problem: str) -> None:
         super().__init__(f"{file}: {problem}")
         self.file, self.problem = file, problem
+
+
+class _Lacking(KeyError):
+    """The fields a run file lacks."""
+
+
+def _require(fields: dict, names: Iterable[str]) -> None:
+    """`_Lacking` the `names` that the JSON object `fields` does not hold."""
+    if not isinstance(fields, dict):
+        raise TypeError(f"expected a JSON object, got {fields!r:.40}")
+    missing = [name for name in names if name not in fields]
+    if missing:
+        raise _Lacking(missing)
 
 
 def _text(path: Path, file: PurePosixPath) -> str:
@@ -131,9 +142,9 @@ def _read_csv(path: Path, file: PurePosixPath) -> list[EpisodeRow] | list[EvalRo
     except csv.Error as error:
         raise RunFileError(file, f"line {reader.line_num}: {error}") from None
     record = ROWS[path.name]
-    missing = [c for c in record.required() if c not in header]
+    missing = [c for c in record.columns() if c not in header]
     if missing:
-        raise RunFileError(file, f"no column(s) {missing} in the header")
+        raise RunFileError(file, f"no column(s) {missing} in the header: {OLDER}")
     rows = []
     for line, values in enumerate(lines, start=2):  # one row per line: no field holds a newline
         if len(values) != len(header):
@@ -156,17 +167,55 @@ def _read_json(path: Path, file: PurePosixPath, kind: type) -> dict | list:
     return value
 
 
+def _config(fields: dict) -> Config:
+    """config.json's Config; every field must be there (the value of one it lacks is not known)."""
+    return Config.from_dict(fields)
+
+
+FINAL_FIELDS = ("task", "policy", "seed", "returns", "lengths", "timeout")
+"""What eval.json holds of `EvalResult` in every run (goals only where the task counts them,
+env_kwargs only where there are any)."""
+
+
+def _final(fields: dict) -> EvalResult:
+    """eval.json's `EvalResult` (written by its `to_dict`)."""
+    _require(fields, FINAL_FIELDS)
+    if not fields["returns"] or len(fields["returns"]) != len(fields["lengths"]):
+        raise ValueError("returns and lengths must be lists of one value per episode")
+    return EvalResult(
+        fields["task"],
+        fields["policy"],
+        int(fields["seed"]),
+        [float(value) for value in fields["returns"]],
+        [int(value) for value in fields["lengths"]],
+        [int(value) for value in fields["goals"]] if "goals" in fields else None,
+        fields["timeout"],
+        dict(fields.get("env_kwargs", {})),
+    )
+
+
+def _summary(fields: dict) -> DemoSummary:
+    """demonstrations.json's `DemoSummary`, every field of which it must hold."""
+    _require(fields, DemoSummary.columns())
+    return DemoSummary.from_row(fields)
+
+
+def _updates(entries: list) -> list[DemoUpdate]:
+    """dynamic_demos.json's `DemoUpdate`s, every field of which each entry must hold."""
+    for entry in entries:
+        _require(entry, DemoUpdate.columns())
+    return [DemoUpdate.from_row(entry) for entry in entries]
+
+
 def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> FinishedRun:
     """The complete run in `directory` (`relative` to its suite); RunFileError names a bad file."""
 
-    def read(name: str, kind: type, parse: Callable = lambda value: value):
-        if not (directory / name).is_file():
-            return None
+    def read(name: str, kind: type, parse: Callable):
         value = _read_json(directory / name, relative / name, kind)
         try:
             return parse(value)
-        except KeyError as error:
-            raise RunFileError(relative / name, f"no {error}") from None
+        except _Lacking as error:
+            raise RunFileError(relative / name, f"no {error.args[0]}: {OLDER}") from None
         except (TypeError, ValueError) as error:
             raise RunFileError(relative / name, str(error)) from None
 
@@ -176,17 +225,23 @@ def _read_run(directory: Path, relative: PurePosixPath, shown: Path) -> Finished
     metrics = _read_csv(directory / "metrics.csv", relative / "metrics.csv")
     if not metrics:
         raise RunFileError(relative / "metrics.csv", "no episodes")
-    final = read("eval.json", dict)
-    if "mean_return" not in final:
-        raise RunFileError(relative / "eval.json", "no mean_return")
+    config = read("config.json", dict, _config)
+    demonstrations = None
+    if config.uses_demos:
+        if not (directory / "demonstrations.json").is_file():
+            raise RunFileError(
+                relative / "demonstrations.json", f"missing (the run learns from demonstrations): {OLDER}"
+            )
+        demonstrations = read("demonstrations.json", dict, _summary)
+    updates = directory / "dynamic_demos.json"
     return FinishedRun(
         shown,
-        read("config.json", dict, Config.from_dict),
+        config,
         metrics,
         _read_csv(directory / "evals.csv", relative / "evals.csv"),
-        final,
-        read("demonstrations.json", dict, DemoSummary.from_row),
-        read("dynamic_demos.json", list, lambda updates: [DemoUpdate.from_row(u) for u in updates]) or [],
+        read("eval.json", dict, _final),
+        demonstrations,
+        read("dynamic_demos.json", list, _updates) if updates.is_file() else [],
         read("provenance.json", dict, Provenance.of),
     )
 

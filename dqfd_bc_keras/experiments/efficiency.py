@@ -30,10 +30,14 @@ SB3_METHOD = "SB3 DQN (rl-zoo3)"
 """The method name of the Stable-Baselines3 arms."""
 EFFICIENCY_FILE = "efficiency.json"
 """Written into the suite directory by `experiments efficiency` (baselines.py); quoted by the report."""
-TEACHER = {task: lab.teacher_return for task, lab in LAB_SETTINGS.items() if lab.teacher_return is not None}
-"""The imperfect teachers our final returns are compared with (each task's `teacher_return`, lab_settings.py)."""
 RESAMPLES, RNG_SEED, LEVEL = 10_000, 0, 0.95
 """Percentile bootstrap of every interval here: resamples, generator seed, coverage."""
+
+
+def teachers() -> dict[str, float]:
+    """Task → the imperfect teacher's mean return our final returns are compared with (each task's
+    `teacher_return`, lab_settings.py), a user's registered tasks included."""
+    return {task: lab.teacher_return for task, lab in LAB_SETTINGS.items() if lab.teacher_return is not None}
 
 
 @dataclass
@@ -212,8 +216,9 @@ def teacher_verdict(final: Sequence[float], teacher: float) -> tuple[float, floa
 
 
 def teacher_table(arms: list[ArmSteps]) -> list[str]:
-    """Our arms on the tasks with a teacher rule (TEACHER) against the teacher's mean; [] if none."""
-    ours = [a for a in arms if a.method != SB3_METHOD and a.task in TEACHER]
+    """Our arms on the tasks with a teacher rule (`teachers()`) against the teacher's mean; [] if none."""
+    teacher = teachers()
+    ours = [a for a in arms if a.method != SB3_METHOD and a.task in teacher]
     if not ours:
         return []
     lines = [
@@ -221,8 +226,8 @@ def teacher_table(arms: list[ArmSteps]) -> list[str]:
         "| --- | --- | --- | --- |",
     ]
     for arm in ours:
-        median, low, high, verdict = teacher_verdict(arm.final, TEACHER[arm.task])
-        lines.append(f"| {arm.label} | {TEACHER[arm.task]:g} | {median:.1f} [{low:.1f}, {high:.1f}] | {verdict} |")
+        median, low, high, verdict = teacher_verdict(arm.final, teacher[arm.task])
+        lines.append(f"| {arm.label} | {teacher[arm.task]:g} | {median:.1f} [{low:.1f}, {high:.1f}] | {verdict} |")
     return lines
 
 
@@ -246,7 +251,8 @@ def efficiency_section(suite_dir: Path) -> list[str]:
     loaded = load(path)
     if loaded is None:
         return [
-            f"Not run (or {EFFICIENCY_FILE} predates the current protocol): `python -m dqfd_bc_keras.experiments efficiency "
+            f"Not run (or {EFFICIENCY_FILE} predates the current protocol): "
+            "`python -m dqfd_bc_keras.experiments efficiency "
             f"--out {suite_dir}` writes {EFFICIENCY_FILE}."
         ]
     protocol, arms = loaded

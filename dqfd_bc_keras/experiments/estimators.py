@@ -46,8 +46,6 @@ from dqfd_bc_keras.experiments.suites import SUITES
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import demo_seed
 
-TASKS = tuple(task for task, lab in LAB_SETTINGS.items() if lab.calibrate)
-"""The tasks the estimators are calibrated on (each task's `calibrate`, lab_settings.py)."""
 STATE_SETS = ("held-out demos", "trained agent", "random policy", "3–6 std away")
 OFF_DEMO = ("random policy", "3–6 std away")
 """The sets an epistemic estimator must single out (the trained agent may stay near the demos)."""
@@ -94,11 +92,19 @@ def measure(task: str, seed: int, episodes: int, bc_epochs: int | None = None) -
     return result
 
 
-def calibrate(tasks: Sequence[str] = TASKS, seeds: int = 3, episodes: int = 5, bc_epochs: int | None = None) -> dict:
-    """Every task × seed × estimator, and per task and estimator the mean over seeds, the off/on
-    ratios and the share of the largest variance reached."""
+def calibrated_tasks() -> tuple[str, ...]:
+    """The tasks the estimators are calibrated on (each task's `calibrate`, lab_settings.py), a
+    user's registered ones included."""
+    return tuple(task for task, lab in LAB_SETTINGS.items() if lab.calibrate)
+
+
+def calibrate(
+    tasks: Sequence[str] | None = None, seeds: int = 3, episodes: int = 5, bc_epochs: int | None = None
+) -> dict:
+    """Every task (default: `calibrated_tasks()`) × seed × estimator, and per task and estimator the
+    mean over seeds, the off/on ratios and the share of the largest variance reached."""
     summary: dict = {"goal_ratio": GOAL_RATIO, "seeds": seeds, "episodes": episodes, "n_actions": {}, "tasks": {}}
-    for task in tasks:
+    for task in calibrated_tasks() if tasks is None else tasks:
         runs = [measure(task, seed, episodes, bc_epochs) for seed in range(seeds)]
         env = make_task(task)
         n_actions = summary["n_actions"][task] = int(env.action_space.n)

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.experiments.arms import ArmRuns, group_arms
 from dqfd_bc_keras.experiments.data import load_runs
@@ -89,7 +90,7 @@ def collect(
 ) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
     """`task`'s cells and {method: {cell: Entry}} from the suite's arms and BC alone's files."""
     cells = [Cell(task, c["expert"], float(c["expert_epsilon"]), int(c["demo_episodes"])) for c in grid_cells(quick)]
-    by_config = {_key(a.config): a for a in arms}
+    by_config = {_key(a.fields): a for a in arms}
     table: dict[str, dict[Cell, Entry]] = {}
     for a in grid_arms(task, quick):
         found = by_config.get(_key(a.config(0).to_dict()))
@@ -98,7 +99,7 @@ def collect(
             continue
         entry = Entry(
             np.array([interactions_to_threshold(r) for r in runs], float),
-            np.array([r.final["mean_return"] for r in runs], float),
+            np.array([r.final.mean_return for r in runs], float),
         )
         targets = cells if a.expert_loss == "none" else [_cell(a)]
         for cell in targets:
@@ -111,10 +112,10 @@ def collect(
     return cells, table
 
 
-def grid_only(config: dict) -> bool:
-    """Whether an arm's config (without the seed) is one only the grid runs: such arms are drawn
+def grid_only(config: Config) -> bool:
+    """Whether an arm's config (its seed aside) is one only the grid runs: such arms are drawn
     as the grid's heatmaps, not as curves among a setting's variants."""
-    return _key(config) in _grid_only_keys()
+    return _key(config.to_dict()) in _grid_only_keys()
 
 
 @functools.cache

@@ -91,7 +91,7 @@ PER_RUN: dict[str, Callable[[FinishedRun], float]] = {
     "collapsed": lambda r: float(collapses(r) > 0),
     "goals_first30": lambda r: float(r.column("goals")[:EARLY_EPISODES].mean()),
     "goals_all": lambda r: float(r.column("goals").mean()),
-    "final_eval": lambda r: float(r.final["mean_return"]),
+    "final_eval": lambda r: r.final.mean_return,
     "interactions_to_threshold": interactions_to_threshold,
 }
 """Each metric as one number per run, for statistics over seeds."""

@@ -40,7 +40,7 @@ from dqfd_bc_keras.files import write_text
 DEFAULT_ARCHIVE = "docs/data/results.tar.xz"
 METRICS: dict[str, Callable[[FinishedRun], float]] = {
     "interactions to the threshold": interactions_to_threshold,
-    "final return": lambda run: float(run.final["mean_return"]),
+    "final return": lambda run: run.final.mean_return,
     "mean training return": lambda run: float(np.mean(run.column("plain_return"))),
 }
 """What is compared for every arm; a run that never reached the threshold counts as ∞ (ranked last)."""

@@ -112,20 +112,19 @@ def _claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
 
 def _per_seed(arms: list[ArmRuns]) -> str:
     """PER_SEED's text: per run its arm, setting and seed, every metric of claims.PER_RUN (inf: never),
-    the demonstration transitions it started from (empty if not recorded) and its dynamic updates."""
+    the demonstration transitions it started from and its dynamic updates."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(["arm", "setting", "seed", *PER_RUN, "demo_transitions", "dynamic_demo_updates"])
     for arm in arms:
         for run in arm.runs:
-            transitions = run.demo_transitions
             writer.writerow(
                 [
                     arm.name,
                     arm.setting,
                     run.config.seed,
                     *(f"{PER_RUN[m](run):.10g}" for m in PER_RUN),
-                    "" if transitions is None else transitions,
+                    run.demo_transitions,
                     len(run.dynamic_demos),
                 ]
             )
@@ -136,8 +135,8 @@ def _figures(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> list
     """Per setting: learning curves of the preset arms (the paper's and the baselines'); the best,
     average and worst run of each arm of its reference bayes–ce pair (of every arm if it has
     none); and, where a setting has variants (sensitivity, estimators), their curves beside the
-    reference pair (the grid's own arms are its heatmaps). A goal-count setting adds the first EARLY_EPISODES episodes (C4's "early") zoomed in.
-    Returns the markdown links."""
+    reference pair (the grid's own arms are its heatmaps). A goal-count setting adds the first
+    EARLY_EPISODES episodes (C4's "early") zoomed in. Returns the markdown links."""
     links = []
     for setting in sorted({a.setting for a in arms}):
         members = [a for a in arms if a.setting == setting]
@@ -207,13 +206,13 @@ def _provenance(arms: list[ArmRuns]) -> str:
         return "Provenance: no runs."
 
     def commits(key: str) -> str:
-        counts = Counter(getattr(r.provenance, key) if r.provenance else None for r in runs)
+        counts = Counter(getattr(r.provenance, key) for r in runs)
         return ", ".join(
             f"{_commit(c)} ({n} run{'s' * (n > 1)})"
             for c, n in sorted(counts.items(), key=lambda item: (item[0] is None, item[0] or ""))
         )
 
-    dirty = [f"{a.label} seed {r.config.seed}" for a in arms for r in a.runs if r.provenance and r.provenance.dirty]
+    dirty = [f"{a.label} seed {r.config.seed}" for a in arms for r in a.runs if r.provenance.dirty]
     flag = (
         f" **{len(dirty)} run(s) trained from uncommitted changes** (their commit does not reproduce them): "
         f"{', '.join(dirty)}."
@@ -270,12 +269,12 @@ def _dynamic(arms: list[ArmRuns]) -> list[str]:
             steps = CensoredSummary.of(arm.values("interactions_to_threshold"))
             extra = (
                 np.mean([sum(u.new_transitions or 0 for u in r.dynamic_demos) for r in arm.runs])
-                if arm.config["dynamic_demos"] == "rollouts"
+                if arm.config.dynamic_demos == "rollouts"
                 else 0.0
             )
             cells.append(f"{steps.format(0)} · {extra:,.0f} · {Summary.of(arm.values('final_eval')).format()}")
         rows.append(
-            f"| {episodes.setting} {episodes.config['expert_loss']} | {len(episodes.runs)}, "
+            f"| {episodes.setting} {episodes.config.expert_loss} | {len(episodes.runs)}, "
             f"{len(rollouts.runs)} | {cells[0]} | {cells[1]} | {winner} |"
         )
     verdict = f"**default: `{choice}`**" if choice else f"not decided yet: {len(pairs)} of the rule's 4 pairs have run"
@@ -303,14 +302,14 @@ def _ablations(arms: list[ArmRuns]) -> list[str]:
         result = judge_ablation(ablated, full)
         if not result.comparisons:
             rows.append(
-                f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
+                f"| {full.setting} {full.config.expert_loss} | {key} = {ablated.fields[key]} | "
                 f"{len(full.runs)}, {len(ablated.runs)} | {too_few(full, ablated)} | — | — | — | "
                 f"**{result.verdict}** |"
             )
             continue
         [c] = result.comparisons
         rows.append(
-            f"| {full.setting} {full.config['expert_loss']} | {key} = {ablated.config[key]} | "
+            f"| {full.setting} {full.config.expert_loss} | {key} = {ablated.fields[key]} | "
             f"{len(full.runs)}, {len(ablated.runs)} | {c.metric}: full {c.bayes.format(2)} · ablated "
             f"{c.ce.format(2)} | {c.interval()} | {c.test} p = {c.p:.3g} | {result.power:.2f} | "
             f"**{result.verdict}** |"

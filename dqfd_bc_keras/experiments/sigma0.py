@@ -181,7 +181,8 @@ def sigma0_section(arms: list[ArmRuns]) -> list[str]:
         "σ0² also raises the weight on every state: the study cannot separate a stronger imitation from a more "
         "selective one.",
         "",
-        "| setting | estimator | σ0² | seeds | bayes · ce | margin rule | p · Holm | verdict | weight on · off · ratio |",
+        "| setting | estimator | σ0² | seeds | bayes · ce | margin rule | p · Holm | verdict "
+        "| weight on · off · ratio |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         *rows,
         "",

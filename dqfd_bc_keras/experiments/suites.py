@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib
 import json
 import re
 from collections.abc import Sequence
@@ -26,6 +25,7 @@ from dqfd_bc_keras.experiments.claims import CLAIMS, PAPER_READING_STEPS
 from dqfd_bc_keras.experiments.claims import PAPER as PAPER_READING
 from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS
 from dqfd_bc_keras.experiments.plans import planned_seeds
+from dqfd_bc_keras.plugins import load, parse
 
 
 @dataclass(frozen=True)
@@ -125,9 +125,14 @@ def claim_seeds(claim_id: str, task: str) -> int:
 PROTOCOL = {"eval_every": 1_000, "eval_episodes": 10}
 """The sample-efficiency protocol, ours and SB3's alike: 10 greedy episodes on the plain env with
 fixed seeds (`seeds.eval_seed`) at exactly every 1,000 interactions."""
-EFFICIENCY_TASKS = {task: lab.efficiency_demos for task, lab in LAB_SETTINGS.items() if lab.efficiency_demos}
-"""Sample-efficiency tasks → demonstration episodes of the imperfect expert (each task's `efficiency_demos`,
-lab_settings.py)."""
+
+
+def efficiency_tasks() -> dict[str, int]:
+    """Sample-efficiency tasks → demonstration episodes of the imperfect expert (each task's
+    `efficiency_demos`, lab_settings.py), a user's registered tasks included."""
+    return {task: lab.efficiency_demos for task, lab in LAB_SETTINGS.items() if lab.efficiency_demos}
+
+
 PAPER_TASKS = ("cartpole", "mountaincar")
 """The paper's two envs: the dynamic-demonstration readings and every expert loss run on them."""
 C2_PAPER_READING = {"early_stop_window": 0, "total_steps": PAPER_READING_STEPS}
@@ -162,7 +167,7 @@ def _efficiency() -> list[Arm]:
     bayes, ce, DQfD's margin and DQN on the paper's envs; the default (bayes) alone on the others."""
     return [
         arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
-        for task, episodes in EFFICIENCY_TASKS.items()
+        for task, episodes in efficiency_tasks().items()
         for loss in (("bayes", "ce", "margin", "none") if task in PAPER_TASKS else ("bayes",))
     ]
 
@@ -271,7 +276,7 @@ def _estimators() -> list[Arm]:
                 "bayes",
                 10,
                 uncertainty=u,
-                demo_episodes=EFFICIENCY_TASKS["mountaincar"],
+                demo_episodes=efficiency_tasks()["mountaincar"],
                 **PROTOCOL,
             ),
         )
@@ -300,7 +305,7 @@ def sigma0_settings() -> list[tuple[str, str, int, dict[str, object]]]:
             )
             for c in cells
         ),
-        ("MountainCar efficiency", "mountaincar", 10, {"demo_episodes": EFFICIENCY_TASKS["mountaincar"], **PROTOCOL}),
+        ("MountainCar efficiency", "mountaincar", 10, {"demo_episodes": efficiency_tasks()["mountaincar"], **PROTOCOL}),
     ]
 
 
@@ -352,13 +357,10 @@ def suite_arms(suite: str) -> list[Arm]:
     (built with `arm(...)`) in an importable module."""
     if suite in SUITES:
         return SUITES[suite]
-    module, sep, name = suite.rpartition(":")
-    if not (sep and module):
+    if parse(suite) is None:
         raise ConfigError(f"unknown suite {suite!r}; expected one of {sorted(SUITES)} or module:NAME")
-    try:
-        arms = getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as error:
-        raise ConfigError(f"suite {suite!r}: cannot import it ({type(error).__name__}: {error})") from None
-    if not isinstance(arms, (list, tuple)) or not arms or not all(isinstance(a, Arm) for a in arms):
-        raise ConfigError(f"suite {suite!r} must be a non-empty list of experiments.suites.Arm")
-    return list(arms)
+    return list(load(suite, f"suite {suite!r}", _is_arms, "non-empty list of experiments.suites.Arm"))
+
+
+def _is_arms(value: object) -> bool:
+    return isinstance(value, (list, tuple)) and bool(value) and all(isinstance(a, Arm) for a in value)

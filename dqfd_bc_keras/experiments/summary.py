@@ -27,7 +27,7 @@ from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, lo
 from dqfd_bc_keras.experiments.estimators import CALIBRATION_FILE, meets_goal
 from dqfd_bc_keras.experiments.grid import BC_ALONE, DQN, collect, effect
 from dqfd_bc_keras.experiments.replicate import replicated
-from dqfd_bc_keras.experiments.suites import ALL, EFFICIENCY_TASKS, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES
+from dqfd_bc_keras.experiments.suites import ALL, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES, efficiency_tasks
 
 UNKNOWN = ("inconclusive", "not reproduced")
 
@@ -114,7 +114,7 @@ def _efficiency(arms: list[ArmRuns], directory: Path) -> list[str]:
             f"{a.task}: SB3 ÷ bayes {point:.1f}× [{low:.1f}×, {high:.1f}×] over {a.steps.size} seeds, the "
             f"{a.target:g}× goal {'met' if point >= a.target else 'not met'}"
         )
-        same = Config.for_task(a.task, expert_loss="bayes", demo_episodes=EFFICIENCY_TASKS[a.task], **PROTOCOL)
+        same = Config.for_task(a.task, expert_loss="bayes", demo_episodes=efficiency_tasks()[a.task], **PROTOCOL)
         run = find_arm(arms, same)
         if run is not None and len(run.runs) > a.steps.size:
             more = ratio_ci(sb3[a.task], run.values("interactions_to_threshold"))

@@ -31,12 +31,11 @@ from pathlib import Path
 from dqfd_bc_keras.commands.cli import Terminated
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DirectoryInUseError, RunDirectoryError
 from dqfd_bc_keras.experiments.data import SWEEP_LOG
+from dqfd_bc_keras.experiments.names import BACKENDS, RUNS_PER_WORKER
 from dqfd_bc_keras.experiments.suites import Arm, suite_arms
 from dqfd_bc_keras.files import DirectoryLock, write_text
 from dqfd_bc_keras.runs.directory import COMPLETE
 from dqfd_bc_keras.runs.provenance import provenance
-
-BACKENDS = ("local", "ray")
 
 
 @dataclass(frozen=True)
@@ -166,10 +165,6 @@ STOP_GRACE = 20.0
 under way: one episode at most) before those still running are killed. A kill costs nothing a
 stop keeps: a stop writes no checkpoint either, every file of a run is written atomically, and
 the next runner takes over the dead one's lock."""
-RUNS_PER_WORKER = 25
-"""Runs a worker process takes in turn before it retires and a fresh one takes its place (as
-`multiprocessing.Pool(maxtasksperchild=…)`): TensorFlow's import (~5 s) is paid once per worker,
-not once per run, and whatever a run leaves behind in the process is bounded."""
 
 
 @dataclass
@@ -198,10 +193,8 @@ class _Worker:
 
     def retire(self) -> None:
         """Tell an idle worker to exit, and wait for it."""
-        try:
+        with contextlib.suppress(OSError):  # it is gone already
             self.jobs.send(None)
-        except OSError:
-            pass  # it is gone already
         self.end_by(time.monotonic() + STOP_GRACE)
 
     def end_by(self, deadline: float) -> bool:

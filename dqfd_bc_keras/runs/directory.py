@@ -44,16 +44,30 @@ import tensorflow as tf
 
 from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.envs.make import checked_spaces, task_spaces
+from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
-from dqfd_bc_keras.evaluation import EvalResult
+from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from dqfd_bc_keras.runs.provenance import provenance
-from dqfd_bc_keras.training.records import DemoSummary, EpisodeRow, EvalRow
-from dqfd_bc_keras.runs.writers import COMPLETE, METRICS, RESTART, RESUME, append_row, check_dir, clear, plot_learning_curve, write_demonstrations, write_dynamic_demos, write_evals, write_metrics
-from dqfd_bc_keras.training.state import TrainingState
+from dqfd_bc_keras.runs.writers import (
+    COMPLETE,
+    METRICS,
+    RESTART,
+    RESUME,
+    append_row,
+    check_dir,
+    clear,
+    plot_learning_curve,
+    write_config,
+    write_demonstrations,
+    write_dynamic_demos,
+    write_evals,
+    write_metrics,
+)
 from dqfd_bc_keras.seeds import final_eval_seed
 from dqfd_bc_keras.training.loop import Callback, Learner, build, evaluate_at, run_evaluation, train_with_callback
+from dqfd_bc_keras.training.records import DemoSummary, EpisodeRow, EvalRow
+from dqfd_bc_keras.training.state import TrainingState
 
 GIVEN_DEMOS = "demos_given.npz"
 """D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
@@ -92,8 +106,12 @@ class RunDirectory:
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
 
-            self.progress = tqdm(total=config.total_steps, unit="step", dynamic_ncols=True,
-                                 initial=int(learner.interaction.env_steps.numpy()))
+            self.progress = tqdm(
+                total=config.total_steps,
+                unit="step",
+                dynamic_ncols=True,
+                initial=int(learner.interaction.env_steps.numpy()),
+            )
 
     @functools.cached_property
     def tb(self) -> tf.summary.SummaryWriter:
@@ -107,8 +125,9 @@ class RunDirectory:
         try:
             yield
         except tf.errors.OpError as error:
-            raise RunDirectoryError(f"{self.out / 'tb'}: cannot write the TensorBoard events "
-                                    f"({one_line(error)})") from None
+            raise RunDirectoryError(
+                f"{self.out / 'tb'}: cannot write the TensorBoard events ({one_line(error)})"
+            ) from None
 
     def write_demonstrations(self, source: str | None) -> None:
         """What the run started from before any interaction (not interactions themselves), as it
@@ -120,10 +139,18 @@ class RunDirectory:
         demo_io.save(data, self.out / "checkpoints" / GIVEN_DEMOS, force=True)
         meta = data.meta
         source = source or "recorded"
-        write_demonstrations(self.out, DemoSummary(
-            transitions=len(data), episodes=data.n_episodes, expert=meta.expert,
-            episode_returns=meta.episode_returns, plain_returns=meta.plain_returns,
-            pretrain_steps=self.config.pretrain_steps, source=source))
+        write_demonstrations(
+            self.out,
+            DemoSummary(
+                transitions=len(data),
+                episodes=data.n_episodes,
+                expert=meta.expert,
+                episode_returns=meta.episode_returns,
+                plain_returns=meta.plain_returns,
+                pretrain_steps=self.config.pretrain_steps,
+                source=source,
+            ),
+        )
 
     # --- called after every episode -------------------------------------------------------
     def on_episode(self, learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
@@ -212,8 +239,9 @@ class RunDirectory:
                 dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
             self.state = TrainingState.from_dict(json.loads((source / "state.json").read_text()))
         except (OSError, ValueError, LookupError, TypeError, tf.errors.OpError) as error:
-            raise BrokenRunError(f"{source}: the checkpoint cannot be resumed ({one_line(error)}); "
-                                 "start the run over with --force") from None
+            raise BrokenRunError(
+                f"{source}: the checkpoint cannot be resumed ({one_line(error)}); start the run over with --force"
+            ) from None
         self.learner.tally.count = self.state.interactions
 
     # --- the end ----------------------------------------------------------------------------
@@ -228,18 +256,36 @@ class RunDirectory:
                 learner.bc.save(tmp)
         if learner.dynamic is not None:
             demo_io.save(learner.dynamic.dataset, out / "demos.npz", force=True)
-        evaluation = run_evaluation(self.config, learner.agent, self.config.final_eval_episodes,
-                                    final_eval_seed(self.config.seed))
+        evaluation = run_evaluation(
+            self.config, learner.agent, self.config.final_eval_episodes, final_eval_seed(self.config.seed)
+        )
         write_text(out / "eval.json", json.dumps(evaluation.to_dict(), indent=1))
         plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
         self.save_checkpoint()
         with self.tb_errors():
             self.tb.close()
         write_text(out / "provenance.json", json.dumps(provenance(), indent=1))
-        write_text(out / COMPLETE, json.dumps({"episodes": self.state.episode, "env_steps": int(
-            learner.interaction.env_steps.numpy()), "interactions": learner.interactions}) + "\n", durable=True)
-        return RunResult(out, self.state.episode, int(learner.interaction.env_steps.numpy()), learner.interactions,
-                         self.state.stopped_early, self.state.wall_time, evaluation)
+        write_text(
+            out / COMPLETE,
+            json.dumps(
+                {
+                    "episodes": self.state.episode,
+                    "env_steps": int(learner.interaction.env_steps.numpy()),
+                    "interactions": learner.interactions,
+                }
+            )
+            + "\n",
+            durable=True,
+        )
+        return RunResult(
+            out,
+            self.state.episode,
+            int(learner.interaction.env_steps.numpy()),
+            learner.interactions,
+            self.state.stopped_early,
+            self.state.wall_time,
+            evaluation,
+        )
 
 
 def train(
@@ -266,10 +312,7 @@ def train(
     with DirectoryLock(out):
         mode = check_dir(out, resume, force)
         if mode == RESTART:
-            warnings.warn(f"{out}: no checkpoint yet (the run was stopped before its first); starting it over",
-                          DqfdWarning, stacklevel=2)
-            if resume and (out / "checkpoints" / GIVEN_DEMOS).is_file():  # the run's own D_demo, as a resume would
-                dataset = _given_demos(out / "checkpoints" / GIVEN_DEMOS, config)
+            dataset = _restart(out, config, dataset, resume)
         resume = mode == RESUME
         if not resume:
             clear(out)
@@ -287,6 +330,18 @@ def train(
             remove_temporaries(out)
             (out / COMPLETE).unlink(missing_ok=True)  # written again when it finishes again
         return _train_into(run, callback)
+
+
+def _restart(
+    out: Path, config: Config, dataset: demo_io.DemoDataset | None, resume: bool
+) -> demo_io.DemoDataset | None:
+    """The D_demo to start over a run stopped before its first checkpoint with: its own, as a
+    resume would, if it got as far as keeping it; else `dataset`."""
+    warnings.warn(
+        f"{out}: no checkpoint yet (the run was stopped before its first); starting it over", DqfdWarning, stacklevel=3
+    )
+    given = out / "checkpoints" / GIVEN_DEMOS
+    return _given_demos(given, config) if resume and given.is_file() else dataset
 
 
 def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None = None) -> RunResult:
@@ -333,12 +388,6 @@ def save_run(out: str | Path, learner: Learner, state: TrainingState, source: st
         run.finish()
 
 
-def write_config(config: Config, out: Path) -> None:
-    """config.json: every field, and under "observation" the env's observation space and its flattening."""
-    observation = task_spaces(config.task, config.env_kwargs).layout.to_dict()
-    write_text(out / "config.json", json.dumps({**config.to_dict(), "observation": observation}, indent=1))
-
-
 def saved_config(out: str | Path) -> Config:
     """The config of the run in `out`, to resume it: its task, env kwargs and step limit come from
     there, not from the command line. A one-line error if there is no run to resume, and if its
@@ -350,33 +399,44 @@ def saved_config(out: str | Path) -> Config:
         own = out / "checkpoints" / json.loads((out / "checkpoints" / "latest.json").read_text())["dir"] / "config.json"
     except (OSError, ValueError, KeyError, TypeError):
         return config  # an unreadable latest.json is the restore's to report
-    if own.is_file():  # checkpoints written before the copy existed have none
-        trained = _read_config(own)
-        changed = differences(trained.to_dict(), config.to_dict())
-        if changed == differences({"total_steps": trained.total_steps}, {"total_steps": config.total_steps}) and (
-                trained.total_steps > config.total_steps):
-            return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
-        if changed:
-            raise BrokenRunError(f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
-                                 f"{'; '.join(changed)}; put it back, or start the run over with --force")
+    trained = _read_config(own)
+    changed = differences(trained.to_dict(), config.to_dict())
+    if changed == differences({"total_steps": trained.total_steps}, {"total_steps": config.total_steps}) and (
+        trained.total_steps > config.total_steps
+    ):
+        return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
+    if changed:
+        raise BrokenRunError(
+            f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
+            f"{'; '.join(changed)}; put it back, or start the run over with --force"
+        )
     return config
 
 
 def differences(was: dict, now: dict) -> list[str]:
     """The fields whose values differ between two configs' dicts, as `key: now (was before)`."""
-    return [f"{key}: {now.get(key)!r} (was {was.get(key)!r})" for key in sorted({*was, *now})
-            if was.get(key) != now.get(key)]
+    return [
+        f"{key}: {now.get(key)!r} (was {was.get(key)!r})"
+        for key in sorted({*was, *now})
+        if was.get(key) != now.get(key)
+    ]
 
 
 def _read_config(path: Path) -> Config:
+    """A run's config.json or its checkpoint's copy, holding every field of Config."""
     try:
-        return Config.from_dict(json.loads(path.read_text()))
+        fields = json.loads(path.read_text())
+        config = Config.from_dict(fields)
     except (OSError, ValueError) as error:
-        raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
+        raise BrokenRunError(
+            f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force"
+        ) from None
+    return config
 
 
-def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool,
-           source: str | None = None) -> RunDirectory:
+def _start(
+    config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool, source: str | None = None
+) -> RunDirectory:
     """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
     if resume:
         config = saved_config(out)
@@ -384,9 +444,8 @@ def _start(config: Config, out: Path, dataset: demo_io.DemoDataset | None, resum
             write_config(config, out)
     else:
         write_config(config, out)
-    given = out / "checkpoints" / GIVEN_DEMOS
-    if resume and given.is_file():  # the run's own D_demo, not a new recording (nor the --demos of this call)
-        dataset = _given_demos(given, config)
+    if resume and config.uses_demos:  # the run's own D_demo, not a new recording (nor the --demos of this call)
+        dataset = _given_demos(out / "checkpoints" / GIVEN_DEMOS, config)
     learner, _ = build(config, dataset, fresh=not resume)
     run = RunDirectory(config, out, learner, TrainingState(), quiet)
     if resume:
@@ -413,4 +472,3 @@ def free_name(path: Path) -> Path:
         k += 1
         candidate = path.with_name(f"{path.name}.{k}")
     return candidate
-

@@ -2,6 +2,8 @@
 drawn from them. One writer for every run directory: `runs/directory.py` while a run trains, and the
 lab's test fixture (tests/data/make_suite.py), so the lab reads what runs write.
 
+    config.json          the run's `Config`, and under "observation" the env's observation space
+                         and how it was flattened
     metrics.csv          one `EpisodeRow` per episode
     evals.csv            one `EvalRow` per grid point of interactions
     demonstrations.json  the `DemoSummary` of the D_demo the run started from
@@ -25,7 +27,7 @@ from typing import IO
 import numpy as np
 
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.envs.make import get_task, task_spaces
 from dqfd_bc_keras.errors import ConfigError, OutputExistsError
 from dqfd_bc_keras.files import DirectoryLock, atomic_path, temporary_of, write_text
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Record
@@ -34,9 +36,24 @@ METRICS, EVALS = "metrics.csv", "evals.csv"
 DEMONSTRATIONS, DYNAMIC_DEMOS = "demonstrations.json", "dynamic_demos.json"
 COMPLETE = "complete.json"
 """Written last, atomically, by a finished run: a run without it is resumed, never taken as done."""
-RUN_FILES = frozenset({"config.json", METRICS, EVALS, DEMONSTRATIONS, DYNAMIC_DEMOS, "tb", "checkpoints",
-                       "q_network.keras", "bc_model.keras", "demos.npz", "eval.json", "learning_curve.png",
-                       "provenance.json", COMPLETE})
+RUN_FILES = frozenset(
+    {
+        "config.json",
+        METRICS,
+        EVALS,
+        DEMONSTRATIONS,
+        DYNAMIC_DEMOS,
+        "tb",
+        "checkpoints",
+        "q_network.keras",
+        "bc_model.keras",
+        "demos.npz",
+        "eval.json",
+        "learning_curve.png",
+        "provenance.json",
+        COMPLETE,
+    }
+)
 """The names a run writes in its directory (runs/directory.py's docstring): all that replacing a run deletes."""
 NEW, RESUME, RESTART = "new", "resume", "restart"
 """What training into a directory does (`check_dir`): start a run, resume the one there, or start
@@ -65,8 +82,10 @@ def check_dir(out: Path, resume: bool, force: bool) -> str:
         return NEW
     if not is_run(out):
         shown = ", ".join(contents[:3]) + (f" and {len(contents) - 3} more" if len(contents) > 3 else "")
-        raise OutputExistsError(f"{out} is not a run directory (it holds {shown}), and only a run is ever replaced; "
-                                "choose a new or empty --out")
+        raise OutputExistsError(
+            f"{out} is not a run directory (it holds {shown}), and only a run is ever replaced; "
+            "choose a new or empty --out"
+        )
     if (out / "checkpoints" / "latest.json").is_file():
         if resume:
             return RESUME
@@ -77,8 +96,9 @@ def check_dir(out: Path, resume: bool, force: bool) -> str:
         return NEW
     if not ((out / METRICS).exists() or (out / COMPLETE).exists()):
         return RESTART  # killed between its config.json and its first checkpoint: nothing to lose
-    raise OutputExistsError(f"{out} holds a run without a checkpoint, which cannot be resumed; pass --force to "
-                            "replace it")
+    raise OutputExistsError(
+        f"{out} holds a run without a checkpoint, which cannot be resumed; pass --force to replace it"
+    )
 
 
 def clear(out: Path) -> None:
@@ -107,6 +127,12 @@ def append_row(path: Path, row: Record) -> None:
     """One more row at the end of the CSV file `path` (written by `write_rows` for its type)."""
     with open(path, "a", newline="") as file:
         _writer(file, type(row)).writerow(row.to_row())
+
+
+def write_config(config: Config, out: Path) -> None:
+    """config.json: every field, and under "observation" the env's observation space and its flattening."""
+    observation = task_spaces(config.task, config.env_kwargs).layout.to_dict()
+    write_text(out / "config.json", json.dumps({**config.to_dict(), "observation": observation}, indent=1))
 
 
 def write_metrics(out: Path, rows: Sequence[EpisodeRow]) -> None:
@@ -140,10 +166,15 @@ def plot_learning_curve(metrics: Sequence[EpisodeRow], evals: Sequence[EvalRow],
         ax.plot(steps, returns, color="tab:blue", alpha=0.3, lw=1, label="training episode")
         window = min(config.dynamic_window, len(returns))
         average = np.convolve(returns, np.ones(window) / window, mode="valid")
-        ax.plot(steps[window - 1:], average, color="tab:blue", lw=2, label=f"moving average ({window})")
+        ax.plot(steps[window - 1 :], average, color="tab:blue", lw=2, label=f"moving average ({window})")
     if evals:
-        ax.plot([e.env_step for e in evals], [e.mean_return for e in evals], "o-", color="tab:orange",
-                label="greedy evaluation")
+        ax.plot(
+            [e.env_step for e in evals],
+            [e.mean_return for e in evals],
+            "o-",
+            color="tab:orange",
+            label="greedy evaluation",
+        )
     spec = get_task(config.task)
     if spec.solved_return is not None:
         ax.axhline(spec.solved_return, color="grey", ls="--", lw=1, label=f"solved ({spec.solved_return:g})")

@@ -14,10 +14,12 @@ own registers from your module the same way, and `--task my_module:my-task` impo
 This package imports neither TensorFlow nor Gymnasium: reading a config.json loads neither.
 """
 
-from dqfd_bc_keras.tasks import acrobot, cartpole, lunarlander, minatar, mountaincar  # noqa: F401  (they register, in this order)
+# isort: off
+from dqfd_bc_keras.tasks import cartpole, mountaincar, acrobot, lunarlander, minatar  # noqa: F401  (they register, in this order)
+
+# isort: on
 from dqfd_bc_keras.tasks.registry import (
     ENV_DEFAULTS,
-    EXPERT_NAMES,
     ID_NAMESPACE,
     NOT_REMADE,
     TASKS,
@@ -32,7 +34,6 @@ from dqfd_bc_keras.tasks.registry import (
 
 __all__ = [
     "ENV_DEFAULTS",
-    "EXPERT_NAMES",
     "ID_NAMESPACE",
     "NOT_REMADE",
     "TASKS",

@@ -68,7 +68,7 @@ def require_minatar() -> None:
     """Import `minatar.gym` (quietly: without seaborn it only cannot render); a `ConfigError` if it is not installed."""
     try:
         with _quiet_root_logger():
-            import minatar.gym  # noqa: F401
+            import minatar.gym  # noqa: F401  (registers MinAtar's Gymnasium ids)
     except ImportError:
         raise ConfigError("the MinAtar tasks need the minatar package: pip install minatar") from None
 

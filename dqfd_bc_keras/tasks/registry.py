@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from dqfd_bc_keras.choices import EXPERT_NAMES
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.plugins import PluginError, import_module, parse
 
 Rule = Callable[[np.ndarray], int]
 """A scripted demonstrator: observation (as the networks see it) → action."""
 
-EXPERT_NAMES = ("strong", "imperfect")
-"""The scripted experts every package preset has: a strong one and an imperfect one."""
 NOT_REMADE = ("python callable ", "demonstrations from ")
 """How a config names demonstrations that no later process can make again (a Python function
 recorded in the process that ran, a dataset given from Python): accepted as an `expert`, never
@@ -88,14 +87,15 @@ def find_preset(name: str) -> TaskSpec | None:
     `name` is no preset (it may still be a Gymnasium id)."""
     if name in TASKS:
         return TASKS[name]
-    module, sep, bare = name.rpartition(":")
-    if not (sep and module):
+    parsed = parse(name)
+    if parsed is None:
         return None
+    module, bare = parsed
     if bare not in TASKS:
         try:
-            importlib.import_module(module)
-        except ImportError:
-            return None  # `envs.env_task` reports it, with the Gymnasium id's own error
+            import_module(module, f"task {name!r}")
+        except PluginError:
+            return None  # `envs.env_task` reports it, as it does for a Gymnasium id's module
     return TASKS.get(bare)
 
 

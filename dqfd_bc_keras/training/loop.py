@@ -360,7 +360,7 @@ def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode
     """Steps 3–5: episodes until the budget or the early stop; `on_episode` logs and saves,
     `on_eval` evaluates at exactly every `eval_every` interactions."""
     c, agent, interaction = learner.config, learner.agent, learner.interaction
-    steps = lambda: int(interaction.env_steps.numpy())  # noqa: E731
+    steps = lambda: int(interaction.env_steps.numpy())
     while steps() < c.total_steps and not state.stopped_early:
         started = time.perf_counter()
         obs, done = interaction.reset(episode_seed(c.seed, state.episode)), False

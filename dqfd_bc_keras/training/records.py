@@ -2,9 +2,9 @@
 update, and the demonstrations it started from. `runs/directory.py` writes them, the lab parses them back.
 
 A record's columns are its field names (a trailing `_` dropped: `return_` is the column `return`),
-so the CSV headers and JSON keys are spelled here and only here. A field with a default is one
-that older run directories lack; parsing fills it in, so every run ever written still loads.
-No TensorFlow, no numpy: reading a run's files needs neither.
+so the CSV headers and JSON keys are spelled here and only here. Every file holds every column; a
+field typed `… | None` may be empty (an empty CSV cell, a JSON null), and only such a field has a
+default. No TensorFlow, no numpy: reading a run's files needs neither.
 """
 
 from __future__ import annotations
@@ -33,17 +33,6 @@ class Record:
             for column in (kind.columns() if _is_record(kind) else (_column(name),))
         )
 
-    @classmethod
-    def required(cls) -> tuple[str, ...]:
-        """The columns every file holds (no default: written since the first version)."""
-        optional = {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
-        return tuple(
-            column
-            for name, kind in _fields(cls)
-            if name not in optional
-            for column in (kind.required() if _is_record(kind) else (_column(name),))
-        )
-
     def to_row(self) -> dict[str, Any]:
         """Column → value, in column order (values as they are: the writer formats them)."""
         row: dict[str, Any] = {}
@@ -55,18 +44,14 @@ class Record:
     @classmethod
     def from_row(cls: type[R], row: Mapping[str, Any]) -> R:
         """Parse a CSV row (strings) or a JSON object (numbers): each value converted to its
-        field's type, an empty cell or a missing optional column to None, unknown columns
-        ignored. A missing required column raises KeyError naming it; a bad value ValueError."""
-        defaults = {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
-        values = {}
-        for name, kind in _fields(cls):
-            if _is_record(kind):
-                values[name] = kind.from_row(row)
-            elif _column(name) in row:
-                values[name] = _convert(row[_column(name)], kind, _column(name))
-            elif name not in defaults:
-                raise KeyError(_column(name))
-        return cls(**values)
+        field's type, an empty cell to None where the field may be None, unknown columns ignored.
+        A missing column raises KeyError naming it; a bad value ValueError."""
+        return cls(
+            **{
+                name: kind.from_row(row) if _is_record(kind) else _convert(row[_column(name)], kind, _column(name))
+                for name, kind in _fields(cls)
+            }
+        )
 
     def __getitem__(self, column: str) -> Any:
         """The value of `column` (as the file spells it), for code that picks a column by name."""
@@ -125,8 +110,8 @@ class EpisodeRow(Record):
     episode: int
     env_step: int
     """The learner's env steps so far (what ε and the budget count)."""
-    interactions: int | None = None
-    """Every interaction so far, dynamic-demonstration roll-outs included (None: before it was kept)."""
+    interactions: int
+    """Every interaction so far, dynamic-demonstration roll-outs included."""
     return_: float
     """Under the task's rewards (what the learner sees)."""
     plain_return: float
@@ -141,7 +126,8 @@ class EpisodeRow(Record):
     """Seconds of training so far."""
     imitation_weight_demo: float | None = None
     """The Bayesian likelihood's weight 1/(2σ²(s)) averaged over D_demo's rows after the episode
-    (None: the method reads no σ², or the run is from before it was kept)."""
+    (None: none recorded. The method reads no σ², or the run is one of docs/data's archived runs
+    that did not log the weights: their value is not known.)"""
     imitation_weight_agent: float | None = None
     """The same over D_replay's rows, the agent's own states (None also while D_replay is empty)."""
 
@@ -152,9 +138,9 @@ class EvalRow(Record):
 
     env_step: int
     interactions: int
-    episode: int | None = None
+    episode: int
     mean_return: float
-    std_return: float | None = None
+    std_return: float
     mean_goals: float | None = None
     """None where the task counts no goals (an empty cell)."""
 
@@ -165,12 +151,12 @@ class DemoUpdate(Record):
 
     episode: int
     env_step: int
-    interactions: int | None = None
+    interactions: int
     moving_average: float
-    mode: str | None = None
-    """`episodes` or `rollouts` (Config.dynamic_demos); None before it was kept."""
+    mode: str
+    """`episodes` or `rollouts` (Config.dynamic_demos)."""
     new_returns: list[float]
-    new_transitions: int | None = None
+    new_transitions: int
     demo_transitions: int
     demo_episodes: int
     bc_accuracy: float
@@ -194,11 +180,11 @@ class DemoSummary(Record):
     plain_returns: list[float]
     """Return of each episode under the plain env's rewards."""
     pretrain_steps: int
-    source: str | None = None
-    """One of DEMO_SOURCES; None in runs from before it was kept."""
+    source: str
+    """One of DEMO_SOURCES."""
 
     def __post_init__(self) -> None:
         if not self.plain_returns:
             raise ValueError("no episode in plain_returns")
-        if self.source is not None and self.source not in DEMO_SOURCES:
+        if self.source not in DEMO_SOURCES:
             raise ValueError(f"source {self.source!r} is not one of {DEMO_SOURCES}")

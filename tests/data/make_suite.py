@@ -4,9 +4,9 @@
 
 cartpole/naive: bayes and ce (3 seeds; runs stop early at different episodes, one never does)
 and plain DQN (2 seeds); mountaincar-goals/bootstrap: bayes and ce (2 seeds, 40 episodes). Runs
-carry demonstrations.json, provenance.json (two code commits, one dirty run, one run without
-it) and one dynamic_demos.json; the suite a sweep log. The run files of records are written by
-`runs/writers.py`, the writer of real runs. Numbers come from a seeded generator, so
+carry demonstrations.json, provenance.json (two code commits, one dirty run, one run trained
+outside a git checkout) and one dynamic_demos.json; the suite a sweep log. The run files are
+written by `runs/writers.py`, the writer of real runs. Numbers come from a seeded generator, so
 the archive only changes when this script does; regenerate the golden RESULTS.md after it
 (see tests/test_report.py).
 """
@@ -23,9 +23,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.evaluation import EvalResult
+from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.experiments.data import export_archive
-from dqfd_bc_keras.runs.writers import write_demonstrations, write_dynamic_demos, write_evals, write_metrics
+from dqfd_bc_keras.runs.writers import (
+    write_config,
+    write_demonstrations,
+    write_dynamic_demos,
+    write_evals,
+    write_metrics,
+)
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Losses
 
 ARCHIVE = Path(__file__).with_name("suite.tar.xz")
@@ -48,12 +54,12 @@ def write_run(
     rows: list[dict],
     final: list[float],
     rng: np.random.Generator,
-    provenance: dict | None,
+    provenance: dict,
     dynamic: bool = False,
 ) -> None:
     run = root / name / f"seed{config.seed}"
     run.mkdir(parents=True)
-    (run / "config.json").write_text(json.dumps(config.to_dict(), indent=1))
+    write_config(config, run)
     steps = [int(s) for s in np.cumsum([r["length"] for r in rows])]
     write_metrics(
         run,
@@ -126,13 +132,13 @@ def write_run(
                 for episode, average, new, size in ((12, 300.0, 1500, 2500), (20, 450.0, 2500, 5000))
             ],
         )
-    if provenance is not None:
-        (run / "provenance.json").write_text(json.dumps(provenance, indent=1))
+    (run / "provenance.json").write_text(json.dumps(provenance, indent=1))
 
 
 def build(root: Path) -> None:
     rng = np.random.default_rng(0)
     clean = {"code_commit": COMMITS[0], "rules_commit": RULES, "dirty": False, "versions": {"python": "3.11"}}
+    outside_git = {**clean, "code_commit": None, "rules_commit": None, "dirty": None}
     for loss, solves in (("bayes", (25, 32, None)), ("ce", (28, None, 40))):
         for seed, solve_at in enumerate(solves):
             lengths = cartpole_lengths(rng, solve_at)
@@ -157,7 +163,7 @@ def build(root: Path) -> None:
             rows,
             [20.0, 25.0, 30.0],
             rng,
-            None if seed == 1 else clean,
+            outside_git if seed == 1 else clean,
         )
     for loss, rate in (("bayes", 0.5), ("ce", 0.3)):
         for seed in range(2):

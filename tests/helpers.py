@@ -1,0 +1,124 @@
+"""The package's commands called in the test's own process, as their console scripts call them
+(`cli.run`: one-line errors and exit codes). A test that needs a command's answer, or a finished
+run, pays no new Python process and no second TensorFlow import; a subprocess stays where the
+process itself is what a test is about (a kill, a lock between processes, imports, a fresh registry)."""
+
+import contextlib
+import io
+import signal
+import sys
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import gymnasium as gym
+import pytest
+
+from dqfd_bc_keras.commands import cli
+from dqfd_bc_keras.commands.demos import main as demos_main
+from dqfd_bc_keras.commands.evaluate import main as evaluate_main
+from dqfd_bc_keras.commands.train import main as train_main
+from dqfd_bc_keras.core.methods import METHODS
+from dqfd_bc_keras.envs import make
+from dqfd_bc_keras.experiments.__main__ import main as lab_main
+from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS
+from dqfd_bc_keras.experiments.pixels import main as pixels_main
+from dqfd_bc_keras.experiments.suites import SUITES
+from dqfd_bc_keras.tasks import TASKS
+
+REPO = Path(__file__).resolve().parents[1]
+PROGRAMS: dict[str, Callable[[Sequence[str] | None], int]] = {
+    "train.py": train_main,
+    "dqfd-train": train_main,
+    "evaluate.py": evaluate_main,
+    "dqfd-evaluate": evaluate_main,
+    "dqfd_bc_keras.demos": demos_main,
+    "dqfd_bc_keras.experiments": lab_main,
+    "dqfd_bc_keras.experiments.pixels": pixels_main,
+}
+"""Each command by the names a user types it (a script, a console script, a `python -m` module)."""
+PROCESS_CACHES = (make.env_task, make._task_spaces)
+"""What the package remembers for the rest of its process: each env's task and spaces, and with them
+the warnings said once while working them out. A command answered by `call` starts without them, as
+it would in a process of its own."""
+
+
+@dataclass
+class Answer:
+    """What a command answered: its exit code, stdout and stderr (and, run with `-X importtime`, the
+    modules it imported)."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+    imports: list[str] = field(default_factory=list)
+
+
+def call(program: str, *args: object, cwd: Path = REPO, path: Sequence[Path] = ()) -> Answer:
+    """`program ARGS` (a name of `PROGRAMS`) answered in this process as its own process would answer
+    it, typed in `cwd` (the repository, as `python train.py` is) with `path` first on PYTHONPATH: what
+    `cli.run` returns (or the code an argparse error exits with) and what it printed. It sees its own
+    argv and shows each warning once, as in a new process; what it imported from `path` or registered
+    is forgotten when it ends."""
+    argv = [str(arg) for arg in args]
+    out, err = io.StringIO(), io.StringIO()
+    for cache in PROCESS_CACHES:
+        cache.cache_clear()
+    with pytest.MonkeyPatch.context() as process, forgetting(*path), warnings.catch_warnings():
+        process.setattr(sys, "argv", [program, *argv])
+        process.chdir(cwd)
+        for directory in reversed(path):
+            process.syspath_prepend(str(directory))
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = cli.run(PROGRAMS[program], argv)
+            except SystemExit as exit:
+                code = exit.code
+    return Answer(code, out.getvalue(), err.getvalue())
+
+
+def python(*args: object, cwd: Path = REPO, path: Sequence[Path] = ()) -> Answer:
+    """What `python ARGS` answers, typed as a user types it (`train.py …`, `-m dqfd_bc_keras.demos …`),
+    answered in this process by `call`."""
+    first, *rest = map(str, args)
+    program, *rest = rest if first == "-m" else [first, *rest]
+    return call(program, *rest, cwd=cwd, path=path)
+
+
+REGISTRIES = (METHODS, TASKS, SUITES, LAB_SETTINGS)
+"""What a user's module (or a test) adds to by registering a method, preset, suite or lab setting."""
+
+
+def entry_module(spec: gym.envs.registration.EnvSpec) -> str:
+    """The module that defines a Gymnasium id's env."""
+    entry = spec.entry_point
+    return entry.partition(":")[0] if isinstance(entry, str) else getattr(entry, "__module__", "")
+
+
+@contextlib.contextmanager
+def forgetting(*directories: Path) -> Iterator[None]:
+    """After the block, the registries and the SIGTERM handler (`cli.run` installs its own) as they
+    were before it, and the modules it imported from `directories` forgotten with the Gymnasium ids they
+    registered: what a process that ran the block would take with it when it ends. (Ids a package
+    registers on its first import stay, with the package.)"""
+    registered = [dict(registry) for registry in REGISTRIES]
+    modules, env_ids = set(sys.modules), set(gym.registry)
+    on_sigterm = signal.getsignal(signal.SIGTERM)
+    try:
+        yield
+    finally:
+        for registry, before in zip(REGISTRIES, registered, strict=True):
+            registry.clear()
+            registry.update(before)
+        users = {
+            name
+            for name in set(sys.modules) - modules
+            if (getattr(sys.modules[name], "__file__", None) or "").startswith(tuple(map(str, directories)))
+        }
+        for name in users:
+            del sys.modules[name]
+        for env_id in set(gym.registry) - env_ids:
+            if entry_module(gym.registry[env_id]) in users:
+                del gym.registry[env_id]
+        signal.signal(signal.SIGTERM, on_sigterm)
