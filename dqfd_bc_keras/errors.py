@@ -59,3 +59,8 @@ def one_line(error: BaseException) -> str:
     text = str(getattr(error, "message", None) or error).strip()
     text = re.sub(r"\{\{.*?\}\}\s*|\s*\[Op:\w+\]", "", text.splitlines()[0] if text else "")
     return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+OLDER = "written by an older version? Read the run with that version, or train it again"
+"""What a run file lacking a field of today's format is told: its value is not known (a default
+may have changed since), so it is refused rather than filled in."""

@@ -178,7 +178,7 @@ def test_plain_env_is_unmodified():
             {"name": "no_such_pkg:Pong-v0"},
             r"^unknown task 'no_such_pkg:Pong-v0': no module named 'no_such_pkg' \(is its directory on PYTHONPATH\?\)$",
         ),
-        ({"name": "json:Pong-v0"}, r"^unknown task 'json:Pong-v0': neither a preset \(.*\) nor a Gymnasium env id"),
+        ({"name": "json:NoSuch-v0"}, r"^unknown task 'json:NoSuch-v0': neither a preset \(.*\) nor a Gymnasium env id"),
         ({"name": "cartpole", "timeout": "lazy"}, "unknown timeout mode 'lazy'"),
         ({"name": "cartpole", "max_steps": 0}, "max_steps must be ≥ 1, got 0"),
     ],

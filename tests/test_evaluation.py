@@ -157,7 +157,8 @@ def test_load_policy_reads_the_run(run_dir, tmp_path):
     [
         ("{not json", "not valid JSON"),
         ('{"task": "cartpole", "colour": 1}', "unknown config field"),
-        ('{"task": "chess"}', "unknown task"),
+        (json.dumps({**Config.for_task("cartpole").to_dict(), "task": "chess"}), "unknown task"),
+        ('{"task": "cartpole"}', r"no \['env_kwargs', .*written by an older version"),
         ("[1]", "JSON object"),
     ],
 )

@@ -194,7 +194,8 @@ def test_the_torso_is_chosen_by_the_observation_and_refused_where_it_cannot_read
         checked_spaces(Config.for_task("minatar-breakout", timeout="time-aware"))
     with pytest.raises(ConfigError, match="torso='conv' is not one of"):
         Config.for_task("cartpole", torso="conv")
-    assert Config.for_task("minatar-breakout").network_input.torso == "minatar"
+    breakout = Config.for_task("minatar-breakout")
+    assert checked_spaces(breakout).network_input(breakout.torso, breakout.timeout).torso == "minatar"
 
 
 # --- end to end -----------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ from dqfd_bc_keras.choices import DYNAMIC_MODES, PRIOR_CENTERS, TARGETS, TD_LOSS
 from dqfd_bc_keras.core.methods import Method, get_method, reading_saved_config
 from dqfd_bc_keras.envs.make import TaskSpaces, get_task, step_limit
 from dqfd_bc_keras.envs.network_input import CONV_TORSOS, NetworkInput
-from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.errors import OLDER, ConfigError, DqfdWarning
 from dqfd_bc_keras.seeds import MAX_SEED
 from dqfd_bc_keras.tasks import check_demonstrator
 
@@ -222,9 +222,7 @@ class Config:
             raise ConfigError(f"unknown config field(s) {unknown}")
         missing = [name for name in known if name not in fields]
         if missing:
-            raise ConfigError(
-                f"no {missing}: written by an older version? Read the run with that version, or train it again"
-            )
+            raise ConfigError(f"no {missing}: {OLDER}")
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
         with reading_saved_config():  # its method (the user's) is imported to train, not to read its settings
             return cls.for_task(values.pop("task", "cartpole"), **values)

@@ -105,34 +105,34 @@ def make_expert(family: str, name: str, epsilon: float = 0.0, seed: int | None =
 
 
 def make_demonstrator(
-    spec: str, task: str, epsilon: float = 0.0, seed: int | None = None, env_kwargs: dict | None = None
+    name: str, task: str, epsilon: float = 0.0, seed: int | None = None, env_kwargs: dict | None = None
 ) -> Demonstrator:
-    """The demonstrator `spec` on `task` (made with `env_kwargs`): a scripted expert of the task's
+    """The demonstrator `name` on `task` (made with `env_kwargs`): a scripted expert of the task's
     family (strong | imperfect, or a preset's own names), a rule `module:function` (an importable
     function of the observation as the networks see it, flattened, → action), or the greedy
     policy of a saved `.keras` Q-network or BC model (checked against the task's spaces)."""
-    check_demonstrator(spec, get_task(task))
-    if spec.startswith(NOT_REMADE):
+    check_demonstrator(name, get_task(task))
+    if name.startswith(NOT_REMADE):
         raise ConfigError(
-            f"expert {spec!r} existed only in the Python process that used it: give the "
+            f"expert {name!r} existed only in the Python process that used it: give the "
             "demonstrations themselves (--demos FILE.npz)"
         )
     n_actions = task_spaces(task, env_kwargs).n_actions  # first: an env we cannot learn on is the error
     family = get_task(task).family
-    if spec in EXPERT_NAMES or spec in get_task(task).experts:
+    if name in EXPERT_NAMES or name in get_task(task).experts:
         if family is None:
             raise ConfigError(
-                f"{task} has no scripted {spec} expert: give demonstrations with --demos "
+                f"{task} has no scripted {name} expert: give demonstrations with --demos "
                 "FILE.npz or minari:DATASET_ID, or a demonstrator module:function or model.keras"
             )
-        return make_expert(family, spec, epsilon, seed)
-    if spec.endswith(".keras"):
+        return make_expert(family, name, epsilon, seed)
+    if name.endswith(".keras"):
         from dqfd_bc_keras.evaluation import load_policy  # loads Keras: only when a model demonstrates
 
-        rule: Rule = load_policy(spec, None, task, env_kwargs=env_kwargs or {})[0]
+        rule: Rule = load_policy(name, None, task, env_kwargs=env_kwargs or {})[0]
     else:
-        rule = load(spec, f"demonstrator {spec}", callable, "function")
-    return Demonstrator(spec, rule, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed))
+        rule = load(name, f"demonstrator {name}", callable, "function")
+    return Demonstrator(name, rule, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed))
 
 
 def try_demonstrator(config: Config) -> None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.episodes import EvalResult
-from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.errors import OLDER, ConfigError
 from dqfd_bc_keras.files import atomic_path
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
 
@@ -50,7 +50,6 @@ BENCHMARK_FILES = ("efficiency.json", "sb3-dqn", "calibration.json", "bc-alone")
 """Files the report reads besides the runs: `experiments efficiency`'s table and SB3's
 runs, `calibrate`'s measurements and BC alone's results (`imitation.py`)."""
 ARCHIVE_SUFFIX = ".tar.xz"
-OLDER = "written by an older version? Read the run with that version, or train it again"
 """What a run file that lacks a column or field of this version's format is taken for, and the way on."""
 
 
