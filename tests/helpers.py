@@ -122,3 +122,20 @@ def forgetting(*directories: Path) -> Iterator[None]:
             if entry_module(gym.registry[env_id]) in users:
                 del gym.registry[env_id]
         signal.signal(signal.SIGTERM, on_sigterm)
+
+
+TINY_SWEEP = [
+    arg
+    for setting in (
+        "total_steps=100",
+        "pretrain_steps=10",
+        "eval_every=50",
+        "checkpoint_every=50",
+        "demo_episodes=1",
+        "eval_episodes=1",
+        "final_eval_episodes=1",
+        "bc_epochs=1",
+    )
+    for arg in ("--set", setting)
+]
+"""`--set` flags that make each run of a sweep a few seconds: 100 interactions, one episode of everything."""

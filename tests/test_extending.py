@@ -2,9 +2,9 @@
 and suite, each in a module of their own outside the package. The modules are the doc's python blocks
 and the commands its bash blocks, read from the doc when the tests run, so the tests follow the doc
 when it changes. Each recipe runs in tmp_path (the user's directory, where the modules are written)
-with the package as this process imports it; the doc's own `PYTHONPATH=.` adds tmp_path. Each command
-is answered in this process by the program the command names (`helpers.call`), and forgets what it
-imported and registered when it ends, as its own process would (the suite's workers are processes).
+with the repository on PYTHONPATH, standing in for the installed package; the doc's own `PYTHONPATH=.`
+adds tmp_path. Each command runs in a process of its own, as the user types it: `dqfd-train` and
+`dqfd-evaluate` as the repository's train.py and evaluate.py (the same programs as the entry points).
 
 Budgets: the method's commands are the doc's as written (`--quick`, and evaluate's 100 episodes of a
 quick run); the preset's training gets `--quick` (the doc's preset trains 20,000 steps); the suite's
@@ -12,15 +12,18 @@ run gets `--seeds 1` and a run of seconds (the doc's suite is 3 arms × 5 seeds 
 
 import csv
 import json
+import os
 import re
 import runpy
 import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import tensorflow as tf
-from helpers import Answer, call
+from helpers import TINY_SWEEP
 
 from dqfd_bc_keras.core import expert_terms
 from dqfd_bc_keras.core.agent import make_agent
@@ -28,20 +31,12 @@ from dqfd_bc_keras.core.config import Config
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "EXTENDING.md"
-TINY_RUN = [
-    arg
-    for setting in (
-        "total_steps=100",
-        "pretrain_steps=10",
-        "eval_every=50",
-        "checkpoint_every=50",
-        "demo_episodes=1",
-        "eval_episodes=1",
-        "final_eval_episodes=1",
-        "bc_epochs=1",
-    )
-    for arg in ("--set", setting)
-]
+PROGRAMS = {
+    "dqfd-train": [sys.executable, str(REPO / "train.py")],
+    "dqfd-evaluate": [sys.executable, str(REPO / "evaluate.py")],
+    "python": [sys.executable],
+}
+"""The doc's programs as this checkout runs them (the console scripts are train.py and evaluate.py)."""
 """A run of seconds: what the suite recipe needs is its runs, not learning."""
 
 
@@ -56,17 +51,18 @@ def recipe(heading: str) -> tuple[dict[str, str], list[str]]:
     return modules, commands
 
 
-def run(line: str, *extra: str, cwd: Path) -> Answer:
-    """One of the doc's command lines, typed in `cwd`, with `extra` arguments appended; its leading
-    `PYTHONPATH=.` puts `cwd` on the path. Like a process of its own, a command imports a user's
-    module only where its own line says so."""
-    words, path = shlex.split(line), []
+def run(line: str, *extra: str, cwd: Path) -> subprocess.CompletedProcess:
+    """One of the doc's command lines, typed in `cwd` in a process of its own as a user types it,
+    with `extra` arguments appended; its leading `NAME=VALUE` words set the environment
+    (`PYTHONPATH=.`: `cwd`, then the repository, standing in for the installed package)."""
+    words = shlex.split(line)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
     while "=" in words[0]:
         name, _, value = words.pop(0).partition("=")
-        assert name == "PYTHONPATH", f"the doc sets {name}, which these tests do not pass on"
-        path.append(cwd / value)
-    program, *args = words[2:] if words[:2] == ["python", "-m"] else words
-    return call(program, *args, *extra, cwd=cwd, path=path)
+        env[name] = os.pathsep.join([str(cwd / value), str(REPO)]) if name == "PYTHONPATH" else value
+    return subprocess.run(
+        [*PROGRAMS[words[0]], *words[1:], *extra], cwd=cwd, env=env, capture_output=True, text=True, timeout=900
+    )
 
 
 def write(modules: dict[str, str], where: Path) -> None:
@@ -133,7 +129,7 @@ def test_the_suite_recipe_runs_its_arms_and_reports_them(tmp_path):
     write(modules, tmp_path)
     module, _, name = re.search(r" run (\S+)", sweep)[1].partition(":")
     arms = runpy.run_path(str(tmp_path / f"{module}.py"))[name]
-    done = run(sweep, "--seeds", "1", *TINY_RUN, cwd=tmp_path)
+    done = run(sweep, "--seeds", "1", *TINY_SWEEP, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0] == (
         f"{module}:{name}: {len(arms)} runs, 0 already complete, {len(arms)} to run on 2 local worker(s)"

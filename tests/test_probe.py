@@ -32,7 +32,7 @@ import keras
 import numpy as np
 import pytest
 import tensorflow as tf
-from helpers import Answer, call
+from helpers import TINY_SWEEP, Answer, call
 from test_cli import importers
 from test_extending import recipe, write
 from test_reliability import ENV, REPO, evaluate_main, one_line, train_main, tree
@@ -352,20 +352,6 @@ def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_pa
 # seed, and a suite of one's own (`module:NAME`).
 
 LAB = ("-m", "dqfd_bc_keras.experiments")
-TINY_SWEEP = [
-    arg
-    for setting in (
-        "total_steps=100",
-        "pretrain_steps=10",
-        "eval_every=50",
-        "checkpoint_every=50",
-        "demo_episodes=1",
-        "eval_episodes=1",
-        "final_eval_episodes=1",
-        "bc_epochs=1",
-    )
-    for arg in ("--set", setting)
-]
 """A run of seconds: what a test of the sweep needs is runs, not learning."""
 DONE = re.compile(r"\[\d+/\d+\] (\S+) seed0: \d+ episodes, \d+ steps, eval ")
 
