@@ -26,6 +26,7 @@ import numpy as np
 
 from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras.core.config import Config, unknown_field
+from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import BUILT_IN, METHODS, Method, register
 from dqfd_bc_keras.demos.recording import callable_name
 from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
@@ -136,7 +137,7 @@ class DQfD:
         else:
             if self.learner is None:
                 config = dataclasses.replace(self.config, total_steps=budget)
-                config.check_memory(checked_spaces(config))
+                check_memory(config, checked_spaces(config))
                 self.learner, self.state = build(config, self.dataset)[0], TrainingState()
             else:
                 self.learner.extend(budget)

@@ -39,7 +39,8 @@ from test_reliability import ENV, REPO, evaluate_main, one_line, train_main, tre
 
 from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.commands.cli import env_kwarg
-from dqfd_bc_keras.core.config import Config, machine_memory, memory_needed
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.memory import machine_memory, memory_needed
 from dqfd_bc_keras.demos import record, save
 from dqfd_bc_keras.envs.make import checked_spaces, make_task
 from dqfd_bc_keras.runs import directory as runs

@@ -34,6 +34,7 @@ from dqfd_bc_keras.commands.cli import (
     seed,
 )
 from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
+from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.demos.experts import try_demonstrator
 from dqfd_bc_keras.envs.make import checked_spaces, task_slug, task_spaces
@@ -139,7 +140,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.resume:  # what a new run needs, checked before TensorFlow loads
         task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
         config = Config.for_task(task, **overrides)
-        config.check_memory(checked_spaces(config))
+        check_memory(config, checked_spaces(config))
         if not (Path(out) / DirectoryLock.NAME).exists():  # else the lock's holder is named first, in `train`
             check_dir(Path(out), resume=False, force=args.force)
         if args.demos:

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import dataclasses
 import json
 import shutil
 import sys
@@ -44,6 +45,7 @@ import tensorflow as tf
 
 from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
 from dqfd_bc_keras.envs.episodes import EvalResult
@@ -305,7 +307,7 @@ def train(
     out = Path(out)
     if not resume:
         # before anything is written: a run that cannot fit (or whose env cannot) is refused, not killed halfway
-        config.check_memory(checked_spaces(config))
+        check_memory(config, checked_spaces(config))
     created = not out.exists()
     if not (out / DirectoryLock.NAME).exists():  # else a live writer is named first, holding the lock
         check_dir(out, resume, force)
@@ -400,11 +402,9 @@ def saved_config(out: str | Path) -> Config:
     except (OSError, ValueError, KeyError, TypeError):
         return config  # an unreadable latest.json is the restore's to report
     trained = _read_config(own)
-    changed = differences(trained.to_dict(), config.to_dict())
-    if changed == differences({"total_steps": trained.total_steps}, {"total_steps": config.total_steps}) and (
-        trained.total_steps > config.total_steps
-    ):
+    if trained.total_steps > config.total_steps and trained == dataclasses.replace(config, total_steps=trained.total_steps):
         return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
+    changed = differences(trained.to_dict(), config.to_dict())
     if changed:
         raise BrokenRunError(
             f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
