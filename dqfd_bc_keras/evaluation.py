@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import keras
 import numpy as np
 import tensorflow as tf
@@ -23,7 +22,7 @@ from dqfd_bc_keras.choices import POLICY_FILES, TIMEOUT_MODES
 from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.uncertainty import EnsembleDense
-from dqfd_bc_keras.envs.episodes import EvalResult, play
+from dqfd_bc_keras.envs.episodes import EvalResult, check_video, play, video_env
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
 
@@ -178,25 +177,12 @@ def record_video(
 ) -> list[Path]:
     """Play `episodes` greedy episodes on the plain env (as `evaluate`) and save each as an MP4
     in `directory` with Gymnasium's `RecordVideo` (needs `moviepy`); returns the files."""
-    try:
-        import moviepy  # noqa: F401  (RecordVideo's encoder; fail before playing, in one line)
-    except ImportError:
-        raise ConfigError("--video needs moviepy: pip install -r requirements-extras.txt") from None
-    directory = Path(directory)
-    if directory.is_file():
-        raise ConfigError(f"--video {directory}: is a file, not a directory")
-    prefix = task_slug(task)
-    if any(directory.glob(f"{prefix}-episode-*.mp4")):
-        raise ConfigError(
-            f"--video {directory}: already holds {prefix} videos, which would be overwritten; choose another directory"
-        )
+    check_video(directory, task_slug(task))
     env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array", env_kwargs=env_kwargs)
-    env = gym.wrappers.RecordVideo(
-        env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix, disable_logger=True
-    )
+    env = video_env(env, directory, task_slug(task))
     play(env, policy, range(seed, seed + episodes))
     env.close()  # RecordVideo writes the last episode's file
-    return sorted(directory.glob(f"{prefix}-episode-*.mp4"))
+    return sorted(Path(directory).glob(f"{task_slug(task)}-episode-*.mp4"))
 
 
 def load_model(path: str | Path) -> keras.Model:

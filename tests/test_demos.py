@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +12,8 @@ import numpy as np
 import pytest
 from helpers import call
 
-from dqfd_bc_keras.demos import ARRAYS, DemoDataset, load, record, save
+from dqfd_bc_keras.demos import ARRAYS, DemoDataset, concatenate, load, record, save, validate
+from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, OutputExistsError
 
 
@@ -63,7 +65,107 @@ def test_round_trip_is_exact(dataset, tmp_path):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(dataset, name))
         assert getattr(loaded, name).dtype == getattr(dataset, name).dtype
     with np.load(path, allow_pickle=False) as raw:  # readable without this package
-        assert json.loads(str(raw["meta"]))["format_version"] == 1
+        assert json.loads(str(raw["meta"]))["format_version"] == 2
+
+
+def test_recorded_dataset_knows_its_seeds_and_step_limit(dataset):
+    """Episode i was reset with seed + i and played under the task's limit, or --max-steps'."""
+    assert dataset.meta.episode_seeds == [7, 8, 9]
+    assert dataset.meta.max_steps == get_task("cartpole-200").max_steps == 200
+    assert (dataset.meta.keys, dataset.meta.fps) == ({}, None)  # a program's demonstrations
+    short = record("mountaincar", "imperfect", episodes=2, seed=3, max_steps=50)
+    assert short.meta.max_steps == 50 and short.meta.episode_seeds == [3, 4]
+    timed = record("mountaincar", "imperfect", episodes=1, seed=0, timeout="time-aware", max_steps=40)
+    assert timed.meta.max_steps == 40
+
+
+def test_episode_seeds_replay_the_recorded_episodes(dataset):
+    """What `show` relies on: resetting with an episode's seed and re-applying its actions gives its states."""
+    from dqfd_bc_keras.envs.make import make_task
+
+    with make_task("cartpole-200", max_steps=dataset.meta.max_steps) as env:
+        for episode, seed in zip(dataset.episodes(), dataset.meta.episode_seeds, strict=True):
+            obs, _ = env.reset(seed=seed)
+            states = [obs]
+            for action in episode.actions[:-1]:
+                states.append(env.step(int(action))[0])
+            np.testing.assert_array_equal(np.asarray(states, np.float32), episode.obs)
+
+
+def test_a_person_s_keys_and_fps_round_trip(dataset, tmp_path):
+    played = dataclasses.replace(
+        dataset, meta=dataclasses.replace(dataset.meta, keys={"": 0, "right": 1, "left+up": 1}, fps=12.5)
+    )
+    path = tmp_path / "played.npz"
+    save(played, path)
+    loaded = load(path)
+    assert loaded.meta == played.meta
+    m = loaded.meta
+    assert (m.max_steps, m.episode_seeds, m.keys, m.fps) == (200, [7, 8, 9], {"": 0, "right": 1, "left+up": 1}, 12.5)
+    assert 'keys         {"": 0, "right": 1, "left+up": 1} at 12.5 fps' in loaded.summary()
+
+
+def test_a_version_1_file_is_still_read(dataset, tmp_path):
+    """Users and run directories hold version-1 files: they load, without what they never recorded."""
+    old = dataclasses.asdict(dataset.meta) | {"format_version": 1}
+    for key in ("max_steps", "episode_seeds", "keys", "fps"):
+        del old[key]
+    loaded = load(write(tmp_path / "v1.npz", dataset, meta=old), task="cartpole-200", timeout="bootstrap")
+    m = loaded.meta
+    assert (m.max_steps, m.episode_seeds, m.keys, m.fps) == (None, [None, None, None], {}, None)
+    assert m.episode_returns == dataset.meta.episode_returns and m.format_version == 2
+    for name in ARRAYS:
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(dataset, name))
+    assert "(seeds not recorded)" in loaded.summary()
+    save(loaded, tmp_path / "v2.npz")  # written again: version 2, every key
+    with np.load(tmp_path / "v2.npz", allow_pickle=False) as raw:
+        fields = json.loads(str(raw["meta"]))
+    assert fields["format_version"] == 2 and fields["episode_seeds"] == [None, None, None]
+    assert load(tmp_path / "v2.npz").meta == m
+
+
+def test_a_version_2_file_needs_every_key(dataset, tmp_path):
+    meta = dataclasses.asdict(dataset.meta)
+    del meta["episode_seeds"]
+    with pytest.raises(DemoFileError, match=re.escape("bad.npz: meta lacks ['episode_seeds']")):
+        load(write(tmp_path / "bad.npz", dataset, meta=meta))
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"episode_seeds": [7, "3", 9]}, "meta's episode_seeds must be a list of ints or nulls, got '3'"),
+        ({"episode_seeds": [7, True, 9]}, "meta's episode_seeds must be a list of ints or nulls, got True"),
+        ({"episode_seeds": 7}, "meta's episode_seeds must be list, got 7"),
+        ({"keys": {"a": "x"}}, "meta's keys must map key names to int actions, got 'a': 'x'"),
+        ({"keys": {"a": False}}, "meta's keys must map key names to int actions, got 'a': False"),
+        ({"keys": []}, r"meta's keys must be dict, got \[\]"),
+        ({"fps": "30"}, "meta's fps must be int or float or NoneType, got '30'"),
+        ({"max_steps": 2.5}, "meta's max_steps must be int or NoneType, got 2.5"),
+        ({"episode_seeds": [7, 8]}, "3 episodes, 2 seeds in meta's episode_seeds"),
+    ],
+)
+def test_rejects_wrong_version_2_fields(dataset, tmp_path, change, match):
+    meta = dataclasses.asdict(dataset.meta) | change
+    with pytest.raises(DemoFileError, match=match):
+        load(write(tmp_path / "bad.npz", dataset, meta=meta))
+
+
+def test_validate_counts_one_seed_per_episode(dataset):
+    short = dataclasses.replace(dataset, meta=dataclasses.replace(dataset.meta, episode_seeds=[7, 8]))
+    with pytest.raises(DemoFileError, match=r"^somewhere.npz: 3 episodes, 2 seeds in meta's episode_seeds$"):
+        validate(Path("somewhere.npz"), short)
+
+
+def test_episodes_and_concatenate_keep_each_episode_s_seed(dataset):
+    parts = dataset.episodes()
+    assert [p.meta.episode_seeds for p in parts] == [[7], [8], [9]]
+    other = record("cartpole-200", "strong", episodes=2, seed=20)
+    joined = concatenate([*parts[::-1], other], source="mixed")
+    assert joined.meta.episode_seeds == [9, 8, 7, 20, 21]
+    validate(Path("joined"), joined)
+    assert "(seeds 9, 8, 7, 20, 21)" in joined.summary()
+    assert "(seeds 7..9)" in dataset.summary()
 
 
 def test_recording_is_deterministic_and_epsilon_changes_actions():
@@ -152,7 +254,8 @@ def test_rejects_bad_arrays_with_the_problem_named(dataset, tmp_path, change, ma
     "meta, match",
     [
         ("not json", "meta is not valid JSON"),
-        ({"format_version": 99}, "format_version 99 is not 1"),
+        ({"format_version": 99}, "format_version 99 is not 1 or 2"),
+        ({"format_version": 2, "task": "cartpole"}, "meta lacks"),
         ({"format_version": 1, "task": "cartpole"}, "meta lacks"),
     ],
 )
@@ -212,7 +315,7 @@ def test_cli_record_and_inspect(tmp_path):
     shown = cli("inspect", str(out))
     assert shown.returncode == 0
     assert "task         mountaincar (MountainCar-v0" in shown.stdout
-    assert "episodes     2" in shown.stdout and "mean ± std" in shown.stdout
+    assert "episodes     2 (seeds 1..2)" in shown.stdout and "mean ± std" in shown.stdout
     assert load(out).meta.seed == 1
 
 
@@ -246,3 +349,25 @@ def test_cli_does_not_overwrite_without_force(tmp_path):
     assert again.returncode == 2 and "exists; pass --force" in again.stderr
     assert out.read_bytes() == before
     assert call("dqfd_bc_keras.demos", *args, "--force").returncode == 0
+
+
+def test_load_reads_one_snapshot_while_a_writer_replaces_the_file(tmp_path, monkeypatch):
+    """`demos play` rewrites its file after every episode: a reader at that moment gets the old
+    dataset or the new one, never the arrays of one with the header of the other."""
+    from dqfd_bc_keras.demos import npz
+
+    one, two = (record("cartpole", "imperfect", n, max_steps=30) for n in (1, 2))
+    path, newer = tmp_path / "d.npz", tmp_path / "newer.npz"
+    save(one, path)
+    save(two, newer)
+    read = npz._read
+
+    def replaced_meanwhile(*args):
+        if newer.exists():
+            os.replace(newer, path)
+        return read(*args)
+
+    monkeypatch.setattr(npz, "_read", replaced_meanwhile)
+    got = load(path)
+    assert got.n_episodes == 1 and np.array_equal(got.obs, one.obs)
+    assert load(path).n_episodes == 2

@@ -92,13 +92,13 @@ def test_cartpole_returns_are_the_plain_envs():
 
 def test_play_gives_each_seed_one_watched_episode_and_leaves_the_env_open():
     starts, steps, done = [], [], []
-    watcher = SimpleNamespace(reset=starts.append, step=lambda *transition: steps.append(transition))
+    watcher = SimpleNamespace(reset=lambda *start: starts.append(start), step=lambda *step: steps.append(step))
     env = make_plain_env("cartpole-200")
     played = play(env, lambda obs: 1, [3, 3, 4], watcher, progress=done.append)
-    assert done == [1, 2, 3] and played.goals == [0, 0, 0] and len(starts) == 3
+    assert done == [1, 2, 3] and played.goals == [0, 0, 0] and [seed for _, seed in starts] == [3, 3, 4]
     assert played.returns[:2] == [float(played.lengths[0])] * 2  # the same seed, the same episode
     assert len(steps) == sum(played.lengths) and steps[-1][3]  # ends terminated
-    np.testing.assert_array_equal(env.reset(seed=3)[0], starts[0])
+    np.testing.assert_array_equal(env.reset(seed=3)[0], starts[0][0])
 
 
 def test_goal_count_task_counts_goals_and_scores_the_plain_env():

@@ -4,6 +4,7 @@ Everything happens in a temporary local Minari cache (MINARI_DATASETS_PATH); dow
 made to fail, so a test that tried the network would fail too.
 """
 
+import dataclasses
 import re
 import sys
 
@@ -14,8 +15,13 @@ from helpers import python as run
 
 minari = pytest.importorskip("minari")
 
-from dqfd_bc_keras.demos import ARRAYS, DemoDataset, record, rollout  # noqa: E402  (after the importorskip guards)
-from dqfd_bc_keras.demos.minari import _check_spaces, from_minari, to_minari  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.demos import ARRAYS, DemoDataset, concatenate, record, rollout  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.demos.minari import (  # noqa: E402  (after the importorskip guards)
+    _check_spaces,
+    check_exportable,
+    from_minari,
+    to_minari,
+)
 from dqfd_bc_keras.envs import make as envs  # noqa: E402  (after the importorskip guards)
 from dqfd_bc_keras.errors import ConfigError, DemoFileError  # noqa: E402  (after the importorskip guards)
 
@@ -100,6 +106,38 @@ def test_round_trip_preset(mountaincar, cache):
     m = got.meta
     assert (m.task, m.env_id, m.timeout, m.obs_dim, m.n_actions) == ("mountaincar", "MountainCar-v0", "bootstrap", 2, 3)
     assert (m.expert, m.epsilon, m.seed) == ("minari:mountaincar/imperfect-v0", 0.0, 0)
+
+
+def test_round_trip_keeps_each_episode_s_seed_not_the_step_limit(mountaincar):
+    """Minari keeps each episode's reset seed (in the episode's metadata); no step limit of ours."""
+    assert mountaincar.meta.episode_seeds == [0, 1, 2] and mountaincar.meta.max_steps == 200
+    to_minari(mountaincar, "mountaincar/imperfect-v0")
+    published = minari.load_dataset("mountaincar/imperfect-v0")
+    assert [e["seed"] for e in published.storage.get_episode_metadata(published.episode_indices)] == [0, 1, 2]
+    m = from_minari("mountaincar/imperfect-v0", "mountaincar").meta
+    assert (m.episode_seeds, m.max_steps, m.keys, m.fps) == ([0, 1, 2], None, {}, None)
+    later = mountaincar.episodes()[1:]
+    to_minari(concatenate(later, source="later"), "mountaincar/later-v0")
+    assert from_minari("mountaincar/later-v0", "mountaincar").meta.episode_seeds == [1, 2]
+
+
+def test_episodes_without_a_seed_read_as_none(mountaincar):
+    write_minari("cartpole/unseeded-v0", [episode(4), episode(3)])
+    assert from_minari("cartpole/unseeded-v0", "CartPole-v1").meta.episode_seeds == [None, None]
+    seeds = [None, 5, None]
+    unknown = dataclasses.replace(mountaincar, meta=dataclasses.replace(mountaincar.meta, episode_seeds=seeds))
+    to_minari(unknown, "mountaincar/unknown-v0")  # e.g. a version-1 file's: exported without seeds
+    assert from_minari("mountaincar/unknown-v0", "mountaincar").meta.episode_seeds == seeds
+
+
+def test_check_exportable_needs_only_the_meta(monkeypatch, mountaincar):
+    """A caller can check before recording anything, without Minari: the messages `to_minari` gives."""
+    monkeypatch.setitem(sys.modules, "minari", None)
+    check_exportable("mountaincar", "bootstrap", {}, "mountaincar/imperfect-v0")
+    with pytest.raises(ConfigError, match=r"^minari:mc/naive-v0: the dataset was recorded with timeout='naive'"):
+        check_exportable("mountaincar", "naive", {}, "mc/naive-v0")
+    with pytest.raises(ConfigError, match=r"^minari:cp-v0: task 'cartpole' has shaped rewards"):
+        check_exportable("cartpole", "bootstrap", {}, "cp-v0")
 
 
 def test_round_trip_generic_env_id(cartpole_v1):

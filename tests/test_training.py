@@ -406,7 +406,7 @@ def test_dynamic_update_from_training_episodes_inserts_those_reaching_the_new_be
     recorder = demo_io.EpisodeRecorder(learner.interaction.env, task="cartpole", source="agent")
     for length in (10, 40, 30):  # returns 10 − 1 − 100 (falls) or a full … : build episodes by hand
         recorder.clear()
-        recorder.reset(np.zeros(4, np.float32))
+        recorder.reset(np.zeros(4, np.float32), None)
         for t in range(length):
             recorder.step(0, np.full(4, t, np.float32), 1.0, False, t == length - 1, {"plain_reward": 1.0})
         dynamic.observe(recorder.dataset())

@@ -194,6 +194,14 @@ def positive_int(text: str) -> int:
     return value
 
 
+def positive_float(text: str) -> float:
+    """argparse type for a rate that must be > 0 and finite (frames per second)."""
+    value = float(text)
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
 def seed(text: str) -> int:
     """argparse type for a seed: an integer in [0, MAX_SEED]."""
     value = int(text)

@@ -8,6 +8,8 @@ every check a learner relies on; Minari datasets convert both ways (`demos/minar
         --max-steps 1000 --policy my_rules:flap --out flappy.npz
     python -m dqfd_bc_keras.demos inspect demos.npz
     python -m dqfd_bc_keras.demos export demos.npz --minari mountaincar/imperfect-v0
+    python -m dqfd_bc_keras.demos play --task cartpole --episodes 5 --out mine.npz     # you play, in a window
+    python -m dqfd_bc_keras.demos show mine.npz                                        # replayed and checked
 """
 
 from __future__ import annotations
@@ -15,7 +17,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from dqfd_bc_keras.choices import EXPERT_NAMES, TIMEOUT_MODES
-from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, seed
+from dqfd_bc_keras.commands.cli import (
+    ArgumentParser,
+    add_task_arguments,
+    chosen_task,
+    env_settings,
+    positive_float,
+    positive_int,
+    run,
+    seed,
+)
 from dqfd_bc_keras.demos.minari import to_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import record
@@ -47,8 +58,51 @@ def main(argv: Sequence[str] | None = None) -> int:
     exp.add_argument("path", help="the .npz dataset (recorded with --timeout bootstrap)")
     exp.add_argument("--minari", required=True, metavar="DATASET_ID", help="e.g. acrobot/imperfect-v0")
     exp.add_argument("--force", action="store_true", help="replace an existing Minari dataset of that id")
+    ply = commands.add_parser("play", help="record your own demonstrations: play the env in a window")
+    add_task_arguments(ply, required=True)
+    ply.add_argument("--out", required=True, help="the .npz file to write (or minari:DATASET_ID)")
+    ply.add_argument("--episodes", type=positive_int, help="episodes to record (default: until you quit)")
+    ply.add_argument("--keys", help='a key map as JSON, e.g. \'{"a": 0, "d": 2, "": 1}\' ("" = no key pressed)')
+    ply.add_argument("--fps", type=positive_float, help="steps per second (default: the task's)")
+    ply.add_argument(
+        "--seed", type=seed, help="episode i resets with seed + i (default 0; with --append after the last)"
+    )
+    ply.add_argument("--timeout", choices=TIMEOUT_MODES, default="bootstrap")
+    ply.add_argument("--append", action="store_true", help="add episodes to --out (same task, kwargs and keys)")
+    ply.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    shw = commands.add_parser("show", help="replay a dataset, checking it step by step, in a window or as MP4s")
+    shw.add_argument("path")
+    shw.add_argument("--video", metavar="DIR", help="write one MP4 per episode in DIR instead of showing them")
+    shw.add_argument("--check", action="store_true", help="only replay and check, without a window")
+    shw.add_argument("--fps", type=positive_float, help="steps per second (default: the rate they were played at)")
     args = parser.parse_args(argv)
-    if args.command == "record":
+    if args.command == "play":
+        from dqfd_bc_keras.demos.human import play  # pygame from here on
+
+        env = env_settings(args)
+        dataset = play(
+            chosen_task(args),
+            args.out,
+            args.episodes,
+            keys=args.keys,
+            fps=args.fps,
+            seed=args.seed,
+            append=args.append,
+            force=args.force,
+            timeout=args.timeout,
+            max_steps=env.get("max_steps"),
+            env_kwargs=env.get("env_kwargs"),
+        )
+        if dataset is None:
+            print("no episode finished: nothing written")
+            return 0
+    elif args.command == "show":
+        from dqfd_bc_keras.demos.replaying import show
+
+        dataset = show(args.path, window=not args.check, video=args.video, fps=args.fps)
+        if args.video:
+            print(f"wrote {dataset.n_episodes} video(s) in {args.video}")
+    elif args.command == "record":
         if not args.out.endswith(".npz"):
             raise ConfigError(f"--out must end in .npz, got {args.out!r}")
         env = env_settings(args)
@@ -71,3 +125,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         dataset = load(args.path)
     print(dataset.summary())
     return 0
+
+
+def cli() -> int:
+    """The `dqfd-demos` console script."""
+    return run(main)

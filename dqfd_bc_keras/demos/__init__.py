@@ -1,13 +1,16 @@
 """Demonstration datasets: record them with any demonstrator (a scripted expert, a rule
-`module:function`, a saved `.keras` model), save them as plain `.npz`, and load them back with
-every check a learner relies on; Minari datasets convert both ways (`demos/minari.py`).
+`module:function`, a saved `.keras` model) or play them yourself in a window, save them as plain
+`.npz`, load them back with every check a learner relies on, and replay them against the env;
+Minari datasets convert both ways (`demos/minari.py`).
 
-This module is the public face of four: `dataset` (the dataset and its invariants),
-`recording` (demonstrators played on a task env), `npz` (the `.npz` format) and
-`minari`; `load_source` reads either kind of source. The command line is
-`commands/demos.py`:
+This module is the public face of the package's modules: `dataset` (the dataset and its
+invariants), `recording` (demonstrators played on a task env), `human` (a person playing:
+`play`, with `keys` and `window`), `replaying` (`show`), `npz` (the `.npz` format) and `minari`;
+`load_source` reads either kind of source. The command line is `commands/demos.py`:
 
     python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
+    python -m dqfd_bc_keras.demos play --task cartpole --episodes 5 --out mine.npz
+    python -m dqfd_bc_keras.demos show mine.npz
     python -m dqfd_bc_keras.demos inspect demos.npz
 """
 
@@ -16,9 +19,11 @@ from __future__ import annotations
 from typing import Any
 
 from dqfd_bc_keras.demos.dataset import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, concatenate, validate
-from dqfd_bc_keras.demos.minari import from_minari
+from dqfd_bc_keras.demos.human import play
+from dqfd_bc_keras.demos.minari import check_exportable, from_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import EpisodeRecorder, record, rollout
+from dqfd_bc_keras.demos.replaying import show
 
 __all__ = [
     "ARRAYS",
@@ -26,14 +31,17 @@ __all__ = [
     "DemoDataset",
     "DemoMeta",
     "EpisodeRecorder",
+    "check_exportable",
     "concatenate",
     "given_expert",
     "given_source",
     "load",
     "load_source",
+    "play",
     "record",
     "rollout",
     "save",
+    "show",
     "validate",
 ]
 

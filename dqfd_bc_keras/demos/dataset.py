@@ -10,7 +10,9 @@ The arrays (`ARRAYS`), one row per transition:
 `obs` are the flat vectors the networks take (`observations`: a Dict is flattened), or, for a
 task observed in frames, uint8 arrays (N, *meta.obs_shape); `meta.observation` names the env's
 own space. Every episode is complete (its last transition is
-terminated or truncated), so n-step returns can be read off directly.
+terminated or truncated), so n-step returns can be read off directly. `meta.episode_seeds` holds
+each episode's reset seed, so an episode can be played again (the env reset with it, the actions
+re-applied).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import numpy as np
 
 from dqfd_bc_keras.errors import DemoFileError
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 ARRAYS: dict[str, tuple[type, int]] = {
     # name: (dtype, number of dimensions)
@@ -63,6 +65,14 @@ class DemoMeta:
     """The env's own observation space and how it was flattened ("" in files that predate it)."""
     obs_shape: list[int] | None = None
     """The shape of one observation kept as uint8 frames; None for flat float32 vectors."""
+    max_steps: int | None = None
+    """The step limit the episodes were played under (the task env's `TimeLimitMode`); None: not recorded."""
+    episode_seeds: list[int | None] = dataclasses.field(default_factory=list)
+    """The seed each episode's `env.reset` got, one per episode in order; None where not known."""
+    keys: dict[str, int] = dataclasses.field(default_factory=dict)
+    """The key map a person played with (pygame key names, "+"-joined combos, "" = no key); empty for programs."""
+    fps: float | None = None
+    """The frame rate (steps per second) a person played at; None for programs."""
 
     @property
     def obs_dtype(self) -> type:
@@ -106,6 +116,7 @@ class DemoDataset:
                     self.meta,
                     episode_returns=[self.meta.episode_returns[i]],
                     plain_returns=[self.meta.plain_returns[i]],
+                    episode_seeds=[self.meta.episode_seeds[i]],
                 ),
             )
             for i, (a, b) in enumerate(zip(starts, ends, strict=True))
@@ -123,6 +134,7 @@ class DemoDataset:
         m = self.meta
         returns = np.asarray(m.episode_returns)
         plain = np.asarray(m.plain_returns)
+        fps = "" if m.fps is None else f" at {m.fps:g} fps"
         return "\n".join(
             [
                 f"task         {m.task} ({m.env_id}, timeout={m.timeout}, obs_dim={m.obs_dim}, "
@@ -130,13 +142,23 @@ class DemoDataset:
                 *([f"env kwargs   {json.dumps(m.env_kwargs)}"] if m.env_kwargs else []),
                 *([f"observation  {m.observation}"] if m.observation else []),
                 f"expert       {m.expert} (epsilon={m.epsilon:g}, seed={m.seed})",
-                f"episodes     {self.n_episodes}",
+                f"episodes     {self.n_episodes} (seeds {seeds_text(m.episode_seeds)})",
+                *([f"keys         {json.dumps(m.keys)}{fps}"] if m.keys else []),
                 f"transitions  {len(self)}",
                 f"returns      {' '.join(f'{r:g}' for r in returns)}",
                 f"mean ± std   {returns.mean():.1f} ± {returns.std():.1f}  "
                 f"(plain env: {plain.mean():.1f} ± {plain.std():.1f})",
             ]
         )
+
+
+def seeds_text(seeds: Sequence[int | None]) -> str:
+    """Episode seeds in a few characters: "0..9" when consecutive, else the list."""
+    if all(s is None for s in seeds):
+        return "not recorded"
+    if len(seeds) > 1 and None not in seeds and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}..{seeds[-1]}"
+    return ", ".join("?" if s is None else str(s) for s in seeds)
 
 
 def concatenate(parts: Sequence[DemoDataset], source: str) -> DemoDataset:
@@ -150,6 +172,7 @@ def concatenate(parts: Sequence[DemoDataset], source: str) -> DemoDataset:
         expert=source,
         episode_returns=[r for p in parts for r in p.meta.episode_returns],
         plain_returns=[r for p in parts for r in p.meta.plain_returns],
+        episode_seeds=[s for p in parts for s in p.meta.episode_seeds],
     )
     return DemoDataset(**arrays, meta=meta)
 
@@ -201,6 +224,10 @@ def validate(path: Path, ds: DemoDataset) -> None:
     if len(starts) + 1 != len(m.episode_returns):
         raise DemoFileError(
             path, f"{len(starts) + 1} episodes in episode_ids, {len(m.episode_returns)} returns in meta"
+        )
+    if len(m.episode_seeds) != len(m.episode_returns):
+        raise DemoFileError(
+            path, f"{len(m.episode_returns)} episodes, {len(m.episode_seeds)} seeds in meta's episode_seeds"
         )
     ends = np.append(starts - 1, n - 1)
     if not (ds.terminated[ends] | ds.truncated[ends]).all():

@@ -56,7 +56,7 @@ def _minari() -> ModuleType:
     return minari
 
 
-def _dataset_dir(dataset_id: str) -> Path:
+def dataset_dir(dataset_id: str) -> Path:
     """Where the local cache keeps `dataset_id` (checked to be a well-formed Minari id)."""
     from minari.dataset.minari_dataset import parse_dataset_id
     from minari.storage.datasets_root_dir import get_dataset_path
@@ -120,7 +120,7 @@ def _open_checked(
         )
     spec = get_task(task)
     _refuse_shaped(spec, str(where))
-    directory = _dataset_dir(dataset_id)
+    directory = dataset_dir(dataset_id)
     if not (directory / "data").is_dir():
         raise DemoFileError(
             where,
@@ -198,6 +198,13 @@ def _transitions(
     )
 
 
+def _seeds(source: Any) -> list[int | None]:
+    """Each episode's reset seed, which Minari keeps in the episode's metadata (not its
+    `EpisodeData`); None for an episode recorded without one."""
+    metadata = source.storage.get_episode_metadata(source.episode_indices)
+    return [None if m.get("seed") is None else int(m["seed"]) for m in metadata]
+
+
 def from_minari(
     dataset_id: str,
     task: str,
@@ -213,7 +220,8 @@ def from_minari(
     in on both sides), other spaces, a shaped-reward task, `timeout="time-aware"` (there is no
     time feature to add) and incomplete episodes. Observations are flattened as the task's are
     (`observations`). `naive` records every truncation as a termination, as our naive mode
-    does; `bootstrap` keeps Gymnasium's flags.
+    does; `bootstrap` keeps Gymnasium's flags. Each episode's reset seed is kept where Minari
+    has one; the step limit is not known (`max_steps` None).
     """
     env_kwargs = dict(env_kwargs or {})
     where = Path(f"minari:{dataset_id}")
@@ -223,6 +231,7 @@ def from_minari(
     returns: list[float] = []
     try:
         episodes = list(source.iterate_episodes())
+        seeds = _seeds(source)
     except Exception as error:
         raise DemoFileError(where, f"cannot be read ({one_line(error)})") from None
     for index, episode in enumerate(episodes):
@@ -246,6 +255,8 @@ def from_minari(
         plain_returns=list(returns),
         env_kwargs=env_kwargs,
         observation=layout.text(),
+        max_steps=None,  # Minari records no limit of ours (an env spec's own may not be what the episodes had)
+        episode_seeds=seeds,
     )
     dataset = DemoDataset(
         **{name: np.concatenate(columns[name]).astype(dtype, copy=False) for name, (dtype, _) in ARRAYS.items()},
@@ -255,39 +266,48 @@ def from_minari(
     return dataset
 
 
-def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Path:
-    """Publish `dataset` in the local Minari cache as `dataset_id`; returns its directory.
-
-    Only `bootstrap` datasets of unshaped tasks: their flags and rewards mean what Gymnasium's
-    do, which is what a Minari user assumes. An existing dataset is replaced only with
-    `force`, and only once the new one is written. No reference scores are computed (that
-    would roll the env out again).
-    """
-    minari = _minari()
-    from minari.data_collector import EpisodeBuffer
-
-    m = dataset.meta
+def check_exportable(task: str, timeout: str, env_kwargs: dict[str, Any], dataset_id: str) -> None:
+    """Refuse, in one `ConfigError` naming `minari:dataset_id`, demonstrations of `task` (made with
+    `env_kwargs`, recorded with `timeout`) that `to_minari` cannot publish: a caller can check
+    before recording anything. Only `bootstrap` datasets of unshaped tasks with flat observations:
+    their flags and rewards mean what Gymnasium's do, which is what a Minari user assumes, and
+    they are the env's own."""
     where = f"minari:{dataset_id}"
-    if m.timeout != "bootstrap":
+    if timeout != "bootstrap":
         raise ConfigError(
-            f"{where}: the dataset was recorded with timeout={m.timeout!r}, so its flags at the "
+            f"{where}: the dataset was recorded with timeout={timeout!r}, so its flags at the "
             "time limit do not mean what Gymnasium's do; record it again with --timeout bootstrap"
         )
-    _refuse_shaped(get_task(m.task), where)  # also imports the env's module (`module:Env-v0`)
-    layout = task_spaces(m.task, m.env_kwargs).layout
+    _refuse_shaped(get_task(task), where)  # also imports the env's module (`module:Env-v0`)
+    layout = task_spaces(task, env_kwargs).layout
     if layout.image:
         raise ConfigError(
-            f"{where}: the dataset's observations are frames ({m.observation}); writing Minari "
+            f"{where}: the dataset's observations are frames ({layout.text()}); writing Minari "
             "datasets of frames is not supported yet (keep them as .npz)"
         )
     if not layout.flat:
         raise ConfigError(
-            f"{where}: the dataset's observations were flattened from {m.observation}; a Minari "
+            f"{where}: the dataset's observations were flattened from {layout.text()}; a Minari "
             "dataset holds the env's own observations, so record it with Minari's DataCollector"
         )
+
+
+def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Path:
+    """Publish `dataset` in the local Minari cache as `dataset_id`; returns its directory.
+
+    Only what `check_exportable` accepts. Each episode keeps its reset seed (where known). An
+    existing dataset is replaced only with `force`, and only once the new one is written. No
+    reference scores are computed (that would roll the env out again).
+    """
+    minari = _minari()
+    from minari.data_collector import EpisodeBuffer
+
+    check_exportable(dataset.meta.task, dataset.meta.timeout, dataset.meta.env_kwargs, dataset_id)
+    m = dataset.meta
+    where = f"minari:{dataset_id}"
     env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
     env_spec = dataclasses.replace(env_spec, kwargs={**env_spec.kwargs, **m.env_kwargs})
-    directory = _dataset_dir(dataset_id)
+    directory = dataset_dir(dataset_id)
     if directory.exists() and not force:
         raise ConfigError(f"{where}: a Minari dataset of that id exists at {directory}; pass --force to replace it")
 
@@ -300,8 +320,9 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
             rewards=dataset.rewards[a:b],
             terminations=dataset.terminated[a:b],
             truncations=dataset.truncated[a:b],
+            seed=seed,
         )
-        for a, b in zip(starts, ends, strict=True)
+        for a, b, seed in zip(starts, ends, m.episode_seeds, strict=True)
     ]
     description = (
         f"Demonstrations exported by dqfd_bc_keras: task {m.task} ({m.env_id}), demonstrator "

@@ -1,14 +1,18 @@
 """Demonstration files: a dataset as a plain `.npz`, written atomically and read back with every
 check a learner relies on.
 
-File format (version 1), readable with `numpy.load(path, allow_pickle=False)`: the arrays of
+File format (version 2), readable with `numpy.load(path, allow_pickle=False)`: the arrays of
 `demos.dataset.ARRAYS`, and
 
     meta  0-d str: JSON {format_version, task, env_id, timeout, obs_dim, n_actions, expert,
                          epsilon, seed, episode_returns, plain_returns, env_kwargs, observation,
-                         obs_shape}
+                         obs_shape, max_steps, episode_seeds, keys, fps}
 
-Every key is in every file (`obs_shape` null for flat observations); a file without one is refused.
+Every key is in every file (`obs_shape` null for flat observations, `max_steps` the step limit,
+`episode_seeds` one reset seed per episode, `keys` {} and `fps` null for a program's
+demonstrations); a file without one is refused. Version 1 had the keys up to `obs_shape`; its
+files are still read, without what they never recorded (`max_steps` and `fps` None, every seed
+None, `keys` {}). Files are always written as version 2.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import math
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -34,7 +38,7 @@ from dqfd_bc_keras.files import atomic_path
 def save(dataset: DemoDataset, path: str | Path, force: bool = False) -> None:
     """Write `dataset` to `path` atomically; an existing file is kept unless `force`."""
     arrays = {name: getattr(dataset, name) for name in ARRAYS}
-    meta = np.array(json.dumps(dataclasses.asdict(dataset.meta)))
+    meta = np.array(json.dumps(dataclasses.asdict(dataset.meta) | {"format_version": FORMAT_VERSION}))
     with atomic_path(path, overwrite=force) as tmp:
         np.savez_compressed(tmp, meta=meta, **arrays)
 
@@ -69,22 +73,23 @@ def load(
     path = Path(path)
     if not path.is_file():
         raise DemoFileError(path, _not_a_file(path))
-    if not zipfile.is_zipfile(path):
-        raise DemoFileError(path, "is not an .npz file")
-    headers = _headers(path)
-    missing = [key for key in (*ARRAYS, "meta") if key not in headers]
-    if missing:
-        raise DemoFileError(path, f"missing key(s) {missing}")
-    rows = headers["actions"][1][0] if headers["actions"][1] else 0
-    if max_transitions is not None and rows > max_transitions:
-        raise DemoFileError(
-            path,
-            f"holds {rows} transitions, more than demo_capacity={max_transitions} "
-            "(raise it with --set demo_capacity=N, or give fewer demonstrations)",
-        )
-    meta = _parse_meta(path, _read(path, "meta"))
-    check_layout(path, meta, {name: headers[name] for name in ARRAYS})
-    dataset = DemoDataset(**{name: _read(path, name) for name in ARRAYS}, meta=meta)
+    with path.open("rb") as file:  # one snapshot: a writer may replace the file (atomically) meanwhile
+        if not zipfile.is_zipfile(file):
+            raise DemoFileError(path, "is not an .npz file")
+        headers = _headers(path, file)
+        missing = [key for key in (*ARRAYS, "meta") if key not in headers]
+        if missing:
+            raise DemoFileError(path, f"missing key(s) {missing}")
+        rows = headers["actions"][1][0] if headers["actions"][1] else 0
+        if max_transitions is not None and rows > max_transitions:
+            raise DemoFileError(
+                path,
+                f"holds {rows} transitions, more than demo_capacity={max_transitions} "
+                "(raise it with --set demo_capacity=N, or give fewer demonstrations)",
+            )
+        meta = _parse_meta(path, _read(path, file, "meta"))
+        check_layout(path, meta, {name: headers[name] for name in ARRAYS})
+        dataset = DemoDataset(**{name: _read(path, file, name) for name in ARRAYS}, meta=meta)
     validate(path, dataset)
     if task is not None:
         _check_task(path, meta, task, env_kwargs)
@@ -130,14 +135,14 @@ MAX_DEFLATE_RATIO = 1032
 """The most data deflate gives per compressed byte: a member claiming more is damaged or forged."""
 
 
-def _headers(path: Path) -> dict[str, tuple[np.dtype, tuple[int, ...]]]:
+def _headers(path: Path, file: BinaryIO) -> dict[str, tuple[np.dtype, tuple[int, ...]]]:
     """{key: (dtype, shape)} of the file's `.npy` members, from their headers alone, each checked
     against the member's size in the zip: the data a header claims must be exactly what the member
     holds, and no more than its compressed bytes can inflate to. numpy allocates what a header
     claims before reading, so a lying header is a MemoryError (10^12 rows) or a short read."""
     headers = {}
     try:
-        with zipfile.ZipFile(path) as archive:
+        with zipfile.ZipFile(file) as archive:
             for info in archive.infolist():
                 if not info.filename.endswith(".npy"):
                     continue
@@ -174,10 +179,11 @@ def _headers(path: Path) -> dict[str, tuple[np.dtype, tuple[int, ...]]]:
     return headers
 
 
-def _read(path: Path, key: str) -> np.ndarray:
-    """One array of the file, its header already checked by `_headers`."""
+def _read(path: Path, file: BinaryIO, key: str) -> np.ndarray:
+    """One array of `file` (opened from `path`), its header already checked by `_headers`."""
     try:
-        with np.load(path, allow_pickle=False) as data:
+        file.seek(0)
+        with np.load(file, allow_pickle=False) as data:
             return data[key]
     except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error) as error:
         raise DemoFileError(path, f"member {key}.npy is not readable ({error})") from None
@@ -198,8 +204,14 @@ META_TYPES: dict[str, tuple[type, ...]] = {
     "env_kwargs": (dict,),
     "observation": (str,),
     "obs_shape": (list, type(None)),
+    "max_steps": (int, type(None)),
+    "episode_seeds": (list,),
+    "keys": (dict,),
+    "fps": (int, float, type(None)),
 }
 """The JSON type of each field of `DemoMeta`, each in every file's meta (a bool is not a number here)."""
+VERSION_1_DEFAULTS: dict[str, Any] = {"max_steps": None, "keys": {}, "fps": None}
+"""What a version-1 file lacks and this version reads it with (`episode_seeds`: None per episode)."""
 
 
 def _check_types(path: Path, fields: dict[str, Any]) -> None:
@@ -210,6 +222,12 @@ def _check_types(path: Path, fields: dict[str, Any]) -> None:
     for key in ("episode_returns", "plain_returns"):
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in fields[key]):
             raise DemoFileError(path, f"meta's {key} must be a list of numbers")
+    wrong = [v for v in fields["episode_seeds"] if v is not None and (isinstance(v, bool) or not isinstance(v, int))]
+    if wrong:
+        raise DemoFileError(path, f"meta's episode_seeds must be a list of ints or nulls, got {wrong[0]!r} in it")
+    wrong = [f"{k!r}: {v!r}" for k, v in fields["keys"].items() if isinstance(v, bool) or not isinstance(v, int)]
+    if wrong:
+        raise DemoFileError(path, f"meta's keys must map key names to int actions, got {wrong[0]}")
 
 
 def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
@@ -221,15 +239,21 @@ def _parse_meta(path: Path, raw: np.ndarray) -> DemoMeta:
         raise DemoFileError(path, f"meta is not valid JSON ({error})") from None
     if not isinstance(fields, dict):
         raise DemoFileError(path, "meta must be a JSON object")
-    if fields.get("format_version") != FORMAT_VERSION:
-        raise DemoFileError(path, f"format_version {fields.get('format_version')!r} is not {FORMAT_VERSION}")
+    version = fields.get("format_version")
+    if version == 1:  # users and run directories hold them: read on, without what they never recorded
+        returns = fields.get("episode_returns")
+        seeds = [None] * len(returns) if isinstance(returns, list) else []
+        fields = VERSION_1_DEFAULTS | {"episode_seeds": seeds} | fields
+    elif version != FORMAT_VERSION:
+        raise DemoFileError(path, f"format_version {version!r} is not 1 or {FORMAT_VERSION}")
     missing = [key for key in META_TYPES if key not in fields]
     if missing:
         raise DemoFileError(
             path, f"meta lacks {missing}: written by an older version? Record the demonstrations again with this one"
         )
     _check_types(path, fields)
-    meta = DemoMeta(**{key: fields[key] for key in META_TYPES})
+    fps = None if fields["fps"] is None else float(fields["fps"])
+    meta = DemoMeta(**{key: fields[key] for key in META_TYPES} | {"format_version": FORMAT_VERSION, "fps": fps})
     try:
         get_task(meta.task)
     except ConfigError as error:

@@ -211,8 +211,10 @@ def record(
 class EpisodeRecorder:
     """Transitions of complete episodes as they are played, turned into a dataset on demand.
 
-    One recorder serves scripted demonstrations, greedy roll-outs and the agent's own training
-    episodes (dynamic demonstrations), so every D_demo episode has the same layout and meta.
+    One recorder serves scripted demonstrations, greedy roll-outs, the agent's own training
+    episodes (dynamic demonstrations) and a person's play (`keys`, `fps`: the key map and frame
+    rate they played with), so every D_demo episode has the same layout and meta, each with the
+    seed it was reset with, to be played again.
     """
 
     def __init__(
@@ -224,14 +226,18 @@ class EpisodeRecorder:
         epsilon: float = 0.0,
         seed: int = 0,
         env_kwargs: dict[str, Any] | None = None,
+        keys: dict[str, int] | None = None,
+        fps: float | None = None,
     ) -> None:
         self.task, self.source, self.epsilon, self.seed = task, source, float(epsilon), int(seed)
         self.env_kwargs = dict(env_kwargs or {})
+        self.keys, self.fps = dict(keys or {}), None if fps is None else float(fps)
         shape = env.observation_space.shape
         self.frames = len(shape) > 1  # envs.make_task flattens all but frames
         self.obs_dim, self.n_actions = int(np.prod(shape)), int(env.action_space.n)
         self.obs_shape = [int(n) for n in shape] if self.frames else None
         self.timeout = env.get_wrapper_attr("mode")
+        self.max_steps = int(env.get_wrapper_attr("max_steps"))  # `TimeLimitMode`'s limit (`TimeFeature`'s is the same)
         self.clear()
 
     def clear(self) -> None:
@@ -239,13 +245,16 @@ class EpisodeRecorder:
         self.columns: dict[str, list] = {name: [] for name in ARRAYS}
         self.returns: list[float] = []
         self.plain_returns: list[float] = []
+        self.seeds: list[int | None] = []
         self.open = 0
 
-    def reset(self, obs: np.ndarray) -> None:
-        """A new episode starts in `obs`; an unfinished one before it is dropped."""
+    def reset(self, obs: np.ndarray, seed: int | None) -> None:
+        """A new episode starts in `obs`, the env reset with `seed` (None: without one); an
+        unfinished one before it is dropped."""
         for column in self.columns.values():
             del column[len(column) - self.open :]
         self.obs, self.open, self.ret, self.plain = obs, 0, 0.0, 0.0
+        self.episode_seed = None if seed is None else int(seed)
 
     def step(
         self, action: int, next_obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
@@ -259,6 +268,7 @@ class EpisodeRecorder:
         if terminated or truncated:
             self.returns.append(self.ret)
             self.plain_returns.append(self.plain)
+            self.seeds.append(self.episode_seed)
             self.open = 0
 
     def dataset(self) -> DemoDataset:
@@ -280,6 +290,10 @@ class EpisodeRecorder:
             env_kwargs=dict(self.env_kwargs),
             observation=task_spaces(self.task, self.env_kwargs).layout.text(),
             obs_shape=self.obs_shape,
+            max_steps=self.max_steps,
+            episode_seeds=list(self.seeds),
+            keys=dict(self.keys),
+            fps=self.fps,
         )
         dtypes = {name: dtype for name, (dtype, _) in ARRAYS.items()} | {
             "obs": meta.obs_dtype,

@@ -10,18 +10,21 @@ from __future__ import annotations
 import statistics
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, NamedTuple, Protocol
 
 import gymnasium as gym
 import numpy as np
 
 from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.errors import ConfigError
 
 
 class Watcher(Protocol):
-    """Sees every episode as it is played (`recording.EpisodeRecorder`): its first observation, then each step."""
+    """Sees every episode as it is played (`recording.EpisodeRecorder`): its first observation and
+    the seed the env was reset with (to play it again), then each step."""
 
-    def reset(self, obs: np.ndarray) -> None: ...
+    def reset(self, obs: np.ndarray, seed: int | None) -> None: ...
 
     def step(
         self, action: int, next_obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
@@ -49,7 +52,7 @@ def play(
     for done, seed in enumerate(seeds, 1):
         obs, info = env.reset(seed=int(seed))
         if watcher is not None:
-            watcher.reset(obs)
+            watcher.reset(obs, int(seed))
         total, steps, over = 0.0, 0, False
         while not over:
             action = policy(obs)
@@ -63,6 +66,30 @@ def play(
         if progress is not None:
             progress(done)
     return played
+
+
+def check_video(directory: str | Path, prefix: str) -> None:
+    """A one-line `ConfigError` before anything is played if MP4s named `prefix` cannot be written
+    in `directory`: no encoder (moviepy), a file in its place, videos that would be overwritten."""
+    try:
+        import moviepy  # noqa: F401  (RecordVideo's encoder)
+    except ImportError:
+        raise ConfigError("--video needs moviepy: pip install -r requirements-extras.txt") from None
+    directory = Path(directory)
+    if directory.is_file():
+        raise ConfigError(f"--video {directory}: is a file, not a directory")
+    if any(directory.glob(f"{prefix}-episode-*.mp4")):
+        raise ConfigError(
+            f"--video {directory}: already holds {prefix} videos, which would be overwritten; choose another directory"
+        )
+
+
+def video_env(env: gym.Env, directory: str | Path, prefix: str) -> gym.Env:
+    """`env` writing each episode as `directory/prefix-episode-K.mp4` (Gymnasium's `RecordVideo`;
+    its last file is written when it is closed). Call `check_video` first."""
+    return gym.wrappers.RecordVideo(
+        env, str(directory), episode_trigger=lambda _: True, name_prefix=prefix, disable_logger=True
+    )
 
 
 @dataclass

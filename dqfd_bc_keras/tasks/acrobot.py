@@ -28,6 +28,8 @@ register_task(
         solved_return=-100.0,
         defaults={**ENV_DEFAULTS, "eval_every": 1_000},
         experts={"strong": strong, "imperfect": imperfect},
+        keys={"left": 0, "": 1, "right": 2},  # torque −1, 0, +1 on the joint between the links
+        fps=15,
         doc="Acrobot-v1, 500 steps, solved at −100; the generic env defaults (SB3's budget of 100k steps) with "
         "an evaluation every 1k, the sample-efficiency grid",
     )

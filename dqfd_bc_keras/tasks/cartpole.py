@@ -20,6 +20,10 @@ def imperfect(obs: np.ndarray) -> int:
 
 
 EXPERTS = {"strong": strong, "imperfect": imperfect}
+KEYS = {"left": 0, "right": 1}
+"""Push left, push right; CartPole has no action for no key, so the last push goes on."""
+FPS = 15
+"""CartPole's physics steps 0.02 s (50 per second): at 15 a person sees it 3.3 times slower."""
 DEFAULTS = {"total_steps": 50_000, "eval_every": 1_000}
 """Runs end within ~10–50k steps (early stop at 10 episodes ≥ 490): a finer evaluation grid makes
 steps-to-threshold meaningful."""
@@ -34,6 +38,8 @@ register_task(
         solved_return=475.0,
         defaults=DEFAULTS,
         experts=EXPERTS,
+        keys=KEYS,
+        fps=FPS,
         doc="CartPole-v1, 500 steps, −100 on a fall; stops early at 10 episodes ≥ 490",
     )
 )
@@ -47,6 +53,8 @@ register_task(
         solved_return=475.0,
         defaults=DEFAULTS,
         experts=EXPERTS,
+        keys=KEYS,
+        fps=FPS,
         doc="the paper's unstable variant with a 200-step limit",
     )
 )

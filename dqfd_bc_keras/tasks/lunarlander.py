@@ -46,6 +46,8 @@ register_task(
         solved_return=200.0,
         defaults={**ENV_DEFAULTS, "eval_every": 1_000},
         experts={"strong": strong, "imperfect": imperfect},
+        keys={"": 0, "left": 1, "up": 2, "right": 3},  # 1 and 3 fire the side engines: they push left and right
+        fps=30,
         doc="LunarLander-v3, 1000 steps, solved at 200; as acrobot",
     )
 )

@@ -263,6 +263,8 @@ register_task(
         1000,
         defaults=DEFAULTS,
         experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
+        keys={"": 0, "left": 1, "right": 2},
+        fps=10,
         doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
     )
 )
@@ -277,6 +279,8 @@ register_task(
         2500,
         defaults=DEFAULTS,
         experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
+        keys={"": 0, "up": 1, "down": 2},
+        fps=10,
         doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
     )
 )

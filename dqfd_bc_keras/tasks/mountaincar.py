@@ -32,6 +32,8 @@ register_task(
         solved_return=-110.0,
         defaults=DEFAULTS,
         experts=EXPERTS,
+        keys={"left": 0, "": 1, "right": 2},
+        fps=30,
         doc="MountainCar-v0, 200 steps, sparse; no early stop (the budget ends it)",
     )
 )
@@ -45,6 +47,8 @@ register_task(
         solved_return=-110.0,
         defaults=DEFAULTS,
         experts=EXPERTS,
+        keys={"left": 0, "": 1, "right": 2},
+        fps=30,
         doc="the paper's goal-count variant (Figs. 9–11): +100 on each flag",
     )
 )

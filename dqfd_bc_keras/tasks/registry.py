@@ -53,6 +53,11 @@ class TaskSpec:
     """The preset's Config defaults where they differ from Config's shared ones."""
     experts: Mapping[str, Rule] = field(default_factory=dict, repr=False)
     """Scripted demonstrators by name (strong, imperfect)."""
+    keys: Mapping[str, int] = field(default_factory=dict)
+    """The keys a person plays with (`demos play`): pygame key names, "+"-joined for keys held
+    together, "" for no key pressed → action (demos/keys.py)."""
+    fps: float | None = None
+    """Steps per second a person plays at (`demos play --fps`); None: the env's own rate."""
     doc: str = ""
 
     @property

@@ -56,7 +56,7 @@ class Interaction(tf.Module):
         self.episode = EpisodeStats()
         if self.recorder is not None:
             self.recorder.clear()
-            self.recorder.reset(obs)
+            self.recorder.reset(obs, seed)
         return obs
 
     def _env_step(self, action: np.ndarray) -> np.ndarray | tuple[np.ndarray, np.ndarray]:

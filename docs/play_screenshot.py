@@ -1,0 +1,84 @@
+"""The screenshot of `demos play` in docs/DEMONSTRATIONS.md, taken as a person would see it.
+
+    .venv/bin/python docs/play_screenshot.py --out docs/figures/play_window.png [--task cartpole]
+
+Starts a virtual screen (Xvfb), runs `python -m dqfd_bc_keras.demos play` on it, plays with
+real key presses (xdotool: Left, then Right, then Left held for a moment each), grabs the
+window's pixels from the screen mid-episode (Pillow's ImageGrab), then quits with Escape, so
+nothing is recorded. Needs Debian's xvfb and xdotool (`.ci/run` installs them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from PIL import ImageGrab
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from dqfd_bc_keras.files import atomic_path  # noqa: E402  (after the path: run as a script)
+
+
+def xdotool(env: dict[str, str], *args: str) -> str:
+    return subprocess.run(["xdotool", *args], env=env, check=True, capture_output=True, text=True, timeout=30).stdout
+
+
+def screenshot(task: str, out: Path, hold: float) -> tuple[int, int]:
+    """Play `task` on a virtual screen, grab the window into `out`; returns its size."""
+    read, write = os.pipe()
+    server = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1024x900x24", "-nolisten", "tcp"],
+        pass_fds=(write,),
+        stderr=subprocess.DEVNULL,
+    )
+    os.close(write)
+    with os.fdopen(read) as answer:
+        display = f":{answer.readline().strip()}"
+    env = {**os.environ, "DISPLAY": display, "SDL_AUDIODRIVER": "dummy", "PYTHONPATH": str(REPO)}
+    env.pop("SDL_VIDEODRIVER", None)
+    with tempfile.TemporaryDirectory() as scratch:
+        play = subprocess.Popen(
+            [sys.executable, "-m", "dqfd_bc_keras.demos", "play", "--task", task, "--out", f"{scratch}/d.npz"],
+            env=env,
+            cwd=REPO,
+        )
+        try:
+            window = xdotool(env, "search", "--sync", "--pid", str(play.pid)).split()[0]
+            xdotool(env, "windowfocus", "--sync", window)
+            for key in ("Left", "Right", "Left"):
+                xdotool(env, "keydown", key)
+                time.sleep(hold)
+                xdotool(env, "keyup", key)
+            geometry = dict(line.split("=") for line in xdotool(env, "getwindowgeometry", "--shell", window).split())
+            x, y, w, h = (int(geometry[k]) for k in ("X", "Y", "WIDTH", "HEIGHT"))
+            image = ImageGrab.grab(bbox=(x, y, x + w, y + h), xdisplay=display)
+            xdotool(env, "key", "Escape")
+            play.wait(timeout=60)
+        finally:
+            play.kill()
+            server.terminate()
+            server.wait()
+    with atomic_path(out) as tmp:
+        image.save(tmp, format="PNG")
+    return image.size
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, required=True, help="the PNG to write")
+    parser.add_argument("--task", default="cartpole")
+    parser.add_argument("--hold", type=float, default=0.4, help="seconds each key is held")
+    args = parser.parse_args()
+    width, height = screenshot(args.task, args.out, args.hold)
+    print(f"wrote {args.out} ({width}x{height})")
+
+
+if __name__ == "__main__":
+    main()

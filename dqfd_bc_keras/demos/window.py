@@ -1,0 +1,108 @@
+"""The window a person plays and watches demonstrations in: the env's frame scaled up, lines of
+text beneath, and the keyboard read between frames (pygame, imported only here and in keys.py)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dqfd_bc_keras.demos.keys import CONTROLS, pygame
+from dqfd_bc_keras.errors import ConfigError
+
+HEADLESS = {"offscreen", "dummy"}
+"""SDL's video drivers without a screen: used when asked for (SDL_VIDEODRIVER, the tests), else no display was found."""
+WIDTH = 600
+"""The frame's larger side on screen, about: small frames (MinAtar's 10x10) are scaled by a whole factor."""
+LINE = 22
+"""Pixels per line of text."""
+TEXT = (235, 235, 235)
+BACKGROUND = (24, 24, 28)
+
+
+@dataclass
+class Input:
+    """What the keyboard did since the last poll."""
+
+    down: set[str] = field(default_factory=set)
+    """Action keys held now or pressed since (a tap between two frames counts)."""
+    pressed: set[str] = field(default_factory=set)
+    """Action keys pressed since the last poll (held from before, they are not)."""
+    controls: set[str] = field(default_factory=set)
+    """What the control keys asked for (`keys.CONTROLS`' values)."""
+    closed: bool = False
+    """The window was closed."""
+
+
+class Window:
+    """A pygame window: `draw` a frame and text, `poll` the keyboard, `tick` at a frame rate."""
+
+    def __init__(self, title: str) -> None:
+        self.pg = pygame()
+        try:
+            self.pg.display.init()
+            driver = self.pg.display.get_driver()
+        except self.pg.error as error:
+            driver = str(error)
+        if driver in HEADLESS and os.environ.get("SDL_VIDEODRIVER") != driver:  # SDL's fallback, not a choice
+            self.pg.display.quit()
+            raise ConfigError(
+                f"cannot open a window (no display: SDL found {driver!r}): run it on a desktop, or headless under "
+                "a virtual display (xvfb-run python -m dqfd_bc_keras.demos …)"
+            )
+        self.pg.display.set_caption(title)
+        self.pg.font.init()
+        self.font = self.pg.font.Font(None, LINE + 2)  # pygame's own font: nothing to find on the system
+        self.clock = self.pg.time.Clock()
+        self.screen = None
+        self.held: set[str] = set()
+
+    def draw(self, frame: np.ndarray | None, lines: list[str]) -> None:
+        """Show `frame` (an RGB array, H x W x 3) scaled up, `lines` beneath it."""
+        pg = self.pg
+        h, w = frame.shape[:2] if frame is not None else (0, WIDTH)
+        scale = max(1, round(WIDTH / max(h, w)))
+        size = (max(w * scale, WIDTH), h * scale + LINE * len(lines) + 16)
+        if self.screen is None or self.screen.get_size() != size:
+            self.screen = pg.display.set_mode(size)
+        self.screen.fill(BACKGROUND)
+        if frame is not None:
+            surface = pg.surfarray.make_surface(
+                np.ascontiguousarray(np.asarray(frame, np.uint8)[..., :3].swapaxes(0, 1))
+            )
+            self.screen.blit(pg.transform.scale(surface, (w * scale, h * scale)), ((size[0] - w * scale) // 2, 0))
+        for i, line in enumerate(lines):
+            self.screen.blit(self.font.render(line, True, TEXT), (10, h * scale + 8 + i * LINE))
+        pg.display.flip()
+
+    def poll(self) -> Input:
+        """The keys down and the controls pressed since the last poll; closing the window is `closed`."""
+        pg, got = self.pg, Input()
+        for event in pg.event.get():
+            if event.type == pg.QUIT:
+                got.closed = True
+            elif event.type in (pg.KEYDOWN, pg.KEYUP):
+                name = pg.key.name(event.key)
+                if name in CONTROLS:
+                    if event.type == pg.KEYDOWN:
+                        got.controls.add(CONTROLS[name])
+                elif event.type == pg.KEYDOWN:
+                    self.held.add(name)
+                    got.pressed.add(name)
+                else:
+                    self.held.discard(name)
+        got.down = got.pressed | self.held
+        return got
+
+    def tick(self, fps: float) -> None:
+        """Wait until 1/fps seconds have passed since the last tick."""
+        self.clock.tick(fps)
+
+    def save(self, path: str | Path) -> None:
+        """The window's content as an image (a screenshot for the docs)."""
+        self.pg.image.save(self.screen, str(path))
+
+    def close(self) -> None:
+        self.pg.display.quit()
