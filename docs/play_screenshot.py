@@ -4,8 +4,9 @@
 
 Starts a virtual screen (Xvfb), runs `python -m dqfd_bc_keras.demos play` on it, plays with
 real key presses (xdotool: Left, then Right, then Left held for a moment each), grabs the
-window's pixels from the screen mid-episode (Pillow's ImageGrab), then quits with Escape, so
-nothing is recorded. Needs Debian's xvfb and xdotool (`.ci/run` installs them).
+window's pixels from the screen mid-episode (Pillow's ImageGrab), then quits with Escape; what
+was recorded goes with its scratch directory. Needs Debian's xvfb and xdotool (`.ci/run`
+installs them).
 """
 
 from __future__ import annotations
@@ -26,8 +27,20 @@ sys.path.insert(0, str(REPO))
 from dqfd_bc_keras.files import atomic_path  # noqa: E402  (after the path: run as a script)
 
 
-def xdotool(env: dict[str, str], *args: str) -> str:
-    return subprocess.run(["xdotool", *args], env=env, check=True, capture_output=True, text=True, timeout=30).stdout
+def xdotool(env: dict[str, str], *args: str, check: bool = True) -> str:
+    return subprocess.run(["xdotool", *args], env=env, check=check, capture_output=True, text=True, timeout=30).stdout
+
+
+def focus(env: dict[str, str], process: subprocess.Popen) -> str:
+    """The id of `process`'s window once it is shown, given the keyboard (there is no window manager)."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and process.poll() is None:
+        for window in xdotool(env, "search", "--onlyvisible", "--pid", str(process.pid), check=False).split():
+            xdotool(env, "windowfocus", window, check=False)
+            if xdotool(env, "getwindowfocus", check=False).strip() == window:
+                return window
+        time.sleep(0.1)
+    raise SystemExit("demos play showed no window (see its error above)")
 
 
 def screenshot(task: str, out: Path, hold: float) -> tuple[int, int]:
@@ -48,10 +61,10 @@ def screenshot(task: str, out: Path, hold: float) -> tuple[int, int]:
             [sys.executable, "-m", "dqfd_bc_keras.demos", "play", "--task", task, "--out", f"{scratch}/d.npz"],
             env=env,
             cwd=REPO,
+            stdout=subprocess.DEVNULL,
         )
         try:
-            window = xdotool(env, "search", "--sync", "--pid", str(play.pid)).split()[0]
-            xdotool(env, "windowfocus", "--sync", window)
+            window = focus(env, play)
             for key in ("Left", "Right", "Left"):
                 xdotool(env, "keydown", key)
                 time.sleep(hold)

@@ -85,14 +85,7 @@ def _check_same_play(out: str, previous: DemoDataset, keys: KeyMap, fps: float, 
             raise ConfigError(f"{out}: its episodes were played with {what} {was}, not {now}: give {flag} {was}")
 
 
-def _lines(task: str, state: str, episode: str, ret: float, steps: int, limit: int, keys: KeyMap) -> list[str]:
-    return [
-        f"{task} · {episode}",
-        f"return {ret:g} · step {steps} · {limit - steps} steps left",
-        state,
-        "keys: " + " · ".join(keys.legend()),
-        "Enter start · P pause · Backspace discard the episode · Esc quit (finished episodes are kept)",
-    ]
+CONTROLS_TEXT = "Enter start · P pause · Backspace discard the episode · Esc quit"
 
 
 def play(
@@ -163,10 +156,10 @@ class Player:
     fps: float
     limit: int
 
-    def episode(self, seed: int, title: str) -> tuple[str, float, int]:
+    def episode(self, seed: int, title: str, saved: str) -> tuple[str, float, int]:
         """Play one episode reset with `seed`: ("over" | "discarded" | "quit", its plain return, its steps).
         It waits for Enter or an action key pressed (a key still held from the last episode is not),
-        then steps at `fps` with the keys down as the action."""
+        then steps at `fps` with the keys down as the action. `title` and `saved` are shown."""
         obs, _ = self.env.reset(seed=seed)
         self.recorder.reset(obs, seed)
         state, ret, steps, action = "waiting", 0.0, 0, None
@@ -187,10 +180,14 @@ class Player:
                 obs, reward, terminated, truncated, info = self.env.step(action)
                 self.recorder.step(action, obs, reward, terminated, truncated, info)
                 ret, steps, over = ret + info["plain_reward"], steps + 1, terminated or truncated
-            text = STATES[state].format(fps=self.fps)
-            self.window.draw(
-                self.env.render(), _lines(self.recorder.task, text, title, ret, steps, self.limit, self.keymap)
-            )
+            lines = [
+                f"{self.recorder.task} · {title} · {saved}",
+                f"return {ret:g} · step {steps} · {self.limit - steps} steps left",
+                STATES[state].format(fps=self.fps),
+                "keys: " + " · ".join(self.keymap.legend()),
+                CONTROLS_TEXT,
+            ]
+            self.window.draw(self.env.render(), lines)
             self.window.tick(self.fps)
             if over:
                 return "over", ret, steps
@@ -208,7 +205,8 @@ def _record(
     try:
         while episodes is None or kept < episodes:
             title = f"episode {kept + 1}{'' if episodes is None else f' of {episodes}'} (seed {seed})"
-            outcome, ret, steps = player.episode(seed, title)
+            saved = f"{written.n_episodes if written else 0} saved in {Path(out).name}"
+            outcome, ret, steps = player.episode(seed, title, saved)
             seed += 1
             if outcome == "quit":
                 break

@@ -72,11 +72,11 @@ class KeyMap:
         return {name for combo in self.keys if combo for name in combo.split("+")}
 
     def legend(self) -> list[str]:
-        """One short text per entry: "left → 0 (LEFT)", "(no key) → 1"."""
+        """One short text per entry: "left: 3 LEFT", "(no key): 0" (ASCII: pygame's own font has no arrows)."""
         return [
-            f"{combo or '(no key)'} → {action}" + (f" {self.meanings[action]}" if action < len(self.meanings) else "")
+            f"{combo or '(no key)'}: {action}" + (f" {self.meanings[action]}" if action < len(self.meanings) else "")
             for combo, action in self.keys.items()
-        ] + ([] if "" in self.keys else ["(no key) → the last action"])
+        ] + ([] if "" in self.keys else ["(no key): the last action"])
 
 
 def check_keys(keys: Mapping[str, int], n_actions: int, source: str) -> dict[str, int]:

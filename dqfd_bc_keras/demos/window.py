@@ -59,12 +59,26 @@ class Window:
         self.screen = None
         self.held: set[str] = set()
 
+    def wrap(self, line: str, width: int) -> list[str]:
+        """`line` broken at " · " (else at spaces) into lines that fit `width` pixels."""
+        sep = " · " if " · " in line else " "
+        rows = [""]
+        for part in line.split(sep):
+            joined = f"{rows[-1]}{sep}{part}" if rows[-1] else part
+            if rows[-1] and self.font.size(joined)[0] > width:
+                rows.append(part)
+            else:
+                rows[-1] = joined
+        return rows
+
     def draw(self, frame: np.ndarray | None, lines: list[str]) -> None:
-        """Show `frame` (an RGB array, H x W x 3) scaled up, `lines` beneath it."""
+        """Show `frame` (an RGB array, H x W x 3) scaled up, `lines` beneath it (wrapped to its width)."""
         pg = self.pg
         h, w = frame.shape[:2] if frame is not None else (0, WIDTH)
         scale = max(1, round(WIDTH / max(h, w)))
-        size = (max(w * scale, WIDTH), h * scale + LINE * len(lines) + 16)
+        width = max(w * scale, WIDTH)
+        lines = [row for line in lines for row in self.wrap(line, width - 20)]
+        size = (width, h * scale + LINE * len(lines) + 16)
         if self.screen is None or self.screen.get_size() != size:
             self.screen = pg.display.set_mode(size)
         self.screen.fill(BACKGROUND)

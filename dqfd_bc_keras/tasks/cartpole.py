@@ -22,8 +22,9 @@ def imperfect(obs: np.ndarray) -> int:
 EXPERTS = {"strong": strong, "imperfect": imperfect}
 KEYS = {"left": 0, "right": 1}
 """Push left, push right; CartPole has no action for no key, so the last push goes on."""
-FPS = 15
-"""CartPole's physics steps 0.02 s (50 per second): at 15 a person sees it 3.3 times slower."""
+FPS = 10
+"""CartPole's physics steps 0.02 s (50 per second): at 10 a person sees it 5 times slower, and a
+pole pushed one way from upright falls in about 10 steps, a second."""
 DEFAULTS = {"total_steps": 50_000, "eval_every": 1_000}
 """Runs end within ~10–50k steps (early stop at 10 episodes ≥ 490): a finer evaluation grid makes
 steps-to-threshold meaningful."""
