@@ -12,7 +12,6 @@ installs them).
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import tempfile
@@ -22,41 +21,16 @@ from pathlib import Path
 from PIL import ImageGrab
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path[:0] = [str(REPO), str(REPO / "tests")]
 
-from dqfd_bc_keras.files import atomic_path  # noqa: E402  (after the path: run as a script)
+from screen import focus, virtual_screen, xdotool  # noqa: E402  (after the path: run as a script)
 
-
-def xdotool(env: dict[str, str], *args: str, check: bool = True) -> str:
-    return subprocess.run(["xdotool", *args], env=env, check=check, capture_output=True, text=True, timeout=30).stdout
-
-
-def focus(env: dict[str, str], process: subprocess.Popen) -> str:
-    """The id of `process`'s window once it is shown, given the keyboard (there is no window manager)."""
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and process.poll() is None:
-        for window in xdotool(env, "search", "--onlyvisible", "--pid", str(process.pid), check=False).split():
-            xdotool(env, "windowfocus", window, check=False)
-            if xdotool(env, "getwindowfocus", check=False).strip() == window:
-                return window
-        time.sleep(0.1)
-    raise SystemExit("demos play showed no window (see its error above)")
+from dqfd_bc_keras.files import atomic_path  # noqa: E402
 
 
 def screenshot(task: str, out: Path, hold: float) -> tuple[int, int]:
     """Play `task` on a virtual screen, grab the window into `out`; returns its size."""
-    read, write = os.pipe()
-    server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1024x900x24", "-nolisten", "tcp"],
-        pass_fds=(write,),
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write)
-    with os.fdopen(read) as answer:
-        display = f":{answer.readline().strip()}"
-    env = {**os.environ, "DISPLAY": display, "SDL_AUDIODRIVER": "dummy", "PYTHONPATH": str(REPO)}
-    env.pop("SDL_VIDEODRIVER", None)
-    with tempfile.TemporaryDirectory() as scratch:
+    with virtual_screen("1024x900") as env, tempfile.TemporaryDirectory() as scratch:
         play = subprocess.Popen(
             [sys.executable, "-m", "dqfd_bc_keras.demos", "play", "--task", task, "--out", f"{scratch}/d.npz"],
             env=env,
@@ -71,13 +45,11 @@ def screenshot(task: str, out: Path, hold: float) -> tuple[int, int]:
                 xdotool(env, "keyup", key)
             geometry = dict(line.split("=") for line in xdotool(env, "getwindowgeometry", "--shell", window).split())
             x, y, w, h = (int(geometry[k]) for k in ("X", "Y", "WIDTH", "HEIGHT"))
-            image = ImageGrab.grab(bbox=(x, y, x + w, y + h), xdisplay=display)
+            image = ImageGrab.grab(bbox=(x, y, x + w, y + h), xdisplay=env["DISPLAY"])
             xdotool(env, "key", "Escape")
             play.wait(timeout=60)
         finally:
             play.kill()
-            server.terminate()
-            server.wait()
     with atomic_path(out) as tmp:
         image.save(tmp, format="PNG")
     return image.size

@@ -3,8 +3,6 @@ virtual screen (Xvfb) receiving real key presses (xdotool), the file it leaves t
 replayed; each preset's key map through posted keyboard events under SDL's headless driver."""
 
 import json
-import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import REPO, call
+from screen import focus, virtual_screen, xdotool
 
 from dqfd_bc_keras import demos
 from dqfd_bc_keras.demos.keys import CONTROLS, env_keys, key_map
@@ -26,49 +25,18 @@ PLAY = [sys.executable, "-m", "dqfd_bc_keras.demos", "play"]
 
 @pytest.fixture(scope="module")
 def screen() -> Iterator[dict[str, str]]:
-    """A virtual X screen of its own (Xvfb picks a free display number), and the environment a
-    command needs to open its window there. `.ci/run` installs Xvfb and xdotool where they are missing."""
-    missing = [tool for tool in ("Xvfb", "xdotool") if shutil.which(tool) is None]
-    assert not missing, f"{missing} not installed: apt-get install xvfb xdotool (as .ci/run does)"
-    read, write = os.pipe()
-    server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-        pass_fds=(write,),
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write)
-    with os.fdopen(read) as answer:
-        display = f":{answer.readline().strip()}"
-    env = {**os.environ, "DISPLAY": display, "SDL_AUDIODRIVER": "dummy", "PYTHONPATH": str(REPO)}
-    env.pop("SDL_VIDEODRIVER", None)
-    yield env
-    server.terminate()
-    server.wait()
-
-
-def xdotool(env: dict[str, str], *args: str) -> str:
-    done = subprocess.run(["xdotool", *args], env=env, capture_output=True, text=True, timeout=30)
-    assert done.returncode == 0, f"xdotool {' '.join(args)}: {done.stderr}"
-    return done.stdout
+    """A virtual X screen for this module's windows."""
+    with virtual_screen() as env:
+        yield env
 
 
 def start(env: dict[str, str], *args: object) -> subprocess.Popen:
-    """`demos play ARGS` in a window on the virtual screen, once its window exists and has the keyboard."""
+    """`demos play ARGS` in a window on the virtual screen, once its window is shown and has the keyboard."""
     process = subprocess.Popen(
         [*PLAY, *map(str, args)], env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
-    deadline = time.monotonic() + 60
-    while True:  # no window manager: the test gives the window the focus, once it is shown
-        search = ["xdotool", "search", "--onlyvisible", "--pid", str(process.pid)]
-        for window in subprocess.run(search, env=env, capture_output=True, text=True, timeout=30).stdout.split():
-            subprocess.run(["xdotool", "windowfocus", window], env=env, capture_output=True, timeout=30)
-        focused = subprocess.run(["xdotool", "getwindowfocus", "getwindowpid"], env=env, capture_output=True, text=True)
-        if focused.stdout.strip() == str(process.pid):
-            return process
-        if process.poll() is not None or time.monotonic() > deadline:
-            process.kill()
-            raise AssertionError(f"no window: {process.communicate()[1]}")
-        time.sleep(0.1)
+    focus(env, process)
+    return process
 
 
 def episodes_in(path: Path, timeout: float = 60.0, at_least: int = 1) -> int:
@@ -153,6 +121,22 @@ def test_a_kill_in_the_third_episode_keeps_the_first_two_and_append_goes_on(scre
     assert more.meta.episode_seeds == [0, 1, 2] and more.n_episodes == 3
     np.testing.assert_array_equal(more.obs[: len(kept)], kept.obs)
     assert (more.episodes()[2].actions == 0).all()
+
+
+def test_a_person_records_into_a_minari_dataset(screen, tmp_path):
+    env = {**screen, "MINARI_DATASETS_PATH": str(tmp_path / "minari")}
+    process = start(env, "--env", "CartPole-v1", "--episodes", 1, "--fps", 60, "--out", "minari:cartpole/me-v0")
+    xdotool(env, "keydown", "Left")
+    _, stderr = process.communicate(timeout=60)
+    xdotool(env, "keyup", "Left")
+    assert process.returncode == 0, stderr
+    again = subprocess.run([*PLAY, "--env", "CartPole-v1", "--out", "minari:cartpole/me-v0"], env=env, cwd=REPO,
+                           capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert again.returncode == 2 and "a Minari dataset of that id exists; pass --force" in again.stderr
+    check = "from dqfd_bc_keras.demos import from_minari; d = from_minari('cartpole/me-v0', 'CartPole-v1'); "
+    check += "print(d.n_episodes, d.meta.episode_seeds, set(d.actions.tolist()))"
+    read = subprocess.run([sys.executable, "-c", check], env=env, cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert read.stdout.split("\n")[0] == "1 [0] {0}", read.stderr  # CartPole's keys: ← is action 0
 
 
 def test_ctrl_c_and_escape_keep_what_finished(screen, tmp_path):
@@ -341,3 +325,22 @@ def test_the_python_api_replays_what_the_cli_recorded(tmp_path):
     demos.save(recorded, path)
     shown = demos.show(path, window=False, report=None)
     assert shown.meta.episode_seeds == [3, 4] and shown.meta.max_steps == 40
+
+
+def test_the_screenshot_script_grabs_the_window(tmp_path):
+    """docs/play_screenshot.py, as the docs' picture is made: a real window, grabbed from the screen."""
+    from PIL import Image
+
+    out = tmp_path / "window.png"
+    made = subprocess.run(
+        [sys.executable, "docs/play_screenshot.py", "--out", out, "--hold", "0.2"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert made.returncode == 0, made.stderr
+    image = np.asarray(Image.open(out).convert("RGB"))
+    assert image.shape[1] == 600 and image.shape[0] > 400  # CartPole's 600x400 frame, the text beneath
+    assert (image[-100:] == (24, 24, 28)).all(axis=-1).mean() > 0.5  # the text panel's background
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10  # a frame and text, not a blank window

@@ -19,7 +19,7 @@ from typing import Any
 import gymnasium as gym
 
 from dqfd_bc_keras.demos.dataset import DemoDataset, concatenate
-from dqfd_bc_keras.demos.keys import KeyMap, key_map
+from dqfd_bc_keras.demos.keys import KeyMap, key_map, played_like
 from dqfd_bc_keras.demos.minari import check_exportable, dataset_dir, to_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import EpisodeRecorder
@@ -35,11 +35,13 @@ ENV_FPS = 30
 
 
 def default_fps(task: str, env: gym.Env, env_kwargs: Mapping[str, Any] | None) -> float:
-    """The preset's rate; for an Atari game real time (60 frames/s over its frame skip); else the
-    env's `render_fps` (highway-env's is 2), at most `ENV_FPS`."""
+    """The preset's rate (`keys.played_like`: also a preset's env given as `--env`); for an Atari
+    game real time (60 frames/s over its frame skip); else the env's `render_fps` (highway-env's
+    is 2), at most `ENV_FPS`."""
     spec = get_task(task)
-    if spec.fps is not None:
-        return spec.fps
+    preset = played_like(spec)
+    if preset is not None and preset.fps is not None:
+        return preset.fps
     if is_atari(spec.env_id):
         return 60 / split_kwargs(dict(env_kwargs or {}))[0].frame_skip
     return min(float(env.metadata.get("render_fps") or ENV_FPS), ENV_FPS)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.tasks import TaskSpec
+from dqfd_bc_keras.tasks import TASKS, TaskSpec
 
 CONTROLS = {"return": "start", "p": "pause", "backspace": "discard", "escape": "quit"}
 """Keys that steer the recording (pygame names → what they do), never an action."""
@@ -136,16 +136,26 @@ def env_keys(env: gym.Env) -> tuple[dict[str, int], str, tuple[str, ...]] | None
     return None
 
 
+def played_like(task: TaskSpec) -> TaskSpec | None:
+    """The preset whose keys and rate `task` plays with: itself if it has keys, else a preset of
+    the same plain env (`--env CartPole-v1` plays as `cartpole`), else None."""
+    if task.keys:
+        return task
+    return next((spec for spec in TASKS.values() if spec.env_id == task.env_id and spec.keys), None)
+
+
 def key_map(task: TaskSpec, env: gym.Env, given: Mapping[str, int] | str | None = None) -> KeyMap:
-    """The key map to play `task` on `env` with: `given` (a dict, or `--keys`'s JSON), the preset's, the env's own."""
+    """The key map to play `task` on `env` with: `given` (a dict, or `--keys`'s JSON), the preset's
+    (`played_like`), the env's own."""
     n = int(env.action_space.n)
     own = env_keys(env)
     meanings = own[2] if own else ()
     if given is not None:
         keys = parse_keys(given, n) if isinstance(given, str) else check_keys(given, n, "keys")
         return KeyMap(keys, "--keys", meanings)
-    if task.keys:
-        return KeyMap(check_keys(task.keys, n, f"preset {task.name}'s keys"), f"preset {task.name}", meanings)
+    preset = played_like(task)
+    if preset is not None:
+        return KeyMap(check_keys(preset.keys, n, f"preset {preset.name}'s keys"), f"preset {preset.name}", meanings)
     if own is not None:
         return KeyMap(check_keys(own[0], n, own[1]), own[1], meanings)
     named = f" ({', '.join(f'{i} {m}' for i, m in enumerate(meanings))})" if meanings else ""
