@@ -344,3 +344,27 @@ def test_the_screenshot_script_grabs_the_window(tmp_path):
     assert image.shape[1] == 600 and image.shape[0] > 400  # CartPole's 600x400 frame, the text beneath
     assert (image[-100:] == (24, 24, 28)).all(axis=-1).mean() > 0.5  # the text panel's background
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10  # a frame and text, not a blank window
+
+
+def test_closing_the_window_quits_and_keeps_the_finished_episodes(tmp_path, monkeypatch):
+    """The window's close button (pygame's QUIT event, posted under SDL's headless driver) ends the
+    session as Esc does: the episode in play is dropped, the finished ones stay in the file."""
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.setenv("SDL_AUDIODRIVER", "dummy")
+    from dqfd_bc_keras.demos.window import Window
+
+    out, poll = tmp_path / "mc.npz", Window.poll
+
+    def person(window: Window):
+        pg = window.pg
+        if not out.exists():  # episode 1: Right pressed on the first frame and held
+            if not window.held:
+                pg.event.post(pg.event.Event(pg.KEYDOWN, key=pg.K_RIGHT, mod=0, unicode="", scancode=0))
+        else:  # episode 2 has begun: the window is closed
+            pg.event.post(pg.event.Event(pg.QUIT))
+        return poll(window)
+
+    monkeypatch.setattr(Window, "poll", person)
+    played = demos.play("mountaincar", out, episodes=3, max_steps=5, fps=1000, report=None)
+    assert played.n_episodes == 1 and (played.actions == 2).all()
+    assert demos.load(out).meta.episode_seeds == [0]
