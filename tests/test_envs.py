@@ -115,7 +115,7 @@ def test_mountaincar_without_goal_count_terminates_at_the_flag():
     assert steps[-1][1] is True and steps[-1][0] == -1.0 and "goals" not in steps[-1][3]
 
 
-MINATAR = ("minatar-breakout", "minatar-freeway")
+MINATAR = tuple(name for name, spec in TASKS.items() if spec.env_id.startswith("MinAtar/"))
 """MinAtar's own gym wrapper seeds its game, not `Env.np_random` (no `super().reset(seed=seed)`),
 which `check_env` asserts; its presets are checked by the test after this one."""
 

@@ -220,14 +220,15 @@ def test_minatar_presets_keys_are_the_games_own(task):
 
 
 def test_envs_without_a_preset_play_with_their_own_keys():
-    """The ALE's key map (FIRE on space, NOOP with no key), highway-env's meta-actions, MinAtar's action set."""
+    """The ALE's key map (FIRE on space, NOOP with no key), highway-env's meta-actions, MinAtar's action set
+    (Asterix's full set, -v0: its preset plays the minimal one)."""
     atari = key_map(get_task("ale_py:ALE/Breakout-v5"), make_task("ale_py:ALE/Breakout-v5"))
     assert (atari.action({"space"}, None), atari.action(set(), None), atari.action({"a"}, None)) == (1, 0, 3)
     assert atari.meanings == ("NOOP", "FIRE", "RIGHT", "LEFT")
     highway = key_map(get_task("highway_env:highway-v0"), make_task("highway_env:highway-v0", max_steps=40))
     assert highway.keys == {"up": 0, "": 1, "down": 2, "right": 3, "left": 4}
-    asterix = key_map(get_task("MinAtar/Asterix-v1"), make_task("MinAtar/Asterix-v1", max_steps=100))
-    assert asterix.keys == {"": 0, "left": 1, "up": 2, "right": 3, "down": 4}
+    asterix = key_map(get_task("MinAtar/Asterix-v0"), make_task("MinAtar/Asterix-v0", max_steps=100))  # all 6 actions
+    assert asterix.keys == {"": 0, "left": 1, "up": 2, "right": 3, "down": 4, "space": 5}
 
 
 def test_the_fullest_combination_wins_and_no_key_repeats_the_last_action():
