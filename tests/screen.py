@@ -23,8 +23,10 @@ def virtual_screen(size: str = "1024x768") -> Iterator[dict[str, str]]:
     if missing:
         raise RuntimeError(f"{missing} not installed: apt-get install xvfb xdotool (as .ci/run does)")
     read, write = os.pipe()
+    # -noreset: by default the server resets when its last client leaves (the window of a killed
+    # `play`, an xdotool call ending), and a client connecting meanwhile is refused ("Can't open display").
     server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", f"{size}x24", "-nolisten", "tcp"],
+        ["Xvfb", "-displayfd", str(write), "-screen", "0", f"{size}x24", "-nolisten", "tcp", "-noreset"],
         pass_fds=(write,),
         stderr=subprocess.DEVNULL,
     )
