@@ -145,24 +145,35 @@ def test_importance_weights_anneal_beta_to_one(demos, bc_models):
     np.testing.assert_allclose(float(agent.beta()), 1.0)
 
 
-def test_store_in_a_graph_adds_agent_rows_with_the_bc_view(demos, bc_models):
+def test_store_in_a_graph_adds_agent_rows_whose_bc_view_is_written_when_settled(demos, bc_models):
+    """Rows stored one by one hold NaN for π̄_bc and σ² until the replay settles them in one batch
+    (as `sample` does first, and by itself every SETTLE_ROWS rows): then each holds its state's view."""
     agent = agent_for("ce", demos, bc_models)
     store = tf.function(agent.store)
-    obs, next_obs = demos.obs[0], demos.next_obs[0]
-    for _ in range(3):
+    replay = agent.replay
+    for t in range(3):
         store(
-            tf.constant(obs),
+            tf.constant(demos.obs[t]),
             tf.constant(1),
             tf.constant(1.0),
-            tf.constant(next_obs),
+            tf.constant(demos.next_obs[t]),
             tf.constant(False),
             tf.constant(True),
         )
-    replay = agent.replay
-    assert int(replay.agent_size.numpy()) == 3
-    row = replay.table[replay.demo_capacity].numpy()
-    np.testing.assert_allclose(row[replay.PI_BC], tf.nn.softmax(bc_models["ce"](obs[None]))[0], rtol=1e-5)
-    assert row[replay.ACTION] == 1 and row[replay.TRUNCATED] == 1 and row[replay.TERMINATED] == 0
+    rows = replay.demo_capacity + np.arange(3)
+    assert int(replay.agent_size.numpy()) == 3 and int(replay.unsettled.numpy()) == 3
+    assert np.isnan(tf.gather(replay.table, rows).numpy()[:, replay.SIGMA_SQ]).all()
+    replay.sample(8, agent.beta())  # settles first
+    table = tf.gather(replay.table, rows).numpy()
+    np.testing.assert_allclose(table[:, replay.PI_BC], tf.nn.softmax(bc_models["ce"](demos.obs[:3])), rtol=1e-5)
+    np.testing.assert_array_equal(table[:, replay.SIGMA_SQ], agent.config.sigma0_sq)  # the MLE model: σ0²
+    assert (table[:, replay.ACTION] == 1).all() and (table[:, replay.TRUNCATED] == 1).all()
+    assert (table[:, replay.TERMINATED] == 0).all() and int(replay.unsettled.numpy()) == 0
+    for t in range(replay.SETTLE_ROWS):  # no sample comes: the replay settles the batch by itself
+        store(*(tf.constant(x[t]) for x in (demos.obs, demos.actions, demos.rewards, demos.next_obs)),
+              tf.constant(False), tf.constant(False))  # fmt: skip
+    assert int(replay.unsettled.numpy()) == 0
+    assert not np.isnan(replay.table[: replay.demo_capacity + 3 + replay.SETTLE_ROWS].numpy()).any()
 
 
 def test_q_network_round_trips_through_keras_file(demos, bc_models, held_out, tmp_path):

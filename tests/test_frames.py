@@ -88,6 +88,7 @@ def test_frames_read_back_exactly_from_the_pool_after_the_buffer_wraps(shape, st
     store(replay, stream)
     # The table holds D_demo's 7 rows, then the last 8 self-generated ones (the head is at 17 % 8 = 1).
     expected = demos + [stream[17 - 8 + (p - 1) % 8] for p in range(8)]
+    replay.settle()  # as `sample` does before reading
     rows = replay.stored_indices()
     batch = replay._batch(rows, tf.ones([len(expected)]))
     assert batch.obs.dtype == tf.uint8 and tuple(batch.obs.shape[1:]) == frames.shape

@@ -333,6 +333,28 @@ def test_an_out_that_cannot_work_is_refused_in_one_line_before_anything_is_writt
     assert left_in(work) == ["models"]  # no runs/, no run\xff
 
 
+def test_a_checkpoint_without_a_variable_the_learner_has_is_one_line(finished, tmp_path, capsys):
+    """As a checkpoint of an earlier version is (e.g. before the replay counted its unsettled rows):
+    here one that holds only the Q-network."""
+    import keras
+    import tensorflow as tf
+
+    run = tmp_path / "run"
+    shutil.copytree(finished, run)
+    prefix = _checkpoint(run) / "tf"
+    for old in prefix.parent.glob("tf.*"):
+        old.unlink()
+    q_network = keras.saving.load_model(run / "q_network.keras")
+    tf.train.Checkpoint(q_network=q_network).write(str(prefix))
+    before = tree(run)
+    code = cli.run(train_main, ["--quiet", "--resume", "--out", str(run)])
+    error = capsys.readouterr().err
+    assert code == 2 and error.count("\n") == 1, error
+    assert error.startswith(f"error: {_checkpoint(run)}: the checkpoint cannot be resumed (")
+    assert error.endswith("; start the run over with --force\n")
+    assert tree(run) == before
+
+
 def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(finished, run)

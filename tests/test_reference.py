@@ -166,6 +166,7 @@ def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_mod
                     )
                 )
             )
+        agent.replay.settle()  # the BC model's view of the last rows, as a sample would before reading them
         ref.replay.store(transitions(agent, agent_data, agent.replay.demo_capacity + slots, chunk))
         agent.reset_metrics()
         graph_terms.append(agent.learn(tf.constant(LEARN)))

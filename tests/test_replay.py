@@ -500,8 +500,9 @@ def test_n_step_private_helper_agrees_for_a_whole_batch():
 
 
 def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
-    """The cached view (refreshed when a row's window changes) is the plain windowed computation at
-    every moment: random episode ends, D_demo replaced twice, the agent buffer wrapping 5 times."""
+    """The cached view (refreshed when a row's window changes, for stored rows when they are settled)
+    is the plain windowed computation after every settle: random episode ends, 1 to 3 rows stored
+    between settles, D_demo replaced twice, the agent buffer wrapping 5 times."""
     rng = np.random.default_rng(7)
     replay = make_replay(n_step=4, capacity=6, demo_capacity=8)
 
@@ -521,11 +522,13 @@ def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
             )
         )
         for _ in range(10):
-            terminated, truncated = flags(1)
-            store_all(
-                replay, make_rows(replay, [tag], rewards=rng.normal(size=1), terminated=terminated, truncated=truncated)
-            )
-            tag += 1
+            n = int(rng.integers(1, 4))
+            terminated, truncated = flags(n)
+            rows = make_rows(replay, range(tag, tag + n), rng.normal(size=n), terminated, truncated)
+            store_all(replay, rows)
+            tag += n
+            assert int(replay.unsettled.numpy()) == n
+            replay.settle()
             indices = replay.stored_indices()
             plain = replay._n_step(indices, tf.gather(replay.table, replay._window(indices)))
             cached = tf.split(tf.gather(replay.n_step_view, indices), [1, 2, 1], axis=1)

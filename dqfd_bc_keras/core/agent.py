@@ -81,6 +81,8 @@ class DQfDAgent(keras.Model):
         self.target_network.trainable = False
         self.replay = replay
         self.bc_model = bc_model
+        if bc_model is not None:  # the BC model's view of self-generated states, in the replay's batches
+            replay.expert_view = self.expert_targets
         # θ_prior of the Bayesian loss: zero during pre-training, then (by default) the
         # pre-trained weights (`capture_prior`).
         self.prior_weights = [
@@ -136,18 +138,25 @@ class DQfDAgent(keras.Model):
     def imitation_weights(self) -> tuple[float | None, float | None]:
         """The weight 1/(2σ²) of the Bayesian likelihood (losses.bayes_likelihood_loss) averaged over
         D_demo's rows and over D_replay's, with σ² as the rows hold it for the loss: how much more
-        the loss imitates on demonstrated states than on the agent's own. None for a method that
-        reads no σ², and for an empty replay."""
+        the loss imitates on demonstrated states than on the agent's own (rows not settled yet, NaN,
+        left out). None for a method that reads no σ², and for an empty replay."""
         if "sigma0_sq" not in self.method.reads:
             return None, None
+        (on_demos, n_demos), (on_agents, n_agents) = self._mean_imitation_weights()
+        return (float(on_demos) if n_demos else None), (float(on_agents) if n_agents else None)
+
+    @tf.function(input_signature=[], autograph=False)
+    def _mean_imitation_weights(self) -> tuple[tuple[tf.Tensor, tf.Tensor], tuple[tf.Tensor, tf.Tensor]]:
+        """(mean 1/(2σ²), rows counted) over D_demo and over D_replay, in one graph call: it comes
+        after every episode, and MinAtar's first episodes last a dozen steps."""
         r = self.replay
-        start, demos, agents = r.demo_capacity, int(r.demo_size.numpy()), int(r.agent_size.numpy())
 
-        def mean_weight(rows: slice) -> float | None:
-            sigma_sq = r.table[rows, r.SIGMA_SQ]
-            return float(tf.reduce_mean(0.5 / sigma_sq)) if sigma_sq.shape[0] else None
+        def mean_weight(start: tf.Tensor, size: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
+            sigma_sq = r.table[start : start + size, r.SIGMA_SQ]
+            sigma_sq = tf.boolean_mask(sigma_sq, tf.logical_not(tf.math.is_nan(sigma_sq)))
+            return tf.reduce_mean(0.5 / sigma_sq), tf.size(sigma_sq)
 
-        return mean_weight(slice(0, demos)), mean_weight(slice(start, start + agents))
+        return mean_weight(tf.constant(0), r.demo_size), mean_weight(tf.constant(r.demo_capacity), r.agent_size)
 
     @property
     def sqil(self) -> bool:
@@ -163,8 +172,13 @@ class DQfDAgent(keras.Model):
         self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated, pi_bc, sigma_sq))
 
     def store(self, obs, action, reward, next_obs, terminated, truncated) -> None:
-        """Append one self-generated transition to D_replay (graph-compatible)."""
-        pi_bc, sigma_sq = self.expert_targets(tf.cast(obs, self.net_input.dtype)[None])
+        """Append one self-generated transition to D_replay (graph-compatible). With a BC model its
+        view of s (π̄_bc, σ²) is written when the replay settles the row, with the rows stored
+        around it, before the next sample: NaN until then, so an early read could not pass unseen."""
+        if self.bc_model is None:
+            pi_bc, sigma_sq = self.expert_targets(tf.cast(obs, self.net_input.dtype)[None])
+        else:
+            pi_bc, sigma_sq = tf.fill([1, self.n_actions], np.nan), tf.fill([1], np.nan)
         reward = 0.0 * tf.cast(reward, tf.float32) if self.sqil else reward
         if self.net_input.image:
             obs, next_obs = self.replay.store_frames(obs, next_obs)

@@ -14,9 +14,18 @@ TensorFlow graph, so storing, sampling and the priority write-back add no graph 
 Every sample carries its n-step return from the stored sequence: R = Σ_{k<m} γ^k r_{t+k}
 with m ≤ n stopping at the episode's end (terminated or truncated) or at the newest stored
 transition, then bootstrapping from s_{t+m} with γ^m·(1 − terminated). A row's return only
-changes when a row of its window is written, so it is computed then (for the n rows whose
-window holds a new transition, and for all of D_demo when it is set) and kept beside the
-table: sampling reads it with one gather instead of re-deriving it for every batch.
+changes when a row of its window is written, so it is computed then (for all of D_demo when it
+is set) and kept beside the table: sampling reads it with one gather instead of re-deriving it
+for every batch.
+
+Self-generated rows are stored one at a time but settled in batches (`settle`): their n-step
+returns (and those of the n − 1 rows before them, whose windows reach them) and, where the
+agent gives an `expert_view`, π̄_bc and σ² of their states. Every op in a graph has a fixed cost
+here (docs/PERFORMANCE.md), so one settle of the rows stored between two samples costs about
+what settling one row did. `sample` settles first, so a batch never sees the difference: what it
+reads is what storing and settling each row at once would have written. Settles come only there
+and every `SETTLE_ROWS` rows, never where a graph call ends, so the MC-dropout draws of a run do
+not depend on where its graph calls stop (its evaluation grid); the count waiting is checkpointed.
 
 Frames (`networks.NetworkInput.image`) are never stored as floats, nor once per stack: a uint8
 pool holds single frames, two slots per row (its s_t's newest frame, written only when s_t does
@@ -30,6 +39,7 @@ run k rows beyond the table's capacity, so the oldest rows' earlier frames outli
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -133,9 +143,13 @@ class PrioritizedReplay(tf.Module):
     Each row of one float32 table packs a transition and the BC model's view of its state:
     [s (d) | s' (d) | a | r | terminated | truncated | π̄_bc (A) | σ²], so a whole n-step
     window of the batch is one gather. π̄_bc and σ² are functions of s alone and the BC model
-    is fixed between refits, so they are computed when a row is written (and recomputed for
-    every row after a refit) instead of K MC-dropout passes on every sampled batch.
+    is fixed between refits, so they are computed when a row is written or settled (and recomputed
+    for every row after a refit) instead of K MC-dropout passes on every sampled batch.
     """
+
+    SETTLE_ROWS = 64
+    """At most this many rows wait to be settled: a batch that shares the per-op cost, and bounds
+    what a settle holds in memory while no sample comes (before learning starts)."""
 
     def __init__(
         self,
@@ -176,6 +190,12 @@ class PrioritizedReplay(tf.Module):
         self.n_step_view = tf.Variable(tf.zeros([rows, d + 2]), trainable=False, name="n_step_view")
         """[R | s_{t+m} (d) | γ^m·(1 − terminated)] of each row, kept current by `_refresh_n_step`."""
         self.tree = SumTree(rows)
+        self.expert_view: Callable[[tf.Tensor], tuple[tf.Tensor, tf.Tensor]] | None = None
+        """States → (π̄_bc, σ²), written into self-generated rows when they are settled (the agent sets it
+        when it has a BC model); None: rows keep the π̄_bc and σ² they were stored with."""
+        self.unsettled = tf.Variable(0, trainable=False, name="unsettled")
+        """How many of the newest self-generated rows wait for `settle`."""
+        self.settle_rows = min(self.SETTLE_ROWS, self.capacity)
         self._strictly_upper = tf.constant(np.triu(np.ones((n_step, n_step), np.float32), k=1))
         self.rng = tf.random.Generator.from_seed(seed)
         if self.frames is not None:
@@ -319,15 +339,31 @@ class PrioritizedReplay(tf.Module):
         self.tree.set(tf.range(len(priorities)), priorities)
 
     def store(self, row: tf.Tensor) -> None:
-        """Append one packed self-generated transition (width,) at the circular head, at max priority."""
+        """Append one packed self-generated transition (width,) at the circular head, at max priority;
+        its n-step return (and π̄_bc, σ² with an `expert_view`) are written when it is settled."""
         position = self.head.read_value()
         index = self.demo_capacity + position
         self.table.scatter_nd_update([[index]], row[None])
         self.tree.set(index[None], self.max_priority[None])
         self.head.assign((position + 1) % self.capacity)
         self.agent_size.assign(tf.minimum(self.agent_size + 1, self.capacity))
-        # The rows whose n-step window reaches the new one: it and the n − 1 stored before it.
-        self._refresh_n_step(self.demo_capacity + (position - tf.range(self.n_step)) % self.capacity)
+        self.unsettled.assign_add(1)
+        tf.cond(self.unsettled >= self.settle_rows, self.settle, lambda: None)
+
+    def settle(self) -> None:
+        """Write the views of the rows stored since the last settle, in one batch: the n-step returns
+        of those rows and of the n − 1 before them (whose windows reach them), and with an
+        `expert_view` π̄_bc and σ² of their states."""
+
+        def write() -> None:
+            newest = lambda m: self.demo_capacity + (self.head - 1 - tf.range(m)) % self.capacity
+            self._refresh_n_step(newest(tf.minimum(self.unsettled + self.n_step - 1, self.capacity)))
+            if self.expert_view is not None:
+                rows = newest(self.unsettled)
+                self.set_expert_targets(rows, *self.expert_view(self.states(rows)))
+            self.unsettled.assign(0)
+
+        tf.cond(self.unsettled > 0, write, lambda: None)
 
     def stored_indices(self) -> tf.Tensor:
         """The table rows in use: D_demo, then D_replay."""
@@ -335,6 +371,7 @@ class PrioritizedReplay(tf.Module):
 
     def sample(self, batch_size: int, beta: tf.Tensor) -> Batch:
         """Draw `batch_size` rows with P(i) ∝ p_i^α, with IS weights and n-step returns."""
+        self.settle()
         total = self.tree.total
         indices = self.tree.find(self.rng.uniform([batch_size]) * total)
         weights = tf.pow(tf.cast(self.size, tf.float32) * self.tree.leaves(indices) / total, -beta)
@@ -343,6 +380,7 @@ class PrioritizedReplay(tf.Module):
     def sample_balanced(self, batch_size: int) -> Batch:
         """SQIL's batch: the first half uniformly from D_demo, the second from D_replay (all from
         D_demo while D_replay is empty), weights 1."""
+        self.settle()
         u = self.rng.uniform([batch_size])
         from_agent = tf.logical_and(tf.range(batch_size) >= batch_size // 2, self.agent_size > 0)
         indices = tf.where(

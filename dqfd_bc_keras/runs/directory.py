@@ -240,7 +240,8 @@ class RunDirectory:
                 recent = source / "recent.npz"
                 dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
             self.state = TrainingState.from_dict(json.loads((source / "state.json").read_text()))
-        except (OSError, ValueError, LookupError, TypeError, tf.errors.OpError) as error:
+        # AssertionError: the checkpoint lacks a variable the learner has (a checkpoint of an earlier version).
+        except (OSError, ValueError, LookupError, TypeError, AssertionError, tf.errors.OpError) as error:
             raise BrokenRunError(
                 f"{source}: the checkpoint cannot be resumed ({one_line(error)}); start the run over with --force"
             ) from None
