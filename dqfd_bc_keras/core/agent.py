@@ -111,6 +111,15 @@ class DQfDAgent(keras.Model):
         """The mean of each term of J(Q) over the learning steps since `reset_metrics`."""
         return self.loss_means.result()
 
+    @tf.function(input_signature=[], autograph=False)
+    def take_losses(self) -> dict[str, tf.Tensor]:
+        """`losses_so_far`, then `reset_metrics`, in one graph call (one an episode, and MinAtar's
+        first episodes last a dozen steps)."""
+        losses = {name: tf.identity(value) for name, value in self.losses_so_far().items()}
+        with tf.control_dependencies(list(losses.values())):
+            self.reset_metrics()
+        return losses
+
     def refresh_target(self) -> None:
         """θ' ← θ."""
         for target, online in zip(self.target_network.weights, self.q_network.weights, strict=True):

@@ -43,8 +43,10 @@ class Interaction(tf.Module):
             input_signature=[tf.TensorSpec(agent.net_input.shape, agent.net_input.dtype), tf.TensorSpec([], tf.int64)],
         )
 
+    @tf.function(input_signature=[], autograph=False)
     def epsilon(self) -> tf.Tensor:
-        """ε, linear from its start to `epsilon_end` over `epsilon_fraction` of the budget."""
+        """ε, linear from its start to `epsilon_end` over `epsilon_fraction` of the budget (a graph of
+        its own: read after every episode, it cost more as eager ops)."""
         c = self.config
         start = c.initial_epsilon
         progress = tf.cast(self.env_steps, tf.float32) / self.decay_steps

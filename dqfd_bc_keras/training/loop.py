@@ -370,8 +370,7 @@ def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode
             obs, done = interaction.play(tf.constant(obs, agent.net_input.dtype), tf.constant(budget, tf.int64))
             obs, done = obs.numpy(), bool(done)
         stats = interaction.episode
-        losses = {name: float(value) for name, value in agent.losses_so_far().items()}
-        agent.reset_metrics()
+        losses = {name: float(value) for name, value in agent.take_losses().items()}
         check_finite(losses, f"episode {state.episode + 1} (env step {steps()})")
         state.returns.append(stats.ret)
         state.episode += 1
