@@ -129,3 +129,22 @@ def test_tensorflow_is_quiet_and_single_threaded():
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["3.0", "1", "1"]
     assert done.stderr == ""
+
+
+def test_the_quick_starts_figures_are_what_the_default_run_gives(tmp_path):
+    """README's quick start names the default run's episodes and interactions; `train.py` with no
+    flag gives those (a figure left standing after the code changed went unnoticed once)."""
+    said = re.search(r"training stops early after (\d+) episodes and ([\d,]+) interactions", README.read_text())
+    assert said, "README's quick start no longer states the default run's episodes and interactions"
+    episodes, interactions = said[1], said[2].replace(",", "")
+    run = subprocess.run(
+        [sys.executable, "train.py", "--out", str(tmp_path / "run")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    summary = f"{episodes} episodes, {interactions} env steps, {interactions} interactions in all (early stop)"
+    assert summary in run.stdout, run.stdout
+    assert "return 500.00 ± 0.00  (min 500, max 500, solved at 475)" in run.stdout

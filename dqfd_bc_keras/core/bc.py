@@ -250,16 +250,9 @@ class BCModel(keras.Model):
             probs = tf.nn.softmax(self(obs, training=False))
             return probs, tf.fill(tf.shape(probs)[:1], tf.constant(self.sigma0_sq, probs.dtype))
         batch = tf.shape(obs)[0]
-        # Everything before the first dropout (the body, the first dense layer) is the same in every
-        # pass: computed once, the K passes share it and differ only from their masks on.
-        x, stack = self.features(obs), list(self.stack)
-        first = next(i for i, layer in enumerate(stack) if isinstance(layer, keras.layers.Dropout))
-        for layer in stack[:first]:
-            x = layer(x)
-        x = tf.tile(x, [self.mc_passes, 1])
-        for layer in stack[first:]:
-            x = layer(x, training=True)
-        probs = tf.reshape(tf.nn.softmax(x), [self.mc_passes, batch, self.n_actions])
+        # The body has no dropout: its features are computed once and the K passes share them.
+        logits = self.head_logits(tf.tile(self.features(obs), [self.mc_passes, 1]), training=True)
+        probs = tf.reshape(tf.nn.softmax(logits), [self.mc_passes, batch, self.n_actions])
         return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
 
     def fit_demos(
