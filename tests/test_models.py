@@ -16,7 +16,15 @@ from dqfd_bc_keras.evaluation import GreedyPolicy, evaluate
 MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
-@pytest.mark.parametrize("name", ["cartpole", "mountaincar", "acrobot", "lunarlander", "minatar-breakout"])
+SHIPPED = sorted(folder.name for folder in MODELS.iterdir() if (folder / "q_network.keras").is_file())
+
+
+def test_every_shipped_model_is_in_the_table_of_models_readme():
+    table = (MODELS / "README.md").read_text()
+    assert len(SHIPPED) >= 8 and all(f"| `{name}/` |" in table for name in SHIPPED)
+
+
+@pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_plays_as_its_eval_json_says(name):
     folder = MODELS / name
     config = Config.from_dict(json.loads((folder / "config.json").read_text()))
