@@ -177,12 +177,13 @@ def record_video(
 ) -> list[Path]:
     """Play `episodes` greedy episodes on the plain env (as `evaluate`) and save each as an MP4
     in `directory` with Gymnasium's `RecordVideo` (needs `moviepy`); returns the files."""
-    check_video(directory, task_slug(task))
+    prefix = task_slug(task)
+    check_video(directory, prefix)
     env = make_plain_env(task, timeout, max_steps, render_mode="rgb_array", env_kwargs=env_kwargs)
-    env = video_env(env, directory, task_slug(task))
+    env = video_env(env, directory, prefix)
     play(env, policy, range(seed, seed + episodes))
     env.close()  # RecordVideo writes the last episode's file
-    return sorted(Path(directory).glob(f"{task_slug(task)}-episode-*.mp4"))
+    return sorted(Path(directory).glob(f"{prefix}-episode-*.mp4"))
 
 
 def load_model(path: str | Path) -> keras.Model:

@@ -28,8 +28,7 @@ CONTROLS = {"return": "start", "p": "pause", "backspace": "discard", "escape": "
 """Keys that steer the recording (pygame names → what they do), never an action."""
 
 MINATAR_KEYS = {"n": "", "l": "left", "u": "up", "r": "right", "d": "down", "f": "space"}
-"""MinAtar's action letters (its full set, `minatar.Environment.action_map`) → keys."""
-MINATAR_LETTERS = "nlurdf"
+"""MinAtar's action letters, in the order of its full set (`minatar.Environment.action_map`) → keys."""
 HIGHWAY_KEYS = {"LANE_LEFT": "up", "IDLE": "", "LANE_RIGHT": "down", "FASTER": "right", "SLOWER": "left"}
 """highway-env's meta-actions → keys, as its own manual control (`EventHandler`) has them."""
 EXAMPLE = '--keys \'{"left": 0, "right": 1, "": 2}\''
@@ -131,7 +130,7 @@ def env_keys(env: gym.Env) -> tuple[dict[str, int], str, tuple[str, ...]] | None
         return {HIGHWAY_KEYS[name]: indexes[name] for name in names}, "highway-env's meta-actions", names
     action_set = getattr(base, "action_set", None)
     if type(base).__module__.startswith("minatar") and action_set is not None and len(action_set) == n:
-        letters = [MINATAR_LETTERS[int(a)] for a in action_set]
+        letters = [list(MINATAR_KEYS)[int(a)] for a in action_set]
         return {MINATAR_KEYS[letter]: i for i, letter in enumerate(letters)}, "MinAtar's action set", tuple(letters)
     return None
 

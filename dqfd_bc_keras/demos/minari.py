@@ -302,8 +302,8 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
     minari = _minari()
     from minari.data_collector import EpisodeBuffer
 
-    check_exportable(dataset.meta.task, dataset.meta.timeout, dataset.meta.env_kwargs, dataset_id)
     m = dataset.meta
+    check_exportable(m.task, m.timeout, m.env_kwargs, dataset_id)
     where = f"minari:{dataset_id}"
     env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
     env_spec = dataclasses.replace(env_spec, kwargs={**env_spec.kwargs, **m.env_kwargs})

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -113,10 +112,6 @@ class Window:
     def tick(self, fps: float) -> None:
         """Wait until 1/fps seconds have passed since the last tick."""
         self.clock.tick(fps)
-
-    def save(self, path: str | Path) -> None:
-        """The window's content as an image (a screenshot for the docs)."""
-        self.pg.image.save(self.screen, str(path))
 
     def close(self) -> None:
         self.pg.display.quit()
