@@ -1,6 +1,8 @@
-"""The statistics helpers against values computed by hand or taken from textbooks."""
+"""The statistics helpers against values computed by hand, taken from textbooks or from rliable."""
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,9 +20,11 @@ from dqfd_bc_keras.experiments.stats import (
     iqm,
     mann_whitney,
     pooled_sd,
+    score_distribution,
     sd_from_ci,
     seeds_for_bound,
     seeds_for_equivalence,
+    stratified_bootstrap_ci,
     tost_ci,
 )
 
@@ -253,3 +257,51 @@ def test_censored_summary_uses_medians_and_order_statistics():
     assert (s.n, s.median, s.censored, s.ci_low, s.ci_high) == (3, 5.0, 1, 3.0, np.inf)
     assert s.format() == "median 5.0 [3.0, ∞] (1 of 3 censored)"
     assert CensoredSummary.of([np.inf, np.inf]).format(0) == "median ∞ [∞, ∞] (2 of 2 censored)"
+
+
+RLIABLE = json.loads((Path(__file__).parent / "data" / "rliable_reference.json").read_text())
+"""rliable 1.2.0's IQM (with its 95% stratified-bootstrap CI, 50,000 resamples) and performance profile
+(with its 95% bands) of one (6 runs, 5 tasks) matrix, written by `python tests/rliable_reference.py`
+in an environment with rliable (not a dependency of ours)."""
+RLIABLE_SCORES, RLIABLE_TAUS = np.array(RLIABLE["scores"]), RLIABLE["taus"]
+
+
+def test_iqm_and_its_stratified_interval_agree_with_rliable():
+    point, (low, high) = RLIABLE["iqm"], RLIABLE["iqm_ci"]
+    assert iqm(RLIABLE_SCORES.reshape(-1)) == pytest.approx(point, abs=1e-12)  # the middle 15 of 30, by hand too
+    assert np.mean(np.sort(RLIABLE_SCORES.reshape(-1))[7:23]) == pytest.approx(point, abs=1e-12)
+    ours = stratified_bootstrap_ci(RLIABLE_SCORES, iqm, 0.95, 50_000, 0)
+    assert ours == pytest.approx((low, high), abs=0.01)  # two generators: bootstrap noise only
+
+
+def test_the_performance_profile_and_its_bands_agree_with_rliable():
+    profile, bands = RLIABLE["profile"], RLIABLE["profile_bands"]
+    assert score_distribution(RLIABLE_SCORES, RLIABLE_TAUS) == pytest.approx(profile, abs=1e-8)
+    ours = stratified_bootstrap_ci(
+        RLIABLE_SCORES, lambda x, axis=None: score_distribution(x, RLIABLE_TAUS, axis), 0.95, 50_000, 0
+    )
+    assert ours.shape == (2, len(RLIABLE_TAUS))
+    assert ours == pytest.approx(np.array(bands), abs=1 / 30 + 1e-9)  # a band's end moves by whole runs (1/30)
+
+
+def test_a_stratified_bootstrap_keeps_every_task_and_draws_only_its_own_runs():
+    # Task 0 is always 0 and task 1 always 1: any mix across tasks would move the mean off ½.
+    scores = np.array([[0.0, 1.0], [0.0, 1.0], [0.0, 1.0]])
+    assert stratified_bootstrap_ci(scores, np.mean, 0.95, 1_000, 0) == (0.5, 0.5)
+    # One run per task: nothing to resample, the interval is the point.
+    assert stratified_bootstrap_ci(np.array([[0.2, 0.9, 0.4]]), iqm) == pytest.approx((0.5, 0.5))
+    # A task whose runs vary widens the interval; the statistic without an axis argument gives the same.
+    varied = np.array([[0.0, 1.0], [2.0, 1.0]])
+    assert stratified_bootstrap_ci(varied, np.mean, 0.95, 2_000, 3) == (0.5, 1.5)
+    assert stratified_bootstrap_ci(varied, lambda x: float(np.mean(x)), 0.95, 2_000, 3) == (0.5, 1.5)
+
+
+def test_score_distribution_counts_scores_strictly_above_each_threshold():
+    scores = np.array([[0.0, 1.0], [2.0, 1.0]])
+    assert list(score_distribution(scores, [-1, 0, 1, 2])) == [1.0, 0.75, 0.25, 0.0]
+    assert score_distribution(np.stack([scores.reshape(-1), np.zeros(4)]), [0.5], axis=1).tolist() == [[0.75], [0.0]]
+
+
+def test_a_stratified_bootstrap_rejects_what_is_not_a_matrix():
+    with pytest.raises(ValueError, match="non-empty \\(runs, tasks\\) matrix, got shape \\(3,\\)"):
+        stratified_bootstrap_ci(np.ones(3))

@@ -26,6 +26,7 @@ from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.errors import OLDER, ConfigError
 from dqfd_bc_keras.files import atomic_path
+from dqfd_bc_keras.runs.writers import COMPLETE
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
 
 SWEEP_LOG = "sweeps.jsonl"
@@ -255,20 +256,28 @@ def _own(directory: Path, path: Path) -> bool:
     return path.relative_to(directory).parts[0] != REPLICATIONS
 
 
+def _finishing(run_dir: Path) -> bool:
+    """A run started here that has not written COMPLETE yet (its eval.json may be there, its last
+    files not): a run unpacked from an archive has no checkpoints/, one finished here has COMPLETE."""
+    return (run_dir / "checkpoints").is_dir() and not (run_dir / COMPLETE).is_file()
+
+
 def _run_dirs(directory: Path) -> list[Path]:
-    """Every complete run (a directory with eval.json) below `directory`, in path order, its
-    REPLICATIONS left out."""
-    return sorted(final.parent for final in directory.rglob("eval.json") if _own(directory, final))
+    """Every complete run (a directory with eval.json, not still finishing) below `directory`, in
+    path order, its REPLICATIONS left out. A sweep in progress can so be read or exported at any time."""
+    return sorted(
+        final.parent
+        for final in directory.rglob("eval.json")
+        if _own(directory, final) and not _finishing(final.parent)
+    )
 
 
 def _unfinished(directory: Path) -> list[Path]:
-    """Run directories below `directory` that have started (config.json, checkpoints/) but hold no eval.json."""
+    """Run directories below `directory` that have started (config.json, checkpoints/) but not finished."""
     return sorted(
         config.parent
         for config in directory.rglob("config.json")
-        if _own(directory, config)
-        and (config.parent / "checkpoints").is_dir()
-        and not (config.parent / "eval.json").is_file()
+        if _own(directory, config) and _finishing(config.parent)
     )
 
 

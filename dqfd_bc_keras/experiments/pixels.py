@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -71,46 +72,80 @@ def arms(quick: bool = False) -> list[Arm]:
     return [arm(TASK, "bootstrap", loss, SEEDS, total_steps=OURS_STEPS, **PROTOCOL) for loss in LOSSES]
 
 
+@dataclass(frozen=True)
+class Sb3Job:
+    """One seed of SB3's DQN on a MinAtar task: where its file goes, and the settings it must record."""
+
+    task: str
+    seed: int
+    budget: int
+    every: int
+    episodes: int
+    path: Path
+
+    @property
+    def args(self) -> tuple:
+        """`sb3_pixels.sb3_minatar_run`'s arguments."""
+        task = get_task(self.task)
+        return (task.env_id, self.seed, self.budget, self.every, self.episodes, task.max_steps, self.path)
+
+    def current(self) -> bool:
+        """Its file exists and records these settings (a changed setting runs it again)."""
+        from dqfd_bc_keras.experiments import sb3_pixels
+
+        return sb3_pixels.current(self.path, sb3_pixels.settings(*self.args[:6]))
+
+
+def run_sb3(
+    jobs: Sequence[Sb3Job],
+    workers: int,
+    progress: Callable[[str], None] = print,
+    finished: Callable[[Sb3Job], None] | None = None,
+) -> None:
+    """The jobs whose files are missing or stale, on a process pool; `finished` is called as each ends."""
+    from dqfd_bc_keras.experiments import sb3_pixels
+
+    todo = [job for job in jobs if not job.current()]
+    progress(f"SB3 DQN: {len(jobs)} runs, {len(jobs) - len(todo)} current, {len(todo)} to run")
+    if not todo:
+        return
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(sb3_pixels.sb3_minatar_run, *job.args): job for job in todo}
+        for done, future in enumerate(as_completed(futures), start=1):
+            record = future.result()
+            progress(
+                f"[{done}/{len(todo)}] sb3 {futures[future].task} seed{record['seed']}: final mean return "
+                f"{record['evaluations'][-1]['mean_return']:.2f} ({record['seconds']:.0f} s)"
+            )
+            if finished is not None:
+                finished(futures[future])
+
+
+def sb3_curves(jobs: Sequence[Sb3Job]) -> Curves | None:
+    """SB3's arm from the jobs whose files are current: each seed's evaluations and final return."""
+    records = [json.loads(job.path.read_text()) for job in jobs if job.current()]
+    if not records:
+        return None
+    evals = [[(e["interactions"], e["mean_return"]) for e in r["evaluations"]] for r in records]
+    return SB3_METHOD, evals, [e[-1][1] for e in evals]
+
+
 def sb3(
     seeds: int, workers: int, out: Path, quick: bool, no_run: bool, progress: Callable[[str], None] = print
 ) -> Curves | None:
     """SB3's seeds whose files under `out/sb3-dqn/` are missing or stale, on a process pool (none
     with `no_run`), then the arm of every current file."""
-    from dqfd_bc_keras.experiments import sb3_pixels
-
     budget = QUICK_STEPS["sb3"] if quick else SB3_STEPS
     every = QUICK_STEPS["every"] if quick else PROTOCOL["eval_every"]
     episodes = 2 if quick else PROTOCOL["eval_episodes"]
-    limit = get_task(TASK).max_steps
-    jobs = {
-        seed: (
-            ENV_ID,
-            seed,
-            budget,
-            every,
-            episodes,
-            limit,
-            out / "sb3-dqn" / f"seed{seed}{'-quick' if quick else ''}.json",
-        )
+    suffix = "-quick" if quick else ""
+    jobs = [
+        Sb3Job(TASK, seed, budget, every, episodes, out / "sb3-dqn" / f"seed{seed}{suffix}.json")
         for seed in range(seeds)
-    }
-    wanted = {seed: sb3_pixels.settings(*job[:6]) for seed, job in jobs.items()}
-    todo = [] if no_run else [job for seed, job in jobs.items() if not sb3_pixels.current(job[6], wanted[seed])]
-    progress(f"SB3 DQN on {ENV_ID}: {len(jobs)} runs, {len(jobs) - len(todo)} current, {len(todo)} to run")
-    if todo:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(sb3_pixels.sb3_minatar_run, *job) for job in todo]
-            for done, future in enumerate(as_completed(futures), start=1):
-                record = future.result()
-                progress(
-                    f"[{done}/{len(todo)}] sb3 seed{record['seed']}: final mean return "
-                    f"{record['evaluations'][-1]['mean_return']:.2f} ({record['seconds']:.0f} s)"
-                )
-    records = [json.loads(job[6].read_text()) for seed, job in jobs.items() if sb3_pixels.current(job[6], wanted[seed])]
-    if not records:
-        return None
-    evals = [[(e["interactions"], e["mean_return"]) for e in r["evaluations"]] for r in records]
-    return SB3_METHOD, evals, [e[-1][1] for e in evals]
+    ]
+    if not no_run:
+        run_sb3(jobs, workers, progress)
+    return sb3_curves(jobs)
 
 
 def measure(

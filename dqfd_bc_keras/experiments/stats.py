@@ -93,6 +93,73 @@ def bootstrap_diff_ci(
     return _percentiles(first - second, level)
 
 
+def stratified_bootstrap_ci(
+    scores: np.ndarray,
+    statistic: Statistic = iqm,
+    level: float = 0.95,
+    resamples: int = 10_000,
+    seed: int = 0,
+) -> tuple[float, float] | np.ndarray:
+    """Percentile-bootstrap interval of `statistic` over a (runs, tasks) matrix of scores, resampling
+    the runs of each task on their own (rliable's `StratifiedBootstrap`, tasks fixed).
+
+    Across games the seeds of a game are exchangeable but the games are not: a resample keeps
+    every game and draws its runs with replacement. `statistic(matrix, axis=None)`-style
+    statistics take the flattened (runs × tasks) scores of one resample (with `axis=1`, all at
+    once); one returning a vector per resample (a performance profile) gives a (2, len) array of
+    lows and highs.
+    """
+    matrix = np.asarray(scores, dtype=float)
+    if matrix.ndim != 2 or matrix.size == 0:
+        raise ValueError(f"a stratified bootstrap takes a non-empty (runs, tasks) matrix, got shape {matrix.shape}")
+    rng = np.random.default_rng(seed)
+    runs, tasks = matrix.shape
+    rows = rng.integers(0, runs, size=(resamples, runs, tasks))
+    flat = matrix[rows, np.arange(tasks)].reshape(resamples, runs * tasks)
+    try:
+        values = np.asarray(statistic(flat, axis=1), dtype=float)  # numpy-style statistics: vectorised
+    except TypeError:
+        values = np.array([np.asarray(statistic(sample), dtype=float) for sample in flat])
+    if values.ndim == 1:
+        return _percentiles(values, level)
+    return np.array([_percentiles(column, level) for column in values.T]).T
+
+
+def stratified_bootstrap_diff_ci(
+    a: np.ndarray,
+    b: np.ndarray,
+    statistic: Statistic = iqm,
+    level: float = 0.95,
+    resamples: int = 10_000,
+    seed: int = 0,
+) -> tuple[float, float]:
+    """Percentile-bootstrap interval of `statistic(a) − statistic(b)` for two (runs, tasks) matrices of
+    independent runs on the same tasks: each matrix's runs resampled within each task on its own."""
+    first, second = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if first.ndim != 2 or second.ndim != 2 or first.shape[1] != second.shape[1] or 0 in first.shape + second.shape:
+        raise ValueError(
+            f"two non-empty (runs, tasks) matrices on the same tasks, got shapes {first.shape}, {second.shape}"
+        )
+    rng = np.random.default_rng(seed)
+
+    def resampled(matrix: np.ndarray) -> np.ndarray:
+        runs, tasks = matrix.shape
+        flat = matrix[rng.integers(0, runs, size=(resamples, runs, tasks)), np.arange(tasks)].reshape(resamples, -1)
+        return np.asarray(statistic(flat, axis=1), dtype=float)
+
+    return _percentiles(resampled(first) - resampled(second), level)
+
+
+def score_distribution(scores: np.ndarray, taus: Sequence[float], axis: int | None = None) -> np.ndarray:
+    """A performance profile (rliable's `score_distributions`): for each τ, the share of all runs of
+    all tasks whose score is above τ (strictly). With `axis=1`, one profile per row."""
+    values = np.asarray(scores, dtype=float)
+    thresholds = np.asarray(taus, dtype=float)
+    if axis is None:
+        return (values.reshape(-1, 1) > thresholds).mean(axis=0)
+    return (np.moveaxis(values, axis, -1)[..., None] > thresholds).mean(axis=-2)
+
+
 def mann_whitney(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
     """Two-sided Mann–Whitney U test: (U of `a`, p).
 

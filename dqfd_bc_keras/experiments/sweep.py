@@ -362,9 +362,12 @@ def run_jobs(
     address: str | None = None,
     progress: Callable[[str], None] = print,
     runs_per_worker: int = RUNS_PER_WORKER,
+    finished: Callable[[Outcome], None] | None = None,
 ) -> list[Outcome]:
     """Run the incomplete ones of `jobs`, logged in `out`'s sweep log as `name` with `seeds`; a
-    worker process takes up to `runs_per_worker` runs in turn (1: a fresh process per run)."""
+    worker process takes up to `runs_per_worker` runs in turn (1: a fresh process per run).
+    `finished` is called with each run's outcome as it comes in (a study exports its archive there,
+    so that a lost machine loses only the runs in progress)."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
     todo = [job for job in jobs if not job.complete]
@@ -394,6 +397,8 @@ def run_jobs(
                 f"[{len(outcomes)}/{len(todo)}] {job.arm.name} seed{job.seed}: {status} "
                 f"({outcome.seconds:.0f} s; {time.perf_counter() - started:.0f} s elapsed)"
             )
+            if finished is not None:
+                finished(outcome)
         interrupted = False
     except KeyboardInterrupt:
         progress(

@@ -1,0 +1,500 @@
+"""The five-game MinAtar study: DQfD (`bayes`, `ce`) and DQN (`none`) against SB3's DQN on every
+MinAtar game (its rules are docs/PREREGISTRATION.md §13, committed before its runs).
+
+Ours: each game's preset as `train.py --task minatar-GAME` runs it (10 episodes of the imperfect
+teacher, MinAtar's network and DQN settings, one update per step), BUDGET interactions. SB3: its DQN
+with the same network and rl-zoo3's Atari schedule (`sb3_pixels.py`), one `learn()` of BUDGET steps.
+Every arm is evaluated on one grid (10 greedy episodes of the plain env at 0 and every 5,000
+interactions, the seed's fixed evaluation seeds); a run's score is its evaluation at BUDGET,
+normalised per game so that the uniform random policy is 0 and the imperfect teacher 1 (ANCHORS).
+The runs go seed by seed (every arm of every game for seed 0, then seed 1, …), so an interrupted
+study has whole seeds; with `--archive`, every finished run is exported there as it finishes and a
+new machine starts from that archive, so nothing is computed twice.
+
+    python -m dqfd_bc_keras.experiments.minatar_study --out results/minatar --archive docs/data/minatar.tar.xz
+    python -m dqfd_bc_keras.experiments.minatar_study --out docs/data/minatar.tar.xz --no-run \\
+        --report docs/MINATAR.md --figures docs/figures
+    python -m dqfd_bc_keras.experiments.minatar_study --out /tmp/minatar --quick   # a minute: tiny budgets
+
+Writes only under --out, into --archive, and, with --report and --figures, that file and the
+figures `minatar_*.png` in that directory.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.core.config import QUICK
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, export_archive, load_runs, open_suite
+from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals, teacher_verdict
+from dqfd_bc_keras.experiments.figures import _colors, _figure
+from dqfd_bc_keras.experiments.metrics import first_reaching
+from dqfd_bc_keras.experiments.pixels import Sb3Job, run_sb3
+from dqfd_bc_keras.experiments.stats import (
+    beyond,
+    bootstrap_ci,
+    equivalent,
+    holm,
+    iqm,
+    mann_whitney,
+    score_distribution,
+    stratified_bootstrap_ci,
+    stratified_bootstrap_diff_ci,
+)
+from dqfd_bc_keras.experiments.suites import Arm, arm
+from dqfd_bc_keras.experiments.sweep import run_jobs, sweep_jobs
+from dqfd_bc_keras.files import write_text
+
+GAMES = ("minatar-asterix", "minatar-breakout", "minatar-freeway", "minatar-seaquest", "minatar-space-invaders")
+LOSSES = ("bayes", "ce", "none")
+METHODS = (*LOSSES, SB3_METHOD)
+DQFD = ("bayes", "ce")
+BUDGET = 100_000
+PROTOCOL = {"eval_every": 5_000, "eval_episodes": 10}
+SEEDS = 10
+"""Per arm and game, by power (PREREGISTRATION §13)."""
+ANCHORS = {
+    "minatar-asterix": (0.60, 28.58),
+    "minatar-breakout": (0.37, 8.56),
+    "minatar-freeway": (0.28, 15.72),
+    "minatar-seaquest": (0.03, 11.11),
+    "minatar-space-invaders": (4.56, 22.56),
+}
+"""Game → (uniform random policy, imperfect teacher): mean plain returns over 100 episodes, seeds 0–99
+(`demos.recording.expert_returns(game, "imperfect", 100, 0, epsilon)` with ε = 1 and 0; pinned by
+tests/test_minatar_study.py). A normalised score is (return − random) ÷ (teacher − random)."""
+MARGIN = 0.15
+"""bayes − ce in IQM of normalised scores: a difference within ±MARGIN is no difference (§13)."""
+TAUS = np.linspace(0.0, 2.0, 81)
+"""The performance profile's thresholds (normalised score)."""
+RESAMPLES, RNG_SEED = 10_000, 0
+QUICK_STEPS = {"ours": 300, "sb3": 500, "every": 150}
+"""`--quick`: interactions of each run of ours and of SB3's, and the evaluation grid: seconds, for the tests."""
+
+Seeds = dict[int, list[tuple[float, float]]]
+"""Seed → its (interactions, mean greedy return) evaluations."""
+
+
+def arms(quick: bool = False) -> list[Arm]:
+    """Our arms, game by game (with `quick`: on tiny budgets)."""
+    if quick:
+        budget = {
+            "total_steps": QUICK_STEPS["ours"],
+            "eval_every": QUICK_STEPS["every"],
+            "checkpoint_every": QUICK_STEPS["every"],
+        }
+        settings = tuple({**QUICK, **budget}.items())
+        return [
+            Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in ("bayes", "none")
+        ]
+    return [arm(game, "bootstrap", loss, SEEDS, total_steps=BUDGET, **PROTOCOL) for game in GAMES for loss in LOSSES]
+
+
+def sb3_jobs(seeds: int, out: Path, quick: bool = False) -> list[Sb3Job]:
+    """SB3's runs, seed by seed, one file per game and seed under out/sb3-dqn/GAME/."""
+    budget, every = (QUICK_STEPS["sb3"], QUICK_STEPS["every"]) if quick else (BUDGET, PROTOCOL["eval_every"])
+    episodes = 2 if quick else PROTOCOL["eval_episodes"]
+    suffix = "-quick" if quick else ""
+    return [
+        Sb3Job(game, seed, budget, every, episodes, out / "sb3-dqn" / game / f"seed{seed}{suffix}.json")
+        for seed in range(seeds)
+        for game in GAMES
+    ]
+
+
+def unpack_missing(archive: Path, out: Path) -> None:
+    """The archive's files that `out` lacks, so a study resumed on another machine runs only what the
+    archive does not hold (an archived run has no checkpoints: the sweep counts it complete)."""
+    if not archive.is_file():
+        return
+    with open_suite(archive) as unpacked:
+        for path in sorted(p for p in unpacked.rglob("*") if p.is_file()):
+            target = out / path.relative_to(unpacked)
+            if not target.exists():
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(path.read_bytes())
+
+
+def measure(
+    seeds: int,
+    workers: int,
+    out: Path,
+    archive: Path | None = None,
+    quick: bool = False,
+    progress: Callable[[str], None] = print,
+) -> None:
+    """Run what is missing, seed by seed: every arm of ours on every game, then SB3's; with `archive`,
+    start from what it holds and export the study there after each finished run."""
+    seeds = 1 if quick else seeds
+    if archive is not None:
+        unpack_missing(archive, out)
+
+    def export(_: object) -> None:
+        if archive is not None:
+            export_archive(out, archive)
+
+    ours, theirs = arms(quick), sb3_jobs(seeds, out, quick)
+    for seed in range(seeds):
+        progress(f"minatar study: seed {seed} of 0–{seeds - 1}")
+        jobs = [job for job in sweep_jobs(ours, seed + 1, out) if job.seed == seed]
+        run_jobs(jobs, out, "minatar", seed + 1, workers, progress=progress, finished=export)
+        run_sb3([job for job in theirs if job.seed == seed], workers, progress, finished=export)
+
+
+@dataclass(frozen=True)
+class Study:
+    """Every finished run's evaluations, by game and method; what the report is computed from."""
+
+    runs: dict[tuple[str, str], Seeds]
+    budget: int
+    seeds: int
+
+    def final(self, game: str, method: str) -> dict[int, float]:
+        """Seed → the mean greedy return at the budget (the run's last grid point)."""
+        return {seed: evals[-1][1] for seed, evals in self.runs.get((game, method), {}).items()}
+
+    def complete_seeds(self, method: str) -> list[int]:
+        """The seeds that `method` has finished on every game (the rows of its score matrix)."""
+        have = [set(self.runs.get((game, method), {})) for game in GAMES]
+        return sorted(set.intersection(*have))
+
+    def scores(self, method: str) -> np.ndarray:
+        """(complete seeds, games) normalised scores at the budget."""
+        seeds = self.complete_seeds(method)
+        return np.array([[normalised(game, self.final(game, method)[s]) for game in GAMES] for s in seeds]).reshape(
+            len(seeds), len(GAMES)
+        )
+
+    @property
+    def complete(self) -> bool:
+        return all(len(self.runs.get((g, m), {})) >= self.seeds for g in GAMES for m in METHODS)
+
+
+def normalised(game: str, value: float | np.ndarray) -> float | np.ndarray:
+    random, teacher = ANCHORS[game]
+    return (value - random) / (teacher - random)
+
+
+def collect(out: Path, seeds: int, quick: bool = False) -> Study:
+    """The runs under `out` that reached the budget: ours (complete runs of the arms) and SB3's (current files)."""
+    budget = QUICK_STEPS["ours"] if quick else BUDGET
+    runs: dict[tuple[str, str], Seeds] = {}
+    for a in arms(quick):
+        for seed in range(seeds):
+            directory = out / a.name / f"seed{seed}"
+            if (directory / "eval.json").is_file():
+                (finished,) = load_runs(directory)
+                evals = interaction_evals(finished)
+                if evals[-1][0] >= budget:
+                    runs.setdefault((a.task, a.expert_loss), {})[seed] = evals
+    for job in sb3_jobs(seeds, out, quick):
+        if job.current():
+            evaluations = json.loads(job.path.read_text())["evaluations"]
+            runs.setdefault((job.task, SB3_METHOD), {})[job.seed] = [
+                (e["interactions"], e["mean_return"]) for e in evaluations
+            ]
+    return Study(runs, budget, seeds)
+
+
+def steps_to_teacher(study: Study, game: str, method: str) -> dict[int, float]:
+    """Seed → the first grid point whose mean greedy return reaches the teacher's (inf: never)."""
+    teacher = ANCHORS[game][1]
+    return {
+        seed: np.inf if (first := first_reaching(evals, teacher)) is None else first
+        for seed, evals in study.runs.get((game, method), {}).items()
+    }
+
+
+def _number(value: float, digits: int = 2) -> str:
+    return "∞" if np.isinf(value) else f"{value:,.{digits}f}"
+
+
+def _interval(low: float, high: float, digits: int = 2) -> str:
+    return f"[{_number(low, digits)}, {_number(high, digits)}]"
+
+
+def _label(method: str) -> str:
+    return method if method == SB3_METHOD else f"{method}{' (DQN, no demonstrations)' if method == 'none' else ''}"
+
+
+def teacher_rows(study: Study, judged: bool) -> list[str]:
+    """Q1, per game: each arm's median return at the budget with its 95% CI, against the teacher (§7's rule)."""
+    lines = [
+        "| game | random | teacher | arm | runs | median return at the budget [95% CI] | normalised | "
+        "against the teacher |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for game in GAMES:
+        random, teacher = ANCHORS[game]
+        for method in METHODS:
+            final = list(study.final(game, method).values())
+            if not final:
+                lines.append(f"| {game} | {random:g} | {teacher:g} | {_label(method)} | 0 | not run | | |")
+                continue
+            median, low, high, verdict = teacher_verdict(final, teacher)
+            verdict = "does not beat it" if verdict == "does not" else verdict
+            if method not in DQFD:
+                verdict = f"({verdict}; described, not judged)"
+            elif not judged:
+                verdict = f"interim: {verdict}"
+            lines.append(
+                f"| {game} | {random:g} | {teacher:g} | {_label(method)} | {len(final)} | {median:.2f} "
+                f"{_interval(low, high)} | {normalised(game, median):.2f} | {verdict} |"
+            )
+    return lines
+
+
+def aggregate_rows(study: Study, judged: bool) -> list[str]:
+    """Across games: each arm's IQM of normalised scores with its 95% stratified bootstrap CI."""
+    lines = [
+        "| arm | seeds on all five games | IQM of normalised scores [95% CI] | mean | runs above the teacher | "
+        "across games |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for method in METHODS:
+        scores = study.scores(method)
+        if scores.size == 0:
+            lines.append(f"| {_label(method)} | 0 | not run | | | |")
+            continue
+        low, high = stratified_bootstrap_ci(scores, iqm, 0.95, RESAMPLES, RNG_SEED)
+        above = float(score_distribution(scores, [1.0])[0])
+        verdict = "beats its teachers" if low > 1 else "below its teachers" if high < 1 else "inconclusive"
+        verdict = (
+            verdict if method in DQFD and judged else f"({verdict}; {'interim' if method in DQFD else 'described'})"
+        )
+        lines.append(
+            f"| {_label(method)} | {scores.shape[0]} | {iqm(scores.reshape(-1)):.2f} {_interval(low, high)} | "
+            f"{scores.mean():.2f} | {above:.0%} | {verdict} |"
+        )
+    return lines
+
+
+def sooner_rows(study: Study, judged: bool) -> list[str]:
+    """Q2, per game: interactions to the teacher's return; each DQfD arm against DQN and SB3 (Mann–Whitney,
+    never reached ranked last, Holm over the 20 comparisons)."""
+    tests = {}
+    for game in GAMES:
+        for method in DQFD:
+            ours = list(steps_to_teacher(study, game, method).values())
+            for other in ("none", SB3_METHOD):
+                theirs = list(steps_to_teacher(study, game, other).values())
+                if ours and theirs:
+                    tests[game, method, other] = mann_whitney(ours, theirs)[1]
+    adjusted = dict(zip(tests, holm(list(tests.values()), 2 * 2 * len(GAMES)), strict=True))
+    lines = [
+        "| game | arm | reached the teacher | median interactions [95% CI] | against DQN (none): Holm p | "
+        "against SB3: Holm p |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for game in GAMES:
+        for method in METHODS:
+            steps = np.array(list(steps_to_teacher(study, game, method).values()), dtype=float)
+            if steps.size == 0:
+                lines.append(f"| {game} | {_label(method)} | not run | | | |")
+                continue
+            low, high = bootstrap_ci(steps, np.median, 0.95, RESAMPLES, RNG_SEED)
+            cells = []
+            for other in ("none", SB3_METHOD):
+                p = adjusted.get((game, method, other))
+                if p is None:
+                    cells.append("")
+                    continue
+                mine = np.median(steps)
+                theirs = np.median(list(steps_to_teacher(study, game, other).values()))
+                word = ("sooner" if mine < theirs else "later") if p < 0.05 else "no measurable difference"
+                cells.append(f"{p:.3f}: {word if judged else 'interim: ' + word}")
+            lines.append(
+                f"| {game} | {_label(method)} | {int(np.isfinite(steps).sum())}/{steps.size} | "
+                f"{_number(np.median(steps), 0)} {_interval(low, high, 0)} | {' | '.join(cells)} |"
+            )
+    return lines
+
+
+def bayes_vs_ce(study: Study, judged: bool) -> list[str]:
+    """Q3: IQM(bayes) − IQM(ce) of normalised scores with its 95% and 90% stratified CIs, against ±MARGIN."""
+    a, b = study.scores("bayes"), study.scores("ce")
+    if a.size == 0 or b.size == 0:
+        return ["Not run."]
+    wide = stratified_bootstrap_diff_ci(a, b, iqm, 0.95, RESAMPLES, RNG_SEED)
+    narrow = stratified_bootstrap_diff_ci(a, b, iqm, 0.90, RESAMPLES, RNG_SEED)
+    if equivalent(narrow, MARGIN):
+        verdict = f"equivalent (the 90% CI lies within ±{MARGIN:g})"
+    elif wide[0] > 0 or wide[1] < 0:
+        better = "bayes" if wide[0] > 0 else "ce"
+        verdict = f"{better} is better" + (" markedly" if beyond(narrow, MARGIN) else f", by less than ±{MARGIN:g}")
+    else:
+        verdict = "inconclusive"
+    difference = iqm(a.reshape(-1)) - iqm(b.reshape(-1))
+    lines = [
+        f"IQM(bayes) − IQM(ce) = {difference:+.3f}, 95% CI {_interval(*wide, 3)}, 90% CI {_interval(*narrow, 3)} "
+        f"({a.shape[0]} and {b.shape[0]} seeds on all five games): "
+        f"**{verdict if judged else 'interim, not judged: ' + verdict}**.",
+        "",
+        "| game | bayes median | ce median | Mann–Whitney p (Holm over 5 games) |",
+        "| --- | --- | --- | --- |",
+    ]
+    pairs = [(list(study.final(g, "bayes").values()), list(study.final(g, "ce").values())) for g in GAMES]
+    ps = holm([mann_whitney(x, y)[1] if x and y else 1.0 for x, y in pairs], len(GAMES))
+    for game, (x, y), p in zip(GAMES, pairs, ps, strict=True):
+        if x and y:
+            lines.append(f"| {game} | {np.median(x):.2f} | {np.median(y):.2f} | {p:.3f} |")
+    return lines
+
+
+def grid_scores(study: Study, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """The evaluation grid's interactions, and a (points, complete seeds, games) array of normalised scores."""
+    seeds = study.complete_seeds(method)
+    points = np.arange(0, study.budget + 1, PROTOCOL["eval_every"] if study.budget == BUDGET else QUICK_STEPS["every"])
+    cube = np.full((points.size, len(seeds), len(GAMES)), np.nan)
+    for g, game in enumerate(GAMES):
+        for s, seed in enumerate(seeds):
+            evals = dict(study.runs[game, method][seed])
+            for p, point in enumerate(points):
+                if point in evals:
+                    cube[p, s, g] = normalised(game, evals[point])
+    return points, cube
+
+
+def figures(study: Study, directory: Path) -> list[str]:
+    """The performance profile and the IQM over interactions (rliable's two pictures), and each game's
+    mean curves; returns the markdown that shows them (paths relative to the report's folder)."""
+    profile, curve, games = (directory / f"minatar_{name}.png" for name in ("profile", "iqm", "games"))
+    colors = dict(zip(METHODS, _colors(), strict=False))
+    with _figure(profile, figsize=(6, 4)) as (_, ax):
+        for method in METHODS:
+            scores = study.scores(method)
+            if scores.size:
+                band = stratified_bootstrap_ci(
+                    scores, lambda x, axis=None: score_distribution(x, TAUS, axis), 0.95, RESAMPLES, RNG_SEED
+                )
+                ax.plot(TAUS, score_distribution(scores, TAUS), color=colors[method], label=f"{_label(method)}")
+                ax.fill_between(TAUS, band[0], band[1], color=colors[method], alpha=0.2, linewidth=0)
+        ax.axvline(1.0, color="grey", linestyle=":", linewidth=1)
+        ax.set(xlabel="normalised score τ (random 0, teacher 1)", ylabel="share of runs with score > τ")
+        ax.legend(fontsize=8)
+    with _figure(curve, figsize=(6, 4)) as (_, ax):
+        for method in METHODS:
+            points, cube = grid_scores(study, method)
+            if cube.shape[1]:
+                mean = [iqm(c.reshape(-1)) for c in cube]
+                bands = np.array([stratified_bootstrap_ci(c, iqm, 0.95, 2_000, RNG_SEED) for c in cube])
+                ax.plot(points, mean, color=colors[method], label=_label(method))
+                ax.fill_between(points, bands[:, 0], bands[:, 1], color=colors[method], alpha=0.2, linewidth=0)
+        ax.axhline(1.0, color="grey", linestyle=":", linewidth=1)
+        ax.set(xlabel="interactions", ylabel="IQM of normalised scores")
+        ax.legend(fontsize=8)
+    with _figure(games, nrows=1, ncols=len(GAMES), figsize=(3 * len(GAMES), 3)) as (_, axes):
+        for ax, game in zip(axes, GAMES, strict=True):
+            for method in METHODS:
+                seeds = study.runs.get((game, method), {})
+                if seeds:
+                    xs = [x for x, _ in next(iter(seeds.values()))]
+                    ys = np.mean([[y for _, y in evals][: len(xs)] for evals in seeds.values()], axis=0)
+                    ax.plot(xs, ys, color=colors[method], label=_label(method))
+            ax.axhline(ANCHORS[game][1], color="grey", linestyle=":", linewidth=1)
+            ax.set(title=game.removeprefix("minatar-"), xlabel="interactions")
+        axes[0].set_ylabel("mean greedy return over seeds")
+        axes[0].legend(fontsize=7)
+    return [
+        f"![{name}](figures/{path.name})"
+        for name, path in (("performance profile", profile), ("IQM", curve), ("games", games))
+    ]
+
+
+def report(study: Study, figure_dir: Path | None = None) -> str:
+    """The study as markdown: status, protocol, the three questions, the figures."""
+    judged = study.complete
+    counts = {m: min(len(study.runs.get((g, m), {})) for g in GAMES) for m in METHODS}
+    status = (
+        f"**Complete: {study.seeds} seeds of every arm on every game; the verdicts below are the pre-registered ones.**"
+        if judged
+        else "**Interim: the study is not complete (seeds finished on all five games: "
+        + ", ".join(f"{_label(m)} {counts[m]}" for m in METHODS)
+        + f", of {study.seeds}). Numbers are described; no pre-registered verdict is given until every arm has "
+        "every seed on every game.**"
+    )
+    anchors = ", ".join(f"{g.removeprefix('minatar-')} {r:g} / {t:g}" for g, (r, t) in ANCHORS.items())
+    return "\n".join(
+        [
+            "# Five MinAtar games: DQfD against DQN and SB3's DQN",
+            "",
+            "Generated by `python -m dqfd_bc_keras.experiments.minatar_study --out docs/data/minatar.tar.xz --no-run "
+            "--report docs/MINATAR.md --figures docs/figures` from the per-run files in docs/data/minatar.tar.xz "
+            "(rules: docs/PREREGISTRATION.md §13).",
+            "",
+            status,
+            "",
+            f"Protocol: each game's preset (`train.py --task minatar-GAME`: 10 episodes of the imperfect teacher, "
+            f"MinAtar's network, one update per step), {study.budget:,} interactions per run, arms `bayes`, `ce`, "
+            f"`none` (DQN without demonstrations) and SB3's DQN with the same network (rl-zoo3's Atari schedule, one "
+            f"`learn()` of {study.budget:,} steps). Score: the mean of 10 greedy episodes at the budget, normalised "
+            f"per game (random 0, teacher 1; random / teacher: {anchors}). Across games: the interquartile mean (IQM) "
+            "with 95% stratified-bootstrap intervals (each game's seeds resampled on their own) and the performance "
+            "profile, as rliable reports them (our `stats` module, tested against rliable's numbers).",
+            "",
+            "## Does DQfD beat its teacher?",
+            "",
+            *aggregate_rows(study, judged),
+            "",
+            *teacher_rows(study, judged),
+            "",
+            "## Does it reach the teacher's score sooner than DQN and SB3?",
+            "",
+            *sooner_rows(study, judged),
+            "",
+            "## Do bayes and ce differ?",
+            "",
+            *bayes_vs_ce(study, judged),
+            "",
+            *(["## Figures", "", *figures(study, figure_dir), ""] if figure_dir is not None else []),
+        ]
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(
+        prog="python -m dqfd_bc_keras.experiments.minatar_study", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument(
+        "--out", type=Path, required=True, help="directory of the study's runs (or its archive, with --no-run)"
+    )
+    parser.add_argument(
+        "--archive", type=Path, help=f"start from this {ARCHIVE_SUFFIX} archive and export to it as runs finish"
+    )
+    parser.add_argument(
+        "--seeds", type=positive_int, default=SEEDS, help="seeds per arm and game (default %(default)s)"
+    )
+    parser.add_argument("--workers", type=positive_int, default=2, help="parallel runs (default %(default)s)")
+    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs")
+    parser.add_argument("--no-run", action="store_true", help="report the runs under --out, run nothing")
+    parser.add_argument("--report", type=Path, help="write the markdown report to this file")
+    parser.add_argument("--figures", type=Path, help="write the report's figures (minatar_*.png) into this directory")
+    args = parser.parse_args(argv)
+    seeds = 1 if args.quick else args.seeds
+    if str(args.out).endswith(ARCHIVE_SUFFIX):
+        if not args.no_run:
+            raise ConfigError(f"--out {args.out}: an archive is read, never run into: add --no-run")
+        with open_suite(args.out) as directory:
+            study = collect(directory, seeds, args.quick)
+    else:
+        if args.archive is not None and not str(args.archive).endswith(ARCHIVE_SUFFIX):
+            raise ConfigError(f"--archive {args.archive}: expected a {ARCHIVE_SUFFIX} file")
+        if not args.no_run:
+            measure(seeds, args.workers, args.out, args.archive, args.quick)
+        study = collect(args.out, seeds, args.quick)
+    text = report(study, args.figures)
+    print(text)
+    if args.report is not None:
+        write_text(args.report, text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(run(main))
