@@ -91,9 +91,7 @@ def arms(quick: bool = False) -> list[Arm]:
             "checkpoint_every": QUICK_STEPS["every"],
         }
         settings = tuple({**QUICK, **budget}.items())
-        return [
-            Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in ("bayes", "none")
-        ]
+        return [Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in LOSSES]
     return [arm(game, "bootstrap", loss, SEEDS, total_steps=BUDGET, **PROTOCOL) for game in GAMES for loss in LOSSES]
 
 
@@ -324,11 +322,15 @@ def bayes_vs_ce(study: Study, judged: bool) -> list[str]:
         return ["Not run."]
     wide = stratified_bootstrap_diff_ci(a, b, iqm, 0.95, RESAMPLES, RNG_SEED)
     narrow = stratified_bootstrap_diff_ci(a, b, iqm, 0.90, RESAMPLES, RNG_SEED)
+    significant = wide[0] > 0 or wide[1] < 0
+    higher = "bayes" if wide[0] > 0 else "ce"
     if equivalent(narrow, MARGIN):
         verdict = f"equivalent (the 90% CI lies within ±{MARGIN:g})"
-    elif wide[0] > 0 or wide[1] < 0:
-        better = "bayes" if wide[0] > 0 else "ce"
-        verdict = f"{better} is better" + (" markedly" if beyond(narrow, MARGIN) else f", by less than ±{MARGIN:g}")
+        verdict += f"; {higher} is higher by a significant amount inside the margin" if significant else ""
+    elif significant:
+        verdict = f"{higher} is better" + (
+            " markedly" if beyond(narrow, MARGIN) else f", not markedly (the 90% CI reaches inside ±{MARGIN:g})"
+        )
     else:
         verdict = "inconclusive"
     difference = iqm(a.reshape(-1)) - iqm(b.reshape(-1))
