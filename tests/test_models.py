@@ -41,3 +41,19 @@ def test_shipped_model_plays_as_its_eval_json_says(name):
     result = evaluate(GreedyPolicy.from_model(q_network), config.task, 5, recorded["seed"], timeout=config.timeout)
     np.testing.assert_allclose(result.returns, recorded["returns"][:5])
     assert abs(result.mean_return - recorded["mean_return"]) <= max(3 * recorded["std_return"], 5.0)
+
+
+def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_fitted_on():
+    """docs/teacher_agreement.py --quick: its BC model takes the teacher's action on (nearly) every state
+    of the episodes its run demonstrated, which only holds if the script records those very episodes."""
+    import subprocess
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "docs" / "teacher_agreement.py"
+    done = subprocess.run([sys.executable, script, "--quick"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    rows = [line.split(" | ") for line in done.stdout.splitlines() if line.startswith("| minatar-breakout")]
+    assert [row[1].split(" (")[0] for row in rows] == ["demonstrated", "held out"]
+    assert rows[0][1] == "demonstrated (seeds 0–9)" and rows[1][1] == "held out (seeds 900000–900000)"
+    shares = [[float(cell.strip(" |%")) for cell in row[3:5]] for row in rows]
+    assert shares[0][1] >= 99.0 and all(0.0 <= share <= 100.0 for row in shares for share in row)
