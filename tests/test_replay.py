@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from dqfd_bc_keras.core.replay import PrioritizedReplay, SumTree
+from dqfd_bc_keras.core.replay import PrioritizedReplay
+from dqfd_bc_keras.core.sum_tree import SumTree
 from dqfd_bc_keras.errors import ConfigError
 
 G = 0.9  # γ in every test
