@@ -44,7 +44,7 @@ def test_an_incomplete_study_is_described_and_judges_nothing():
     partial = made_up({"bayes": [2.0, 2.0], "ce": [2.0, 2.0], "none": [0.0, 0.0], SB3_METHOD: [0.0, 0.0]}, 10)
     assert not partial.complete
     text = report(partial)
-    assert "**Interim: the study is not complete (seeds finished on all five games: bayes 2, ce 2" in text
+    assert "**Interim: 40 of 200 runs finished (seeds finished on all five games: bayes 2, ce 2" in text
     assert "| bayes | 2 | 2.00 [2.00, 2.00] | 2.00 | 100% | (beats its teachers; interim) |" in text
     assert "interim: beats its teacher" in text and "interim, not judged: equivalent" in text
 

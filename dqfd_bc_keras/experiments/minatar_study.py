@@ -259,7 +259,7 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
     for method in METHODS:
         scores = study.scores(method)
         if scores.size == 0:
-            lines.append(f"| {_label(method)} | 0 | not run | | | |")
+            lines.append(f"| {_label(method)} | 0 | no seed on all five games yet | | | |")
             continue
         low, high = stratified_bootstrap_ci(scores, iqm, 0.95, RESAMPLES, RNG_SEED)
         above = float(score_distribution(scores, [1.0])[0])
@@ -364,6 +364,14 @@ def grid_scores(study: Study, method: str) -> tuple[np.ndarray, np.ndarray]:
     return points, cube
 
 
+def _legend(ax) -> None:
+    """A legend where something is drawn; an empty axis (no seed on all games yet) says so."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no seed on all five games yet", ha="center", va="center", transform=ax.transAxes)
+
+
 def figures(study: Study, directory: Path) -> list[str]:
     """The performance profile and the IQM over interactions (rliable's two pictures), and each game's
     mean curves; returns the markdown that shows them (paths relative to the report's folder)."""
@@ -380,7 +388,7 @@ def figures(study: Study, directory: Path) -> list[str]:
                 ax.fill_between(TAUS, band[0], band[1], color=colors[method], alpha=0.2, linewidth=0)
         ax.axvline(1.0, color="grey", linestyle=":", linewidth=1)
         ax.set(xlabel="normalised score τ (random 0, teacher 1)", ylabel="share of runs with score > τ")
-        ax.legend(fontsize=8)
+        _legend(ax)
     with _figure(curve, figsize=(6, 4)) as (_, ax):
         for method in METHODS:
             points, cube = grid_scores(study, method)
@@ -391,7 +399,7 @@ def figures(study: Study, directory: Path) -> list[str]:
                 ax.fill_between(points, bands[:, 0], bands[:, 1], color=colors[method], alpha=0.2, linewidth=0)
         ax.axhline(1.0, color="grey", linestyle=":", linewidth=1)
         ax.set(xlabel="interactions", ylabel="IQM of normalised scores")
-        ax.legend(fontsize=8)
+        _legend(ax)
     with _figure(games, nrows=1, ncols=len(GAMES), figsize=(3 * len(GAMES), 3)) as (_, axes):
         for ax, game in zip(axes, GAMES, strict=True):
             for method in METHODS:
@@ -403,7 +411,7 @@ def figures(study: Study, directory: Path) -> list[str]:
             ax.axhline(ANCHORS[game][1], color="grey", linestyle=":", linewidth=1)
             ax.set(title=game.removeprefix("minatar-"), xlabel="interactions")
         axes[0].set_ylabel("mean greedy return over seeds")
-        axes[0].legend(fontsize=7)
+        _legend(axes[0])
     return [
         f"![{name}](figures/{path.name})"
         for name, path in (("performance profile", profile), ("IQM", curve), ("games", games))
@@ -414,10 +422,12 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
     """The study as markdown: status, protocol, the three questions, the figures."""
     judged = study.complete
     counts = {m: min(len(study.runs.get((g, m), {})) for g in GAMES) for m in METHODS}
+    finished = sum(len(seeds) for seeds in study.runs.values())
     status = (
         f"**Complete: {study.seeds} seeds of every arm on every game; the verdicts below are the pre-registered ones.**"
         if judged
-        else "**Interim: the study is not complete (seeds finished on all five games: "
+        else f"**Interim: {finished} of {study.seeds * len(GAMES) * len(METHODS)} runs finished (seeds finished on "
+        "all five games: "
         + ", ".join(f"{_label(m)} {counts[m]}" for m in METHODS)
         + f", of {study.seeds}). Numbers are described; no pre-registered verdict is given until every arm has "
         "every seed on every game.**"
