@@ -27,7 +27,7 @@ def suite(tmp_path) -> Path:
         shutil.copytree(directory, tmp_path / "suite")
     root = tmp_path / "suite"
     run_dir = root / "cartpole-naive-bayes" / "seed0"
-    for junk in ("q_network.keras", "tb/events.out", "checkpoints/latest.json", "demos.npz"):
+    for junk in ("q_network.keras", "tb/events.out", "checkpoints/latest.json", "demos.npz", "complete.json"):
         (run_dir / junk).parent.mkdir(parents=True, exist_ok=True)
         (run_dir / junk).write_text("not read by the report")
     (root / "cartpole-naive-bayes" / "seed9").mkdir()
@@ -168,6 +168,24 @@ def test_the_archive_holds_exactly_what_the_report_reads_and_is_deterministic(su
         members = tar.getmembers()
     assert [m.name for m in members] == names
     assert {(m.mtime, m.uid, m.gid, m.uname, m.gname, m.mode) for m in members} == {(0, 0, 0, "", "", 0o644)}
+
+
+def test_a_run_still_finishing_is_left_out_until_it_is_complete(suite, tmp_path):
+    """A sweep in progress is read and exported as it runs (the MinAtar study exports after every run):
+    a run that has written eval.json but not yet its last files (complete.json comes last) is not
+    read, named as unfinished, and left out of the archive; once complete, it is in."""
+    run_dir = suite / "cartpole-naive-bayes" / "seed0"
+    (run_dir / "complete.json").unlink()
+    (run_dir / "provenance.json").unlink()  # not written yet
+    skipped = []
+    assert len(load_runs(suite, skipped)) == 11
+    assert [str(e.file) for e in skipped] == ["cartpole-naive-bayes/seed0/eval.json"]
+    assert "has not finished" in skipped[0].problem
+    assert not any(n.startswith("cartpole-naive-bayes/seed0/") for n in export_archive(suite, tmp_path / "a.tar.xz"))
+    (run_dir / "provenance.json").write_text((suite / "cartpole-naive-bayes" / "seed1" / "provenance.json").read_text())
+    (run_dir / "complete.json").write_text("{}")
+    assert len(load_runs(suite)) == 12
+    assert "cartpole-naive-bayes/seed0/provenance.json" in export_archive(suite, tmp_path / "b.tar.xz")
 
 
 def test_export_on_the_command_line(suite, tmp_path, capsys):

@@ -187,8 +187,7 @@ def collect(out: Path, seeds: int, quick: bool = False) -> Study:
     for a in arms(quick):
         for seed in range(seeds):
             directory = out / a.name / f"seed{seed}"
-            if (directory / "eval.json").is_file():
-                (finished,) = load_runs(directory)
+            for finished in load_runs(directory) if directory.is_dir() else []:  # none while it is still finishing
                 evals = interaction_evals(finished)
                 if evals[-1][0] >= budget:
                     runs.setdefault((a.task, a.expert_loss), {})[seed] = evals
