@@ -2,6 +2,7 @@
 made up by hand, and the command as a user runs it: quick runs, the archive written as runs finish,
 a resumed study that computes nothing twice, a report that regenerates byte for byte."""
 
+import re
 import tarfile
 
 import pytest
@@ -47,6 +48,7 @@ def test_an_incomplete_study_is_described_and_judges_nothing():
     assert "**Interim: 40 of 200 runs finished (seeds finished on all five games: bayes 2, ce 2" in text
     assert "| bayes | 2 | 2.00 [2.00, 2.00] | 2.00 | 100% | (beats its teachers; interim) |" in text
     assert "interim: beats its teacher" in text and "interim, not judged: equivalent" in text
+    assert "Our runs' code: none yet" in text  # runs made up here have no provenance
 
 
 def test_a_complete_study_gives_the_preregistered_verdicts():
@@ -127,6 +129,7 @@ def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_b
         for method in METHODS:
             assert f"| {game} |" in text and f"| {study._label(method)} |" in text
     assert "**Interim" not in text  # --quick is one seed of every arm: complete on its own terms
+    assert re.search(r"Our runs' code: [0-9a-f]{7}( \(dirty\))?(, |\s)", text)  # from their provenance.json
 
 
 def test_an_archive_is_read_never_run_into(tmp_path):

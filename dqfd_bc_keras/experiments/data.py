@@ -277,7 +277,9 @@ def _unfinished(directory: Path) -> list[Path]:
     return sorted(
         config.parent
         for config in directory.rglob("config.json")
-        if _own(directory, config) and _finishing(config.parent)
+        if _own(directory, config)
+        and (config.parent / "checkpoints").is_dir()
+        and (_finishing(config.parent) or not (config.parent / "eval.json").is_file())
     )
 
 

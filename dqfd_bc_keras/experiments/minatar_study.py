@@ -153,6 +153,8 @@ class Study:
     runs: dict[tuple[str, str], Seeds]
     budget: int
     seeds: int
+    commits: tuple[str, ...] = ()
+    """The code commits our runs were made by (their provenance.json): one, if the study keeps its rule."""
 
     def final(self, game: str, method: str) -> dict[int, float]:
         """Seed → the mean greedy return at the budget (the run's last grid point)."""
@@ -184,6 +186,7 @@ def collect(out: Path, seeds: int, quick: bool = False) -> Study:
     """The runs under `out` that reached the budget: ours (complete runs of the arms) and SB3's (current files)."""
     budget = QUICK_STEPS["ours"] if quick else BUDGET
     runs: dict[tuple[str, str], Seeds] = {}
+    commits = set()
     for a in arms(quick):
         for seed in range(seeds):
             directory = out / a.name / f"seed{seed}"
@@ -191,13 +194,15 @@ def collect(out: Path, seeds: int, quick: bool = False) -> Study:
                 evals = interaction_evals(finished)
                 if evals[-1][0] >= budget:
                     runs.setdefault((a.task, a.expert_loss), {})[seed] = evals
+                    origin = finished.provenance
+                    commits.add((origin.code_commit or "unknown")[:7] + " (dirty)" * bool(origin.dirty))
     for job in sb3_jobs(seeds, out, quick):
         if job.current():
             evaluations = json.loads(job.path.read_text())["evaluations"]
             runs.setdefault((job.task, SB3_METHOD), {})[job.seed] = [
                 (e["interactions"], e["mean_return"]) for e in evaluations
             ]
-    return Study(runs, budget, seeds)
+    return Study(runs, budget, seeds, tuple(sorted(commits)))
 
 
 def steps_to_teacher(study: Study, game: str, method: str) -> dict[int, float]:
@@ -409,7 +414,7 @@ def figures(study: Study, directory: Path) -> list[str]:
                     ax.plot(xs, ys, color=colors[method], label=_label(method))
             ax.axhline(ANCHORS[game][1], color="grey", linestyle=":", linewidth=1)
             ax.set(title=game.removeprefix("minatar-"), xlabel="interactions")
-        axes[0].set_ylabel("mean greedy return over seeds")
+        axes[0].set_ylabel("mean greedy return over seeds\n(dotted: the teacher)")
         _legend(axes[0])
     return [
         f"![{name}](figures/{path.name})"
@@ -441,6 +446,8 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
             "(rules: docs/PREREGISTRATION.md §13).",
             "",
             status,
+            "",
+            f"Our runs' code: {', '.join(study.commits) or 'none yet'} (each run's provenance.json).",
             "",
             f"Protocol: each game's preset (`train.py --task minatar-GAME`: 10 episodes of the imperfect teacher, "
             f"MinAtar's network, one update per step), {study.budget:,} interactions per run, arms `bayes`, `ce`, "

@@ -231,7 +231,8 @@ def summary(arms: list[ArmRuns], directory: Path) -> list[str]:
         "",
         *(f"- {line}" for line in found or ["nothing"]),
         "- Studies with their own archives and reports: the Bayesian loss with σ0² below the variance cap "
-        "([SIGMA0.md](SIGMA0.md)) and MinAtar Breakout on frames ([PIXELS.md](PIXELS.md)).",
+        "([SIGMA0.md](SIGMA0.md)), MinAtar Breakout on frames ([PIXELS.md](PIXELS.md)) and all five MinAtar "
+        "games against DQN and SB3 ([MINATAR.md](MINATAR.md)).",
         "",
     ]
     gaps = [*(f"claim {where}" for where in claims["not run"]), *_not_run(arms)]
