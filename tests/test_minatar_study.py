@@ -87,6 +87,13 @@ def test_q3_keeps_a_significant_difference_inside_the_margin_from_being_called_m
     assert "**ce is better markedly**" in report(apart)
 
 
+def test_one_seed_gives_numbers_and_no_interval_or_verdict():
+    text = report(made_up({"bayes": [2.0], "ce": [0.0], "none": [0.0], SB3_METHOD: [0.0]}, 10))
+    assert "| bayes | 1 | 2.00 [2.00, 2.00] | 2.00 | 100% | (one seed: no interval; interim) |" in text
+    assert "interim: one seed: no interval |" in text and "beats its teacher" not in text
+    assert "**interim, not judged: one seed: no interval**" in text
+
+
 def test_the_score_matrix_takes_only_seeds_finished_on_every_game():
     runs = made_up({"bayes": [1.0, 1.0, 1.0]}, 3).runs
     del runs["minatar-seaquest", "bayes"][1]

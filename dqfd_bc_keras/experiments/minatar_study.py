@@ -75,6 +75,8 @@ MARGIN = 0.15
 TAUS = np.linspace(0.0, 2.0, 81)
 """The performance profile's thresholds (normalised score)."""
 RESAMPLES, RNG_SEED = 10_000, 0
+ONE_SEED = "one seed: no interval"
+"""What a rule reads instead of a verdict while an arm has one seed (a bootstrap of one is a point)."""
 QUICK_STEPS = {"ours": 300, "sb3": 500, "every": 150}
 """`--quick`: interactions of each run of ours and of SB3's, and the evaluation grid: seconds, for the tests."""
 
@@ -242,6 +244,7 @@ def teacher_rows(study: Study, judged: bool) -> list[str]:
                 continue
             median, low, high, verdict = teacher_verdict(final, teacher)
             verdict = "does not beat it" if verdict == "does not" else verdict
+            verdict = ONE_SEED if len(final) < 2 else verdict
             if method not in DQFD:
                 verdict = f"({verdict}; described, not judged)"
             elif not judged:
@@ -268,6 +271,7 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
         low, high = stratified_bootstrap_ci(scores, iqm, 0.95, RESAMPLES, RNG_SEED)
         above = float(score_distribution(scores, [1.0])[0])
         verdict = "beats its teachers" if low > 1 else "below its teachers" if high < 1 else "inconclusive"
+        verdict = ONE_SEED if scores.shape[0] < 2 else verdict
         verdict = (
             verdict if method in DQFD and judged else f"({verdict}; {'interim' if method in DQFD else 'described'})"
         )
@@ -337,6 +341,7 @@ def bayes_vs_ce(study: Study, judged: bool) -> list[str]:
         )
     else:
         verdict = "inconclusive"
+    verdict = ONE_SEED if min(a.shape[0], b.shape[0]) < 2 else verdict
     difference = iqm(a.reshape(-1)) - iqm(b.reshape(-1))
     lines = [
         f"IQM(bayes) − IQM(ce) = {difference:+.3f}, 95% CI {_interval(*wide, 3)}, 90% CI {_interval(*narrow, 3)} "
