@@ -6,6 +6,7 @@ import re
 import tarfile
 
 import pytest
+from helpers import REPO
 from helpers import python as run
 
 from dqfd_bc_keras.demos.recording import expert_returns
@@ -146,3 +147,17 @@ def test_an_archive_is_read_never_run_into(tmp_path):
         "-m", "dqfd_bc_keras.experiments.minatar_study", "--out", tmp_path / "x", "--archive", tmp_path / "a.zip"
     )
     assert done.returncode == 2 and "--archive" in done.stderr and "expected a .tar.xz file" in done.stderr
+
+
+def test_the_committed_report_is_what_the_committed_archive_gives(tmp_path):
+    """docs/MINATAR.md and its figures regenerate byte for byte from docs/data/minatar.tar.xz (the study
+    exports its runs elsewhere while it runs; the archive and the report are committed together)."""
+    docs = REPO / "docs"
+    done = run(
+        "-m", "dqfd_bc_keras.experiments.minatar_study", "--out", docs / "data" / "minatar.tar.xz", "--no-run",
+        "--report", tmp_path / "MINATAR.md", "--figures", tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "MINATAR.md").read_bytes() == (docs / "MINATAR.md").read_bytes()
+    for figure in ("minatar_profile.png", "minatar_iqm.png", "minatar_games.png"):
+        assert (tmp_path / figure).read_bytes() == (docs / "figures" / figure).read_bytes(), figure
