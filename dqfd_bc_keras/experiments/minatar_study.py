@@ -11,7 +11,7 @@ The runs go seed by seed (every arm of every game for seed 0, then seed 1, …),
 study has whole seeds; with `--archive`, every finished run is exported there as it finishes and a
 new machine starts from that archive, so nothing is computed twice.
 
-    python -m dqfd_bc_keras.experiments.minatar_study --out results/minatar --archive docs/data/minatar.tar.xz
+    python -m dqfd_bc_keras.experiments.minatar_study --out runs/minatar --archive runs/minatar.tar.xz
     python -m dqfd_bc_keras.experiments.minatar_study --out docs/data/minatar.tar.xz --no-run \\
         --report docs/MINATAR.md --figures docs/figures
     python -m dqfd_bc_keras.experiments.minatar_study --out /tmp/minatar --quick   # a minute: tiny budgets
@@ -225,7 +225,7 @@ def _interval(low: float, high: float, digits: int = 2) -> str:
 
 
 def _label(method: str) -> str:
-    return method if method == SB3_METHOD else f"{method}{' (DQN, no demonstrations)' if method == 'none' else ''}"
+    return "none (DQN, no demonstrations)" if method == "none" else method
 
 
 def teacher_rows(study: Study, judged: bool) -> list[str]:
