@@ -279,7 +279,7 @@ def _unfinished(directory: Path) -> list[Path]:
         for config in directory.rglob("config.json")
         if _own(directory, config)
         and (config.parent / "checkpoints").is_dir()
-        and (_finishing(config.parent) or not (config.parent / "eval.json").is_file())
+        and not ((config.parent / COMPLETE).is_file() and (config.parent / "eval.json").is_file())
     )
 
 

@@ -285,14 +285,16 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
 def sooner_rows(study: Study, judged: bool) -> list[str]:
     """Q2, per game: interactions to the teacher's return; each DQfD arm against DQN and SB3 (Mann–Whitney,
     never reached ranked last, Holm over the 20 comparisons)."""
-    tests = {}
-    for game in GAMES:
-        for method in DQFD:
-            ours = list(steps_to_teacher(study, game, method).values())
-            for other in ("none", SB3_METHOD):
-                theirs = list(steps_to_teacher(study, game, other).values())
-                if ours and theirs:
-                    tests[game, method, other] = mann_whitney(ours, theirs)[1]
+    steps_of = {
+        (g, m): np.array(list(steps_to_teacher(study, g, m).values()), dtype=float) for g in GAMES for m in METHODS
+    }
+    tests = {
+        (game, method, other): mann_whitney(steps_of[game, method], steps_of[game, other])[1]
+        for game in GAMES
+        for method in DQFD
+        for other in ("none", SB3_METHOD)
+        if steps_of[game, method].size and steps_of[game, other].size
+    }
     adjusted = dict(zip(tests, holm(list(tests.values()), 2 * 2 * len(GAMES)), strict=True))
     lines = [
         "| game | arm | reached the teacher | median interactions [95% CI] | against DQN (none): Holm p | "
@@ -301,7 +303,7 @@ def sooner_rows(study: Study, judged: bool) -> list[str]:
     ]
     for game in GAMES:
         for method in METHODS:
-            steps = np.array(list(steps_to_teacher(study, game, method).values()), dtype=float)
+            steps = steps_of[game, method]
             if steps.size == 0:
                 lines.append(f"| {game} | {_label(method)} | not run | | | |")
                 continue
@@ -312,9 +314,8 @@ def sooner_rows(study: Study, judged: bool) -> list[str]:
                 if p is None:
                     cells.append("")
                     continue
-                mine = np.median(steps)
-                theirs = np.median(list(steps_to_teacher(study, game, other).values()))
-                word = ("sooner" if mine < theirs else "later") if p < 0.05 else "no measurable difference"
+                sooner = np.median(steps) < np.median(steps_of[game, other])
+                word = ("sooner" if sooner else "later") if p < 0.05 else "no measurable difference"
                 cells.append(f"{p:.3f}: {word if judged else 'interim: ' + word}")
             lines.append(
                 f"| {game} | {_label(method)} | {int(np.isfinite(steps).sum())}/{steps.size} | "
@@ -360,9 +361,10 @@ def bayes_vs_ce(study: Study, judged: bool) -> list[str]:
 
 
 def grid_scores(study: Study, method: str) -> tuple[np.ndarray, np.ndarray]:
-    """The evaluation grid's interactions, and a (points, complete seeds, games) array of normalised scores."""
+    """The evaluation grid's interactions (as the runs record them), and a (points, complete seeds, games) array
+    of normalised scores."""
     seeds = study.complete_seeds(method)
-    points = np.arange(0, study.budget + 1, PROTOCOL["eval_every"] if study.budget == BUDGET else QUICK_STEPS["every"])
+    points = np.array(sorted({x for game in GAMES for seed in seeds for x, _ in study.runs[game, method][seed]}))
     cube = np.full((points.size, len(seeds), len(GAMES)), np.nan)
     for g, game in enumerate(GAMES):
         for s, seed in enumerate(seeds):

@@ -40,11 +40,23 @@ def _as_sample(x: Sequence[float]) -> np.ndarray:
 
 def _resampled(statistic: Statistic, sample: np.ndarray, rng: np.random.Generator, resamples: int) -> np.ndarray:
     """`statistic` of `resamples` bootstrap resamples (rows of `sample` drawn with replacement)."""
-    rows = sample[rng.integers(0, sample.size, size=(resamples, sample.size))]
+    return _per_row(statistic, sample[rng.integers(0, sample.size, size=(resamples, sample.size))])
+
+
+def _per_row(statistic: Statistic, rows: np.ndarray) -> np.ndarray:
+    """`statistic` of each row of `rows`: all at once for numpy-style statistics (`axis=1`), else row by row."""
     try:
-        return np.asarray(statistic(rows, axis=1), dtype=float)  # numpy-style statistics: vectorised
+        return np.asarray(statistic(rows, axis=1), dtype=float)
     except TypeError:
-        return np.array([statistic(row) for row in rows], dtype=float)
+        return np.array([np.asarray(statistic(row), dtype=float) for row in rows])
+
+
+def _stratified_resampled(statistic: Statistic, matrix: np.ndarray, rng: np.random.Generator, resamples: int):
+    """`statistic` of `resamples` stratified resamples of a (runs, tasks) matrix: each task's runs drawn
+    with replacement on their own, every task kept, each resample flattened to runs × tasks scores."""
+    runs, tasks = matrix.shape
+    rows = rng.integers(0, runs, size=(resamples, runs, tasks))
+    return _per_row(statistic, matrix[rows, np.arange(tasks)].reshape(resamples, runs * tasks))
 
 
 def _percentiles(values: np.ndarray, level: float) -> tuple[float, float]:
@@ -112,14 +124,7 @@ def stratified_bootstrap_ci(
     matrix = np.asarray(scores, dtype=float)
     if matrix.ndim != 2 or matrix.size == 0:
         raise ValueError(f"a stratified bootstrap takes a non-empty (runs, tasks) matrix, got shape {matrix.shape}")
-    rng = np.random.default_rng(seed)
-    runs, tasks = matrix.shape
-    rows = rng.integers(0, runs, size=(resamples, runs, tasks))
-    flat = matrix[rows, np.arange(tasks)].reshape(resamples, runs * tasks)
-    try:
-        values = np.asarray(statistic(flat, axis=1), dtype=float)  # numpy-style statistics: vectorised
-    except TypeError:
-        values = np.array([np.asarray(statistic(sample), dtype=float) for sample in flat])
+    values = _stratified_resampled(statistic, matrix, np.random.default_rng(seed), resamples)
     if values.ndim == 1:
         return _percentiles(values, level)
     return np.array([_percentiles(column, level) for column in values.T]).T
@@ -141,13 +146,10 @@ def stratified_bootstrap_diff_ci(
             f"two non-empty (runs, tasks) matrices on the same tasks, got shapes {first.shape}, {second.shape}"
         )
     rng = np.random.default_rng(seed)
-
-    def resampled(matrix: np.ndarray) -> np.ndarray:
-        runs, tasks = matrix.shape
-        flat = matrix[rng.integers(0, runs, size=(resamples, runs, tasks)), np.arange(tasks)].reshape(resamples, -1)
-        return np.asarray(statistic(flat, axis=1), dtype=float)
-
-    return _percentiles(resampled(first) - resampled(second), level)
+    differences = _stratified_resampled(statistic, first, rng, resamples) - _stratified_resampled(
+        statistic, second, rng, resamples
+    )
+    return _percentiles(differences, level)
 
 
 def score_distribution(scores: np.ndarray, taus: Sequence[float], axis: int | None = None) -> np.ndarray:
