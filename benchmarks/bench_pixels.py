@@ -20,7 +20,8 @@ median, min and max, the versions, CPU count, load average and thread settings. 
 runs SB3 alone (our side reports nothing and the ratios are None).
 
     python benchmarks/bench_pixels.py [--steps 5000] [--updates 2000] [--rounds 3] [--sides ours,sb3]
-                                      [--expert-loss bayes] [--train-freq 4] [--json] [--quick]
+                                      [--expert-loss bayes] [--train-freq 4] [--design package]
+                                      [--json] [--quick]
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import interleave
+import numpy_loop_probe
 
 import dqfd_bc_keras  # noqa: F401  (light; before interleave's SB3 child blocks TensorFlow, which its import checks)
 
@@ -127,6 +129,13 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--expert-loss", default="bayes")
     parser.add_argument(
+        "--design",
+        choices=("package", "numpy-probe"),
+        default="package",
+        help="our side: the package's training loop (default), or benchmarks/numpy_loop_probe.py's "
+        "loop (everything but the update in numpy; a design probe, online steps only)",
+    )
+    parser.add_argument(
         "--train-freq",
         type=int,
         default=4,
@@ -146,14 +155,16 @@ def main(argv=None) -> int:
 
     sides = {
         "ours": lambda: (
-            our_figures(args.steps, args.updates, args.expert_loss, args.train_freq, args.warmup)
-            if "ours" in args.sides
-            else None
+            None
+            if "ours" not in args.sides
+            else numpy_loop_probe.run(args.steps, args.warmup, args.train_freq, args.expert_loss)
+            if args.design == "numpy-probe"
+            else our_figures(args.steps, args.updates, args.expert_loss, args.train_freq, args.warmup)
         ),
         "sb3": lambda: sb3_figures(args.steps, args.updates, args.warmup) if "sb3" in args.sides else None,
     }
     ratios = {"env_steps_per_s": ("env_steps_per_s", "env_steps_per_s")}
-    if args.expert_loss != "none":  # plain DQN has no demonstrations to pre-train on
+    if args.expert_loss != "none" and args.design == "package":  # plain DQN has no demonstrations to pre-train on
         ratios["pretrain_vs_sb3_train"] = ("pretrain_updates_per_s", "train_updates_per_s")
     not_run = [
         f"{side}: not run (--sides {','.join(args.sides)})" for side in interleave.SIDES if side not in args.sides
@@ -173,9 +184,13 @@ def main(argv=None) -> int:
             "updates": args.updates,
             "sides": args.sides,
             "expert_loss": args.expert_loss,
+            "design": args.design,
             "train_freq": args.train_freq,
-            "ours": f"{TASK} preset, {args.expert_loss}: training.train_episodes, one "
-            f"prioritized update of batch 32 every {args.train_freq} env steps",
+            "ours": (
+                f"{TASK} preset, {args.expert_loss}: "
+                + ("numpy_loop_probe.run" if args.design == "numpy-probe" else "training.train_episodes")
+                + f", one prioritized update of batch 32 every {args.train_freq} env steps"
+            ),
             "sb3": "DQN as experiments/sb3_pixels.py: MinAtarCNN, uniform replay, "
             "train_freq=4, gradient_steps=1, batch 32",
         },

@@ -285,3 +285,47 @@ def test_bench_sweep_quick_times_both_sides_and_finds_the_same_results():
     # The ratio is of the unrounded times; the report's seconds are rounded to 0.1 s, the ratio to 0.001.
     for ratio, f, r in zip(report["ratio_fresh_over_reused"]["per_round"], fresh, reused, strict=True):
         assert (f - 0.05) / (r + 0.05) - 5e-4 <= ratio <= (f + 0.05) / (r - 0.05) + 5e-4, (ratio, f, r)
+
+
+def test_the_numpy_loop_probe_computes_what_the_package_computes():
+    """The probe's figure is only worth reading if its numpy parts are the package's: Q of MinAtar's
+    network, the n-step views of D_demo, and the BC model's MC-dropout view (its mean over many
+    draws; the draws themselves are numpy's)."""
+    import numpy as np
+    import tensorflow as tf
+
+    from dqfd_bc_keras.core.config import Config
+    from dqfd_bc_keras.training.loop import build
+
+    probe = load_bench("numpy_loop_probe.py")
+    c = Config.for_task("minatar-breakout", total_steps=100, pretrain_steps=20, bc_epochs=1, demo_episodes=2)
+    learner, _ = build(c)
+    agent, demos = learner.agent, learner.demos
+    scale = agent.net_input.frames.scale
+    theta = [w.numpy() for w in agent.q_network.trainable_weights]
+    np.testing.assert_allclose(
+        probe.minatar_forward(theta, demos.obs[:64], scale), agent.q_network(demos.obs[:64]).numpy(), atol=1e-5
+    )
+    view = probe.bc_view(learner.bc, scale, np.random.default_rng(0))
+    replay = probe.NumpyReplay(
+        agent.net_input.shape, agent.n_actions, c.replay_capacity, c.demo_capacity, c.n_step, c.gamma,
+        c.priority_alpha, c.priority_eps_agent, c.priority_eps_demo, c.seed,
+    )  # fmt: skip
+    replay.set_demos(demos.obs, demos.actions, demos.rewards, demos.next_obs, demos.terminated, demos.truncated,
+                     *view(demos.obs))  # fmt: skip
+    n = len(demos.obs)
+    package = agent.replay._batch(tf.range(n), tf.ones([n]))
+    np.testing.assert_allclose(replay.n_return[:n], package.n_returns.numpy(), rtol=1e-6)
+    np.testing.assert_allclose(replay.n_discount[:n], package.n_discount.numpy(), rtol=1e-6)
+    np.testing.assert_array_equal(replay.next_obs[replay.n_last[:n]], package.n_next_obs.numpy())
+    states = demos.obs[:16]
+    ours = np.mean([view(states)[0] for _ in range(400)], axis=0)
+    theirs = np.mean([learner.bc.predictive(tf.constant(states))[0].numpy() for _ in range(400)], axis=0)
+    np.testing.assert_allclose(ours, theirs, atol=0.02)
+
+
+def test_bench_pixels_quick_times_the_numpy_loop_probe():
+    report = bench("bench_pixels.py", "--quick", "--json", "--design", "numpy-probe", "--sides", "ours")
+    assert report["settings"]["design"] == "numpy-probe" and report["sides"]["sb3"] is None
+    assert report["sides"]["ours"]["env_steps_per_s"]["median"] > 0
+    assert set(report["ratios"]) == {"env_steps_per_s"}  # the probe does not time pre-training
