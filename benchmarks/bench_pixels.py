@@ -146,6 +146,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.quick:
         args.warmup, args.steps, args.updates, args.rounds = QUICK_WARMUP, QUICK_WARMUP, 20, 2
+    if args.design == "numpy-probe" and args.expert_loss == "none":
+        parser.error("--design numpy-probe times DQfD's loop: it needs demonstrations (an --expert-loss but none)")
     if args.steps < args.warmup or args.updates < 1:
         parser.error(
             f"--steps must be ≥ --warmup {args.warmup} (the clock runs between evaluation-grid points that "

@@ -201,6 +201,15 @@ def bc_view(bc, scale: float, rng: np.random.Generator):
     return view
 
 
+def uniform_view(n_actions: int, sigma0_sq: float):
+    """The view without a BC model, as `DQfDAgent.expert_targets` gives it: π̄_bc uniform, σ² = σ0²."""
+
+    def view(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.full((len(frames), n_actions), 1 / n_actions, np.float32), np.full(len(frames), sigma0_sq, np.float32)
+
+    return view
+
+
 def run(steps: int, warmup: int, train_freq: int, expert_loss: str = "bayes") -> dict[str, float]:
     """Build the preset's agent and π_bc (the package's code), then time the numpy loop."""
     import tensorflow as tf
@@ -226,12 +235,8 @@ def run(steps: int, warmup: int, train_freq: int, expert_loss: str = "bayes") ->
         c.priority_alpha, c.priority_eps_agent, c.priority_eps_demo, c.seed,
     )  # fmt: skip
     rng = np.random.default_rng(c.seed + 1)
-    expert_view = bc_view(learner.bc, scale, rng) if learner.bc is not None else None
-    pi, sig = (
-        expert_view(demos.obs)
-        if expert_view
-        else (np.full((len(demos.obs), A), 1 / A, np.float32), np.full(len(demos.obs), c.sigma0_sq, np.float32))
-    )
+    expert_view = bc_view(learner.bc, scale, rng) if learner.bc is not None else uniform_view(A, c.sigma0_sq)
+    pi, sig = expert_view(demos.obs)
     replay.set_demos(
         demos.obs, demos.actions, demos.rewards, demos.next_obs, demos.terminated, demos.truncated, pi, sig
     )
@@ -291,7 +296,7 @@ def run(steps: int, warmup: int, train_freq: int, expert_loss: str = "bayes") ->
             replay.store(obs, action, reward, next_obs, terminated, truncated)
             env_steps += 1
             if env_steps % c.train_freq == 0:
-                replay.settle(expert_view or (lambda s: (np.full((len(s), A), 1 / A), np.full(len(s), c.sigma0_sq))))
+                replay.settle(expert_view)
                 index, is_weights = replay.sample(B, beta(train_steps))
                 td_abs, theta_now = update(*replay.batch(index, is_weights))
                 replay.update_priorities(index, td_abs.numpy())

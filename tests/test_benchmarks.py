@@ -329,3 +329,14 @@ def test_bench_pixels_quick_times_the_numpy_loop_probe():
     assert report["settings"]["design"] == "numpy-probe" and report["sides"]["sb3"] is None
     assert report["sides"]["ours"]["env_steps_per_s"]["median"] > 0
     assert set(report["ratios"]) == {"env_steps_per_s"}  # the probe does not time pre-training
+
+
+def test_the_numpy_loop_probe_refuses_plain_dqn_in_one_line():
+    done = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "bench_pixels.py"), "--design", "numpy-probe", "--expert-loss=none"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=REPO,
+    )
+    assert done.returncode == 2 and "needs demonstrations" in done.stderr.splitlines()[-1]
