@@ -45,7 +45,9 @@ def test_shipped_model_plays_as_its_eval_json_says(name):
 
 def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_fitted_on():
     """docs/teacher_agreement.py --quick: its BC model takes the teacher's action on (nearly) every state
-    of the episodes its run demonstrated, which only holds if the script records those very episodes."""
+    of the episodes its run demonstrated, which only holds if the script records those very episodes;
+    and a network that takes the teacher's action on every state of its own play, on the seed the
+    teacher is played at with its ε of 0, scores what the teacher scores (one policy, one seed)."""
     import subprocess
     import sys
 
@@ -53,7 +55,21 @@ def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_f
     done = subprocess.run([sys.executable, script, "--quick"], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     rows = [line.split(" | ") for line in done.stdout.splitlines() if line.startswith("| minatar-breakout")]
-    assert [row[1].split(" (")[0] for row in rows] == ["demonstrated", "held out"]
-    assert rows[0][1] == "demonstrated (seeds 0–9)" and rows[1][1] == "held out (seeds 900000–900000)"
-    shares = [[float(cell.strip(" |%")) for cell in row[3:5]] for row in rows]
+    agreements, teachers = rows[:4], rows[4:]
+    assert [row[1].split(" (")[0] for row in agreements] == [
+        "demonstrated",
+        "held out",
+        "its Q-network's own play",
+        "its BC model's own play",
+    ]
+    assert agreements[0][1] == "demonstrated (seeds 0–9)" and agreements[1][1] == "held out (seeds 900000–900000)"
+    shares = [[float(cell.strip(" |%")) for cell in row[3:5] if cell.strip(" |")] for row in agreements]
     assert shares[0][1] >= 99.0 and all(0.0 <= share <= 100.0 for row in shares for share in row)
+    assert [len(row) for row in shares] == [2, 2, 1, 1]
+    assert [row[1] for row in teachers] == ["Q-network", "BC model"]
+    for network in teachers:  # ε = disagreement · A / (A − 1), Breakout's A = 3
+        assert float(network[3]) == pytest.approx(min(1.0, float(network[2].rstrip("%")) / 100 * 3 / 2), abs=1e-3)
+    # The BC model agrees on the held-out episode (ε = 0) and on every state of its own play on that seed.
+    assert (teachers[1][2], teachers[1][3], shares[3]) == ("0.0%", "0.000", [100.0])
+    own_return = agreements[3][1].split("return ")[1].rstrip(")")
+    assert teachers[1][4].split(" ± ")[0] == own_return
