@@ -28,7 +28,7 @@ from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras.core.config import Config, unknown_field
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import BUILT_IN, METHODS, Method, register
-from dqfd_bc_keras.demos.recording import callable_name
+from dqfd_bc_keras.demos.recording import callable_name, try_demonstrator
 from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy
@@ -78,24 +78,15 @@ class DQfD:
         settings = {"env_kwargs": env_kwargs, "seed": seed, **({"max_steps": limit} if limit else {}), **fields}
         if expert_loss is not None:
             settings["expert_loss"] = expert_loss
-        dataset, self._source, rule = None, None, None
-        if isinstance(demos, demo_io.DemoDataset):
-            dataset, self._source = demos, "python"
-            settings["expert"] = demo_io.given_expert("a Python DemoDataset", demos)
-        elif isinstance(demos, (str, Path)) and (str(demos).endswith(".npz") or str(demos).startswith("minari:")):
-            preset = Config.for_task(task, **settings)
-            dataset = demo_io.load_source(str(demos), task, preset.timeout, preset.env_kwargs, preset.demo_capacity)
-            self._source = demo_io.given_source(dataset)
-            settings["expert"] = demo_io.given_expert(str(demos), dataset)
-        elif isinstance(demos, (str, Path)):
-            settings["expert"] = str(demos)
-        elif callable(demos):
-            rule, self._source = demos, "recorded"
-            settings["expert"] = callable_name(demos)
+        dataset, self._source, rule, expert = _demonstrations(demos, task, settings)
+        if expert is not None:
+            settings["expert"] = expert
         self.config = Config.for_task(task, **settings)
         checked_spaces(self.config)  # a bad env or torso refused here, not at `learn`
         if rule is not None and self.config.uses_demos:  # step 1 for a callable: recorded now, given to training
             dataset = record_demos(self.config, rule)
+        elif dataset is None and self.config.uses_demos:
+            try_demonstrator(self.config)  # a named demonstrator answers (or fails) here, not at `learn`
         self.dataset, self.out = dataset, None if out is None else Path(out)
         self.learner: Learner | None = None
         self.state: TrainingState | None = None
@@ -269,6 +260,29 @@ class DQfD:
 
     def __repr__(self) -> str:
         return f"DQfD({self.config.task!r}, expert_loss={self.config.expert_loss!r}, seed={self.config.seed})"
+
+
+def _demonstrations(
+    demos: DemosLike, task: str, settings: dict[str, Any]
+) -> tuple[demo_io.DemoDataset | None, str | None, Callable | None, str | None]:
+    """What `demos` gives: (a dataset given or loaded, its source, a Python rule to record, the
+    config's `expert`), None where it gives nothing; `settings` make the task's preset."""
+    if isinstance(demos, demo_io.DemoDataset):
+        return demos, "python", None, demo_io.given_expert("a Python DemoDataset", demos)
+    if isinstance(demos, (str, Path)) and (str(demos).endswith(".npz") or str(demos).startswith("minari:")):
+        preset = Config.for_task(task, **settings)
+        dataset = demo_io.load_source(str(demos), task, preset.timeout, preset.env_kwargs, preset.demo_capacity)
+        return dataset, demo_io.given_source(dataset), None, demo_io.given_expert(str(demos), dataset)
+    if isinstance(demos, (str, Path)):
+        return None, None, None, str(demos)
+    if callable(demos):
+        return None, "recorded", demos, callable_name(demos)
+    if demos is None:
+        return None, None, None, None
+    raise ConfigError(
+        f"DQfD(env, demos): demos is a DemoDataset, a .npz file, minari:DATASET_ID, a demonstrator's "
+        f"name or a function obs → action, not {type(demos).__name__}"
+    )
 
 
 def _method_name(method: Method) -> str:

@@ -188,7 +188,7 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
     """One user's path through every entry point: a Dict observation with a text part, no time
     limit, a constructor kwarg that changes the spaces (size=7: 7 states, 6 steps to the goal)."""
     refused = run("train.py", "--env", NO_LIMIT, "--expert", "toy_envs:go_right", "--quick", "--out", tmp_path / "x")
-    one_line_error(refused, "has no time limit of its own: set one with --max-steps N (or --set max_steps=N)")
+    one_line_error(refused, "time limit of its own: set one with --max-steps N (from Python: DQfD(env, max_steps=N))")
 
     demos_file = tmp_path / "seven.npz"
     done = run(

@@ -5,6 +5,7 @@ save → load → learn more, predict, and the same metrics as train.py."""
 import csv
 import json
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -127,6 +128,19 @@ def test_a_bad_keyword_is_a_did_you_mean():
         DQfD("cartpole", sigma_sq=1.0)
 
 
+def test_an_env_without_a_demonstrator_is_refused_when_made_not_at_learn(tmp_path):
+    """As train.py asks its demonstrator for one action before training: an env object with no
+    scripted expert and no demos is refused by DQfD(...) itself, saying how to give them from
+    Python; demos of a type DQfD cannot read are refused by name, not ignored."""
+    with pytest.raises(ConfigError, match=re.escape("has no scripted imperfect expert")) as refused:
+        DQfD(Chain(), max_steps=20, out=tmp_path / "run", **TINY)
+    assert "from Python: DQfD(env, demos)" in str(refused.value)
+    assert not (tmp_path / "run").exists()
+    assert DQfD(Chain(), max_steps=20, expert_loss="none", **TINY).config.expert_loss == "none"  # DQN needs none
+    with pytest.raises(ConfigError, match="demos is a DemoDataset, a .npz file, .* not list"):
+        DQfD("cartpole", [np.zeros(4)], **TINY)
+
+
 # --- demonstrations given every way the CLI takes them, and the same provenance ----------------------
 
 
@@ -199,6 +213,9 @@ def test_demonstrators_by_name_and_by_saved_model():
 
 
 def test_a_factory_env_and_a_gym_make_limit():
+    no_limit = "no time limit of its own: set one with --max-steps N (from Python: DQfD(env, max_steps=N))"
+    with pytest.raises(ConfigError, match=re.escape(no_limit)):
+        DQfD(lambda: Chain(), walk_right, **TINY)
     model = DQfD(lambda: Chain(), walk_right, max_steps=15, **TINY).learn(100)
     assert model.config.task.startswith("dqfd_bc_keras/python-") and model.config.max_steps == 15
     assert max(model.evaluate(2).lengths) <= 15

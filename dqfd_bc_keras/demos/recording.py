@@ -122,8 +122,9 @@ def make_demonstrator(
     if name in EXPERT_NAMES or name in get_task(task).experts:
         if family is None:
             raise ConfigError(
-                f"{task} has no scripted {name} expert: give demonstrations with --demos "
-                "FILE.npz or minari:DATASET_ID, or a demonstrator module:function or model.keras"
+                f"{task} has no scripted {name} expert: give demonstrations with --demos FILE.npz or "
+                "minari:DATASET_ID, or a demonstrator module:function or model.keras with --expert (from "
+                "Python: DQfD(env, demos), demos a file, a dataset, a demonstrator's name or a function)"
             )
         return make_expert(family, name, epsilon, seed)
     if name.endswith(".keras"):

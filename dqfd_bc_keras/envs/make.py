@@ -296,7 +296,9 @@ def step_limit(name: str, max_steps: int | None = None) -> int:
     """The step limit in force: `max_steps`, else the task's; an error if neither exists."""
     limit = get_task(name).max_steps if max_steps is None else max_steps
     if limit is None:
-        raise ConfigError(f"{name} has no time limit of its own: set one with --max-steps N (or --set max_steps=N)")
+        raise ConfigError(
+            f"{name} has no time limit of its own: set one with --max-steps N (from Python: DQfD(env, max_steps=N))"
+        )
     return limit
 
 
