@@ -158,6 +158,11 @@ def test_suites_move_to_any_env_with_their_settings():
         (["train.py", "--env", CHAIN, "--task", "cartpole"], "not allowed with argument"),
         (["train.py", "--env", CHAIN], "has no scripted imperfect expert"),
         (
+            ["train.py", "--env", "Acrobot-v1"],
+            "; the preset acrobot plays Acrobot-v1 with scripted experts (--task acrobot; from Python: "
+            "DQfD('acrobot'))",
+        ),
+        (
             ["-m", "dqfd_bc_keras.demos", "record", "--env", "Pendulum-v1", "--expert", "strong", "--out", "x.npz"],
             SUPPORTED,
         ),

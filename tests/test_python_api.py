@@ -131,10 +131,13 @@ def test_a_bad_keyword_is_a_did_you_mean():
 def test_an_env_without_a_demonstrator_is_refused_when_made_not_at_learn(tmp_path):
     """As train.py asks its demonstrator for one action before training: an env object with no
     scripted expert and no demos is refused by DQfD(...) itself, saying how to give them from
-    Python; demos of a type DQfD cannot read are refused by name, not ignored."""
+    Python (and which preset plays that env with scripted experts, if one does); demos of a type
+    DQfD cannot read are refused by name, not ignored."""
     with pytest.raises(ConfigError, match=re.escape("has no scripted imperfect expert")) as refused:
         DQfD(Chain(), max_steps=20, out=tmp_path / "run", **TINY)
-    assert "from Python: DQfD(env, demos)" in str(refused.value)
+    assert "from Python: DQfD(env, demos)" in str(refused.value) and "preset" not in str(refused.value)
+    with pytest.raises(ConfigError, match=re.escape("the presets cartpole, cartpole-200 play CartPole-v1 with")):
+        DQfD(gym.make("CartPole-v1"), **TINY)  # a preset's own env, given as an object: the preset is named
     assert not (tmp_path / "run").exists()
     assert DQfD(Chain(), max_steps=20, expert_loss="none", **TINY).config.expert_loss == "none"  # DQN needs none
     with pytest.raises(ConfigError, match="demos is a DemoDataset, a .npz file, .* not list"):

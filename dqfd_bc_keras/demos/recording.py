@@ -24,7 +24,7 @@ from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_sp
 from dqfd_bc_keras.errors import ConfigError, DqfdError, one_line
 from dqfd_bc_keras.plugins import load, raised_at, where
 from dqfd_bc_keras.seeds import demo_seed
-from dqfd_bc_keras.tasks import NOT_REMADE, Rule, check_demonstrator, families, family_preset
+from dqfd_bc_keras.tasks import NOT_REMADE, TASKS, Rule, check_demonstrator, families, family_preset
 
 if TYPE_CHECKING:
     from dqfd_bc_keras.core.config import Config
@@ -125,6 +125,7 @@ def make_demonstrator(
                 f"{task} has no scripted {name} expert: give demonstrations with --demos FILE.npz or "
                 "minari:DATASET_ID, or a demonstrator module:function or model.keras with --expert (from "
                 "Python: DQfD(env, demos), demos a file, a dataset, a demonstrator's name or a function)"
+                + _presets_of(get_task(task).env_id)
             )
         return make_expert(family, name, epsilon, seed)
     if name.endswith(".keras"):
@@ -134,6 +135,16 @@ def make_demonstrator(
     else:
         rule = load(name, f"demonstrator {name}", callable, "function")
     return Demonstrator(name, rule, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed))
+
+
+def _presets_of(env_id: str) -> str:
+    """A hint naming the presets whose scripted experts play the env `env_id` ("" if none do)."""
+    bare = env_id.rpartition(":")[2]  # a `module:Env-v0` id is the env Env-v0
+    presets = [spec.name for spec in TASKS.values() if spec.env_id == bare and spec.family in families()]
+    if not presets:
+        return ""
+    which = f"the preset {presets[0]} plays" if len(presets) == 1 else f"the presets {', '.join(presets)} play"
+    return f"; {which} {bare} with scripted experts (--task {presets[0]}; from Python: DQfD('{presets[0]}'))"
 
 
 def try_demonstrator(config: Config) -> None:
