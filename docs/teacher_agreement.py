@@ -30,6 +30,7 @@ import dqfd_bc_keras
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.demos.recording import expert_returns, make_demonstrator, record
 from dqfd_bc_keras.envs.make import get_task, task_spaces
+from dqfd_bc_keras.evaluation import GreedyPolicy
 from dqfd_bc_keras.experiments.estimators import HELD_OUT_SEED  # seeds no run demonstrates
 from dqfd_bc_keras.seeds import demo_seed
 from dqfd_bc_keras.training.loop import record_demos
@@ -47,10 +48,10 @@ def agreement(model, obs: np.ndarray, actions: np.ndarray) -> float:
     return float(np.mean(np.argmax(model.predict(obs, batch_size=1024, verbose=0), axis=1) == actions))
 
 
-def own_play(model_path: Path, config: Config, episodes: int) -> tuple[int, float, float]:
+def own_play(model, config: Config, episodes: int) -> tuple[int, float, float]:
     """The model's greedy play on `episodes` held-out seeds: the states it visits, its mean return, and
     the share of those states where it takes the action its teacher would take there."""
-    played = record(config.task, str(model_path), episodes, HELD_OUT_SEED, 0.0, config.timeout)
+    played = record(config.task, GreedyPolicy.from_model(model), episodes, HELD_OUT_SEED, 0.0, config.timeout)
     teacher = make_demonstrator(config.expert, config.task)
     teacher_actions = np.array([teacher(obs) for obs in played.obs])
     return len(played), float(np.mean(played.meta.episode_returns)), float(np.mean(played.actions == teacher_actions))
@@ -93,16 +94,18 @@ def agreements(name: str, args: argparse.Namespace) -> list[tuple]:
     given = record_demos(config, config.expert)  # the run's own demonstrations, as train.py recorded them
     first = demo_seed(config.seed)
     held = record(config.task, config.expert, args.held_out, HELD_OUT_SEED, config.expert_epsilon, config.timeout)
-    held_agrees, given_agrees = (
-        {kind: agreement(m, d.obs.astype(np.float32), d.actions) for kind, m in models.items()} for d in (held, given)
-    )
+
+    def shares(demos) -> dict[str, float]:
+        return {kind: agreement(model, demos.obs.astype(np.float32), demos.actions) for kind, model in models.items()}
+
+    held_agrees, given_agrees = shares(held), shares(given)
     for label, states, agrees in (
         (f"demonstrated (seeds {first}–{first + config.demo_episodes - 1})", len(given), given_agrees),
         (f"held out ({seeds_text(args.held_out)})", len(held), held_agrees),
     ):
         print(f"| {name} | {label} | {states:,} | {agrees['q_network']:.1%} | {agrees['bc_model']:.1%} |", flush=True)
     for kind in KINDS:
-        states, mean_return, agrees = own_play(MODELS / name / f"{kind}.keras", config, args.own_play)
+        states, mean_return, agrees = own_play(models[kind], config, args.own_play)
         cells = " | ".join(f"{agrees:.1%}" if other == kind else "" for other in KINDS)
         label = f"its {KINDS[kind]}'s own play ({seeds_text(args.own_play)}; return {mean_return:.2f})"
         print(f"| {name} | {label} | {states:,} | {cells} |", flush=True)

@@ -71,6 +71,11 @@ def parse(text: str) -> tuple[str, str] | None:
     return (module, name) if sep and module and name else None
 
 
+def bare_id(env_id: str) -> str:
+    """A Gymnasium id without its `module:` prefix, which only says what to import: the id to make."""
+    return env_id.rpartition(":")[2]
+
+
 def import_module(module: str, what: str) -> ModuleType:
     """`module`, imported; `ModuleMissing` when it is not on the path, `ImportFailed` (the error and
     the file:line that raised it) when its own code raises. `what` opens each message."""

@@ -37,6 +37,7 @@ from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta, validate
 from dqfd_bc_keras.envs.make import TaskSpaces, TaskSpec, effective_kwargs, get_task, task_spaces
 from dqfd_bc_keras.envs.observations import ObservationLayout, describe
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, one_line
+from dqfd_bc_keras.plugins import bare_id
 
 _ABSENT = object()
 
@@ -68,11 +69,6 @@ def dataset_dir(dataset_id: str) -> Path:
             f"malformed Minari dataset id {dataset_id!r}: expected (namespace/)name-vN, e.g. mountaincar/imperfect-v0"
         ) from None
     return get_dataset_path(dataset_id)
-
-
-def _bare_id(env_id: str) -> str:
-    """An env id without the `module:` prefix that only tells Gymnasium what to import."""
-    return env_id.rpartition(":")[2]
 
 
 def _refuse_shaped(spec: TaskSpec, what: str) -> None:
@@ -136,7 +132,7 @@ def _open_checked(
         raise DemoFileError(
             where, f"names no env (its env_spec is empty), so it cannot be checked against {spec.env_id}"
         )
-    if _bare_id(source.env_spec.id) != _bare_id(spec.env_id):
+    if bare_id(source.env_spec.id) != bare_id(spec.env_id):
         raise DemoFileError(where, f"was recorded on {source.env_spec.id}, but task {task!r} is {spec.env_id}")
     spaces = task_spaces(task, env_kwargs)
     theirs = effective_kwargs(spec.env_id, dict(source.env_spec.kwargs or {}))
@@ -305,7 +301,7 @@ def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Pat
     m = dataset.meta
     check_exportable(m.task, m.timeout, m.env_kwargs, dataset_id)
     where = f"minari:{dataset_id}"
-    env_spec = gym.spec(_bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
+    env_spec = gym.spec(bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
     env_spec = dataclasses.replace(env_spec, kwargs={**env_spec.kwargs, **m.env_kwargs})
     directory = dataset_dir(dataset_id)
     if directory.exists() and not force:

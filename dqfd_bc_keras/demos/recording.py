@@ -22,7 +22,7 @@ from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta
 from dqfd_bc_keras.envs.episodes import play
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_spaces
 from dqfd_bc_keras.errors import ConfigError, DqfdError, one_line
-from dqfd_bc_keras.plugins import load, raised_at, where
+from dqfd_bc_keras.plugins import bare_id, load, raised_at, where
 from dqfd_bc_keras.seeds import demo_seed
 from dqfd_bc_keras.tasks import NOT_REMADE, TASKS, Rule, check_demonstrator, families, family_preset
 
@@ -139,8 +139,8 @@ def make_demonstrator(
 
 def _presets_of(env_id: str) -> str:
     """A hint naming the presets whose scripted experts play the env `env_id` ("" if none do)."""
-    bare = env_id.rpartition(":")[2]  # a `module:Env-v0` id is the env Env-v0
-    presets = [spec.name for spec in TASKS.values() if spec.env_id == bare and spec.family in families()]
+    bare, scripted = bare_id(env_id), families()
+    presets = [spec.name for spec in TASKS.values() if spec.env_id == bare and spec.family in scripted]
     if not presets:
         return ""
     which = f"the preset {presets[0]} plays" if len(presets) == 1 else f"the presets {', '.join(presets)} play"

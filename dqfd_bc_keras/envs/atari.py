@@ -67,6 +67,7 @@ import gymnasium as gym
 import numpy as np
 
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.plugins import bare_id
 
 NOOP = 0
 """The ALE's action 0 in every game's minimal action set."""
@@ -84,7 +85,7 @@ FRAME_OPTIONS = ("screen_size", "frame_stack")
 
 def is_atari(env_id: str) -> bool:
     """Whether `env_id` (with or without a `module:` prefix) is in the ALE/ namespace."""
-    return env_id.rpartition(":")[2].startswith("ALE/")
+    return bare_id(env_id).startswith("ALE/")
 
 
 @dataclass(frozen=True)

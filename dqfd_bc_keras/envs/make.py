@@ -51,7 +51,7 @@ from dqfd_bc_keras.envs.observations import (
 )
 from dqfd_bc_keras.envs.wrappers import FallPenalty, ForgetLastAction, GoalCount, TimeFeature, TimeLimitMode
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.plugins import import_module, parse
+from dqfd_bc_keras.plugins import bare_id, import_module, parse
 from dqfd_bc_keras.tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
 from dqfd_bc_keras.tasks.minatar import require_minatar
 
@@ -204,7 +204,7 @@ def effective_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> dict[str, An
     without `render_mode`, which only changes what is drawn."""
     parameters = _constructor_parameters(env_id) or {}
     defaults = {name: p.default for name, p in parameters.items() if p.default is not inspect.Parameter.empty}
-    merged = {**defaults, **gym.spec(env_id.rpartition(":")[2]).kwargs, **env_kwargs}
+    merged = {**defaults, **gym.spec(bare_id(env_id)).kwargs, **env_kwargs}
     merged.pop("render_mode", None)
     return json.loads(json.dumps(merged, default=repr))
 
@@ -212,7 +212,7 @@ def effective_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> dict[str, An
 def _constructor_parameters(env_id: str) -> Mapping[str, inspect.Parameter] | None:
     """The parameters of the callable that env `env_id`'s registration makes it with; None when
     they cannot be read (a C extension, an entry point that does not import)."""
-    entry_point = gym.spec(env_id.rpartition(":")[2]).entry_point
+    entry_point = gym.spec(bare_id(env_id)).entry_point
     try:
         creator = entry_point if callable(entry_point) else gym.envs.registration.load_env_creator(entry_point)
         return inspect.signature(creator).parameters
@@ -246,13 +246,13 @@ def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True
     line. An Atari env gets its preprocessing (`atari.py`): the learner's when `learning`, else
     the evaluation's (raw rewards, whole games)."""
     env_id, env_kwargs = get_task(name).env_id, dict(env_kwargs or {})
-    minatar = env_id.rpartition(":")[2].startswith("MinAtar/")
+    minatar = bare_id(env_id).startswith("MinAtar/")
     if minatar:
         require_minatar()
     check_env_kwargs(env_id, env_kwargs)
     if is_atari(env_id):
         atari, make_kwargs = split_kwargs(env_kwargs)
-        return wrap_atari(gym.make(env_id.rpartition(":")[2], **options, **make_kwargs), atari, learning)
+        return wrap_atari(gym.make(bare_id(env_id), **options, **make_kwargs), atari, learning)
     try:
         env = gym.make(env_id, **options, **env_kwargs)
         return ForgetLastAction(env) if minatar else env
@@ -343,7 +343,7 @@ def make_plain_env(
     With `timeout="time-aware"` the observation also carries the time feature the agent was
     trained with (fraction of the training limit `max_steps` left); rewards and ends are untouched.
     """
-    registered = gym.spec(get_task(name).env_id.rpartition(":")[2]).max_episode_steps
+    registered = gym.spec(bare_id(get_task(name).env_id)).max_episode_steps
     limit = registered if registered is not None else step_limit(name, max_steps)
     env = gym.wrappers.TimeLimit(_unlimited(name, env_kwargs, learning=False, render_mode=render_mode), limit)
     if timeout == "time-aware":
