@@ -73,3 +73,28 @@ def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_f
     assert (teachers[1][2], teachers[1][3], shares[3]) == ("0.0%", "0.000", [100.0])
     own_return = agreements[3][1].split("return ")[1].rstrip(")")
     assert teachers[1][4].split(" ± ")[0] == own_return
+
+
+def test_the_breakout_expert_loss_table_in_models_readme_is_what_the_committed_runs_give():
+    """docs/breakout_expert_losses.py reads the study's archive and the margin runs' archive; its
+    table is the one models/README.md quotes, row for row, and its per-seed columns are the runs' last
+    evaluations (a median computed by hand from them)."""
+    import statistics
+    import subprocess
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "docs" / "breakout_expert_losses.py"
+    done = subprocess.run([sys.executable, script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    table = [line for line in done.stdout.splitlines() if line.startswith("|")]
+    losses = [line.split(" | ")[0].strip("| `") for line in table[2:]]
+    assert losses == ["bayes", "ce", "bc_margin", "margin", "none"]
+    readme = (MODELS / "README.md").read_text()
+    assert all(line in readme for line in table)
+    for line in table[2:]:
+        cells = line.split(" | ")
+        median, per_seed = cells[4].split(" (")
+        finals = [float(x) for x in per_seed.rstrip(")").split(", ")]
+        assert len(finals) == int(cells[2]) >= 6
+        assert float(median) == pytest.approx(statistics.median(finals), abs=0.005)
+        assert int(cells[7].split(" of ")[0]) == sum(x > 8.56 for x in finals)
