@@ -12,29 +12,26 @@ runs of the same preset under the margins: is it the loss's form or its reach th
 
 The margin runs (the presets' defaults; one thread each, ~10 minutes a run here):
 
-    for loss in margin bc_margin; do for s in 0 1 2 3 4 5; do .venv/bin/python train.py --task \\
-        minatar-breakout --expert-loss $loss --seed $s --out runs/minatar-breakout-$loss/seed$s --quiet; done; done
+    for loss in margin bc_margin; do for s in 0 1 2 3 4 5; do .venv/bin/python train.py --task minatar-breakout \\
+        --expert-loss $loss --seed $s --out runs/expert-losses/minatar-breakout-$loss/seed$s --quiet; done; done
     for s in 0 1 2; do .venv/bin/python train.py --task minatar-freeway --expert-loss margin --seed $s \\
-        --out runs/minatar-freeway-margin/seed$s --quiet; done
-    tar -cJf docs/data/minatar-expert-losses.tar.xz -C runs \\
-        $(cd runs && ls minatar-*-*margin/seed*/{evals,config,provenance}.*)
+        --out runs/expert-losses/minatar-freeway-margin/seed$s --quiet; done
+    .venv/bin/python -m dqfd_bc_keras.experiments export runs/expert-losses --out docs/data/minatar-expert-losses.tar.xz
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import io
-import json
 import statistics
 import sys
-import tarfile
 from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dqfd_bc_keras.experiments.minatar_study import ANCHORS, BUDGET, GAMES
+from dqfd_bc_keras.experiments.data import load_runs, open_suite
+from dqfd_bc_keras.experiments.efficiency import interaction_evals
+from dqfd_bc_keras.experiments.minatar_study import ANCHORS, BUDGET, GAMES, collect
 
 DATA = Path(__file__).resolve().parent / "data"
 REACH = {  # in the order of the tables' rows
@@ -44,29 +41,24 @@ REACH = {  # in the order of the tables' rows
     "margin": "demonstrations only",
     "none": "(no expert loss)",
 }
-STUDIED = ("bayes", "ce", "none")  # the five-game study's own arms; the others come from the probe
+SEEDS = 10  # the study's
 
 
-def evaluations(archive: Path, run: str) -> dict[int, list[float]]:
-    """Seed → the mean greedy return of each periodic evaluation (every 5,000 interactions from 0), for
-    the runs `run`/seedN/ of a tar archive of run files that reached the budget."""
-    runs: dict[int, list[float]] = {}
-    with tarfile.open(archive) as tar:
-        for member in tar.getmembers():
-            parts = member.name.split("/")
-            if parts[0] == run and parts[-1] == "evals.csv":
-                rows = list(csv.DictReader(io.TextIOWrapper(tar.extractfile(member), encoding="utf-8")))
-                if rows and float(rows[-1]["interactions"]) >= BUDGET:
-                    runs[int(parts[1].removeprefix("seed"))] = [float(row["mean_return"]) for row in rows]
-    return dict(sorted(runs.items()))
+def returns(runs: dict[int, list[tuple[float, float]]]) -> dict[int, list[float]]:
+    """Seed → the mean greedy return of each periodic evaluation, for the runs that reached the budget."""
+    return {seed: [r for _, r in evals] for seed, evals in sorted(runs.items()) if evals[-1][0] >= BUDGET}
 
 
-def provenance(archive: Path) -> str:
-    """The code commits the archive's runs were made with, and how many ran on a modified work tree."""
-    with tarfile.open(archive) as tar:
-        runs = [json.load(tar.extractfile(m)) for m in tar.getmembers() if m.name.endswith("provenance.json")]
-    commits = Counter(run["code_commit"][:7] + (" (modified)" if run["dirty"] else "") for run in runs)
-    return ", ".join(f"{commit}: {n} run{'s' * (n > 1)}" for commit, n in sorted(commits.items()))
+def probe_runs(probe: Path) -> tuple[dict[tuple[str, str], dict[int, list[float]]], str]:
+    """(task, expert loss) → seed → evaluation returns of the margin runs, and the code they ran."""
+    runs, commits = {}, Counter()
+    for run in load_runs(probe):
+        c = run.config
+        runs.setdefault((c.task, c.expert_loss), {})[c.seed] = interaction_evals(run)
+        origin = run.provenance
+        commits[(origin.code_commit or "unknown")[:7] + " (modified)" * bool(origin.dirty)] += 1
+    code = ", ".join(f"{commit}: {n} run{'s' * (n > 1)}" for commit, n in sorted(commits.items()))
+    return {arm: returns(seeds) for arm, seeds in runs.items()}, code
 
 
 def row(loss: str, runs: dict[int, list[float]], teacher: float) -> str:
@@ -82,14 +74,13 @@ def row(loss: str, runs: dict[int, list[float]], teacher: float) -> str:
     )
 
 
-def table(game: str, study: Path, probe: Path) -> str | None:
+def table(game: str, study: dict, probed: dict) -> str | None:
     """The game's table over the seeds every probed loss finished (None if the probe has none)."""
-    probed = {loss: evaluations(probe, f"{game}-{loss}") for loss in REACH if loss not in STUDIED}
-    probed = {loss: runs for loss, runs in probed.items() if runs}
+    probed = {loss: seeds for (task, loss), seeds in probed.items() if task == game and seeds}
     if not probed:
         return None
     seeds = set.intersection(*(set(runs) for runs in probed.values()))
-    arms = {loss: evaluations(study, f"{game}-bootstrap-{loss}") for loss in STUDIED} | probed
+    arms = {loss: returns(study.get((game, loss), {})) for loss in REACH} | probed
     arms = {loss: {s: r for s, r in runs.items() if s in seeds} for loss, runs in arms.items()}
     teacher = ANCHORS[game][1]  # the imperfect expert's mean return over 100 episodes
     return "\n".join(
@@ -110,11 +101,14 @@ def main() -> None:
     parser.add_argument("--study", type=Path, default=DATA / "minatar.tar.xz", help="the five-game study's archive")
     parser.add_argument("--probe", type=Path, default=DATA / "minatar-expert-losses.tar.xz", help="the margin runs")
     args = parser.parse_args()
-    tables = [t for game in GAMES if (t := table(game, args.study, args.probe)) is not None]
+    with open_suite(args.study) as directory:
+        study = collect(directory, SEEDS).runs
+    probed, code = probe_runs(args.probe)
+    tables = [t for game in GAMES if (t := table(game, study, probed)) is not None]
     if not tables:
         raise SystemExit(f"{args.probe}: no run at {BUDGET:,} interactions")
     print("\n\n".join(tables))
-    print(f"\nthe margin runs' code: {provenance(args.probe)}")
+    print(f"\nthe margin runs' code: {code}")
 
 
 if __name__ == "__main__":
