@@ -7,15 +7,20 @@ BC model's on every sampled transition, the agent's own included (docs/ALGORITHM
 `margin` acts on demonstrated transitions only, and `bc_margin` is the same margin on every
 transition (a_E = argmax π_bc). This prints, game by game and seed for seed, the study's runs beside
 runs of the same preset under the margins: is it the loss's form or its reach that holds the agent?
+And on Freeway, where SB3's DQN leaves every arm of ours far behind, plain DQN (`none`) under SB3's
+update schedule (Adam at 1e-4, an update every 4 steps, ε to 0.01, the Huber loss): is it the schedule?
 
     .venv/bin/python docs/expert_losses.py      # the tables, from the committed archives
 
-The margin runs (the presets' defaults; one thread each, ~10 minutes a run here):
+The probe's runs (the presets' defaults but for the loss or the schedule; one thread each, ~10 minutes a run):
 
     for loss in margin bc_margin; do for s in 0 1 2 3 4 5; do .venv/bin/python train.py --task minatar-breakout \\
         --expert-loss $loss --seed $s --out runs/expert-losses/minatar-breakout-$loss/seed$s --quiet; done; done
     for s in 0 1 2; do .venv/bin/python train.py --task minatar-freeway --expert-loss margin --seed $s \\
         --out runs/expert-losses/minatar-freeway-margin/seed$s --quiet; done
+    for s in 0 1 2; do .venv/bin/python train.py --task minatar-freeway --expert-loss none --seed $s \\
+        --set learning_rate=1e-4 --set train_freq=4 --set epsilon_end=0.01 --set td_loss=huber \\
+        --out runs/expert-losses/minatar-freeway-none-sb3-schedule/seed$s --quiet; done
     .venv/bin/python -m dqfd_bc_keras.experiments export runs/expert-losses --out docs/data/minatar-expert-losses.tar.xz
 """
 
@@ -29,17 +34,22 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.experiments.data import load_runs, open_suite
-from dqfd_bc_keras.experiments.efficiency import interaction_evals
+from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals
 from dqfd_bc_keras.experiments.minatar_study import ANCHORS, BUDGET, GAMES, collect
 
 DATA = Path(__file__).resolve().parent / "data"
-REACH = {  # in the order of the tables' rows
+SB3_SCHEDULE = {"learning_rate": 1e-4, "train_freq": 4, "epsilon_end": 0.01, "td_loss": "huber"}
+"""SB3's DQN's update schedule in the study (rl-zoo3's Atari entry, sb3_pixels.ZOO_ATARI; SB3's Huber loss)."""
+ARMS = {  # row → what its imitation applies to, in the order of the tables' rows
     "bayes": "every transition",
     "ce": "every transition",
     "bc_margin": "every transition",
     "margin": "demonstrations only",
     "none": "(no expert loss)",
+    "none, SB3's schedule": "(no expert loss)",
+    SB3_METHOD: "(no expert loss)",
 }
 SEEDS = 10  # the study's
 
@@ -49,12 +59,22 @@ def returns(runs: dict[int, list[tuple[float, float]]]) -> dict[int, list[float]
     return {seed: [r for _, r in evals] for seed, evals in sorted(runs.items()) if evals[-1][0] >= BUDGET}
 
 
+def schedule(config: Config) -> str:
+    """The row suffix of a probe run's update schedule: its preset's or SB3's (an error for any other)."""
+    preset = Config.for_task(config.task)
+    if all(getattr(config, name) == getattr(preset, name) for name in SB3_SCHEDULE):
+        return ""
+    if all(getattr(config, name) == value for name, value in SB3_SCHEDULE.items()):
+        return ", SB3's schedule"
+    raise SystemExit(f"{config.task} seed {config.seed}: an update schedule neither its preset's nor {SB3_SCHEDULE}")
+
+
 def probe_runs(probe: Path) -> tuple[dict[tuple[str, str], dict[int, list[float]]], str]:
-    """(task, expert loss) → seed → evaluation returns of the margin runs, and the code they ran."""
+    """(task, row) → seed → evaluation returns of the probe's runs, and the code they ran."""
     runs, commits = {}, Counter()
     for run in load_runs(probe):
         c = run.config
-        runs.setdefault((c.task, c.expert_loss), {})[c.seed] = interaction_evals(run)
+        runs.setdefault((c.task, c.expert_loss + schedule(c)), {})[c.seed] = interaction_evals(run)
         origin = run.provenance
         commits[(origin.code_commit or "unknown")[:7] + " (modified)" * bool(origin.dirty)] += 1
     code = ", ".join(f"{commit}: {n} run{'s' * (n > 1)}" for commit, n in sorted(commits.items()))
@@ -67,8 +87,9 @@ def row(loss: str, runs: dict[int, list[float]], teacher: float) -> str:
     best = [max(r) for r in runs.values()]
     distinct = [len(set(r)) for r in runs.values()]
     n = len(next(iter(runs.values())))
+    name = loss if loss == SB3_METHOD else "`" + loss.replace(", ", "`, ", 1) + ("`" * (", " not in loss))
     return (
-        f"| `{loss}` | {REACH[loss]} | {len(runs)} | {statistics.median(start):.2f} | "
+        f"| {name} | {ARMS[loss]} | {len(runs)} | {statistics.median(start):.2f} | "
         f"{statistics.median(end):.2f} ({', '.join(f'{x:g}' for x in end)}) | {statistics.median(best):.2f} | "
         f"{statistics.median(distinct):g} of {n} | {sum(x > teacher for x in end)} of {len(runs)} |"
     )
@@ -80,7 +101,7 @@ def table(game: str, study: dict, probed: dict) -> str | None:
     if not probed:
         return None
     seeds = set.intersection(*(set(runs) for runs in probed.values()))
-    arms = {loss: returns(study.get((game, loss), {})) for loss in REACH} | probed
+    arms = {loss: returns(study.get((game, loss), {})) for loss in ARMS} | probed
     arms = {loss: {s: r for s, r in runs.items() if s in seeds} for loss, runs in arms.items()}
     teacher = ANCHORS[game][1]  # the imperfect expert's mean return over 100 episodes
     return "\n".join(
@@ -91,7 +112,7 @@ def table(game: str, study: dict, probed: dict) -> str | None:
             "| best evaluation (median) | distinct evaluation returns (median) "
             f"| above the teacher's {teacher:g} at 100k |",
             "| --- | --- | --- | --- | --- | --- | --- | --- |",
-            *(row(loss, arms[loss], teacher) for loss in REACH if arms.get(loss)),
+            *(row(loss, arms[loss], teacher) for loss in ARMS if arms.get(loss)),
         ]
     )
 
@@ -99,7 +120,7 @@ def table(game: str, study: dict, probed: dict) -> str | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--study", type=Path, default=DATA / "minatar.tar.xz", help="the five-game study's archive")
-    parser.add_argument("--probe", type=Path, default=DATA / "minatar-expert-losses.tar.xz", help="the margin runs")
+    parser.add_argument("--probe", type=Path, default=DATA / "minatar-expert-losses.tar.xz", help="the probe's runs")
     args = parser.parse_args()
     with open_suite(args.study) as directory:
         study = collect(directory, SEEDS).runs
@@ -108,7 +129,7 @@ def main() -> None:
     if not tables:
         raise SystemExit(f"{args.probe}: no run at {BUDGET:,} interactions")
     print("\n\n".join(tables))
-    print(f"\nthe margin runs' code: {code}")
+    print(f"\nthe probe runs' code: {code}")
 
 
 if __name__ == "__main__":
