@@ -74,11 +74,22 @@ def probe_runs(probe: Path) -> tuple[dict[tuple[str, str], dict[int, list[float]
     runs, commits = {}, Counter()
     for run in load_runs(probe):
         c = run.config
-        runs.setdefault((c.task, c.expert_loss + schedule(c)), {})[c.seed] = interaction_evals(run)
+        arm = c.expert_loss + schedule(c)
+        if arm not in ARMS:
+            raise SystemExit(f"{c.task} seed {c.seed}: {arm!r} is none of the tables' rows {list(ARMS)}")
+        runs.setdefault((c.task, arm), {})[c.seed] = interaction_evals(run)
         origin = run.provenance
         commits[(origin.code_commit or "unknown")[:7] + " (modified)" * bool(origin.dirty)] += 1
     code = ", ".join(f"{commit}: {n} run{'s' * (n > 1)}" for commit, n in sorted(commits.items()))
     return {arm: returns(seeds) for arm, seeds in runs.items()}, code
+
+
+def label(arm: str) -> str:
+    """An arm as the tables name it: its expert loss in code type, then any schedule (SB3's as it is)."""
+    if arm == SB3_METHOD:
+        return arm
+    loss, _, rest = arm.partition(", ")
+    return f"`{loss}`" + (f", {rest}" if rest else "")
 
 
 def row(loss: str, runs: dict[int, list[float]], teacher: float) -> str:
@@ -87,9 +98,8 @@ def row(loss: str, runs: dict[int, list[float]], teacher: float) -> str:
     best = [max(r) for r in runs.values()]
     distinct = [len(set(r)) for r in runs.values()]
     n = len(next(iter(runs.values())))
-    name = loss if loss == SB3_METHOD else "`" + loss.replace(", ", "`, ", 1) + ("`" * (", " not in loss))
     return (
-        f"| {name} | {ARMS[loss]} | {len(runs)} | {statistics.median(start):.2f} | "
+        f"| {label(loss)} | {ARMS[loss]} | {len(runs)} | {statistics.median(start):.2f} | "
         f"{statistics.median(end):.2f} ({', '.join(f'{x:g}' for x in end)}) | {statistics.median(best):.2f} | "
         f"{statistics.median(distinct):g} of {n} | {sum(x > teacher for x in end)} of {len(runs)} |"
     )
