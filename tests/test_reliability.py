@@ -24,7 +24,7 @@ from dqfd_bc_keras.core.config import QUICK, Config
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, RunDirectoryError
 from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.experiments.sweep import run_suite
-from dqfd_bc_keras.files import DirectoryLock
+from dqfd_bc_keras.files import DirectoryLock, temporary_of
 from dqfd_bc_keras.runs import directory as runs
 from dqfd_bc_keras.training.loop import TrainingState
 
@@ -333,6 +333,38 @@ def test_a_full_disk_mid_run_is_one_line_and_keeps_a_resumable_checkpoint(tmp_pa
     )
     assert (_checkpoint(out) / "state.json").is_file()
     assert not [p for p in out.rglob(".*") if p.name != ".lock"]  # no temporary files left behind
+
+
+def _full_disk(*args, **kwargs):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # as `write` raises it: naming no file
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["new", "empty"])
+@pytest.mark.parametrize("write", [".lock", "config.json"])
+def test_a_full_disk_before_the_first_checkpoint_names_the_file_and_leaves_no_directory(
+    tmp_path, monkeypatch, capsys, write, existing
+):
+    """The first bytes a run writes (the PID in its lock, then its config.json) fail on a full disk:
+    one line naming the file, and nothing left of the run, not even the directories made for it."""
+    out = tmp_path / "runs" / "run"
+    if existing:
+        out.mkdir(parents=True)
+    if write == ".lock":
+        monkeypatch.setattr(os, "pwrite", _full_disk)
+    else:
+        real = Path.write_text
+        monkeypatch.setattr(
+            Path,
+            "write_text",
+            lambda self, *a, **k: (_full_disk if temporary_of(self.name) == write else real)(self, *a, **k),
+        )
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
+        f"error: {out / write}: No space left on device\n",
+    )
+    assert list(tmp_path.iterdir()) == ([tmp_path / "runs"] if existing else [])
+    assert not existing or list(out.iterdir()) == []
 
 
 def test_a_real_full_disk_where_the_machine_allows_mounting_one(tmp_path, capsys):
