@@ -524,6 +524,32 @@ def test_sigterm_stops_a_run_like_ctrl_c_and_it_resumes(tmp_path):
     assert (out / "eval.json").is_file()
 
 
+SIGTERM_BEFORE_THE_RUN = """
+import os, signal, sys
+from dqfd_bc_keras.commands import cli, train
+# The signal lands while the command is still checking its arguments: the run directory does not exist yet.
+train.try_demonstrator = lambda config: os.kill(os.getpid(), signal.SIGTERM)
+sys.exit(cli.run(train.main, sys.argv[1:]))
+"""
+
+
+def test_sigterm_before_the_run_directory_exists_says_nothing_was_written(tmp_path):
+    out = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-c", SIGTERM_BEFORE_THE_RUN, "--quick", "--quiet", "--out", str(out)],
+        cwd=REPO,
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert (done.returncode, done.stderr) == (
+        143,
+        "interrupted (SIGTERM); nothing was written; run the same command again\n",
+    )
+    assert not out.exists()
+
+
 # --- round 2: a resumed run is the run it says it is --------------------------------------------
 
 
