@@ -21,6 +21,7 @@ import tensorflow as tf
 from dqfd_bc_keras.choices import POLICY_FILES, TIMEOUT_MODES
 from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import BUILT_IN, playing_saved_run
 from dqfd_bc_keras.core.uncertainty import EnsembleDense
 from dqfd_bc_keras.envs.episodes import EvalResult, check_video, play, video_env
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
@@ -258,7 +259,8 @@ def load_policy(
     model_path = target / POLICY_FILES[policy or "q"] if target.is_dir() else target
     config = read_config(model_path.parent / "config.json")
     if target.is_dir() and not model_path.exists():
-        why = f" (expert loss {config.expert_loss!r} fits no BC model)" if config and not config.uses_bc else ""
+        built_in = config is not None and config.expert_loss in BUILT_IN  # a user's method is not imported here
+        why = f" (expert loss {config.expert_loss!r} fits no BC model)" if built_in and not config.uses_bc else ""
         raise ModelFileError(f"{target}: run directory without {model_path.name}{why}")
     model = load_model(model_path)
     try:
@@ -284,14 +286,17 @@ def load_policy(
 
 
 def read_config(path: Path) -> Config | None:
-    """The run's `config.json`, None when there is none, a `ConfigError` naming it when unusable."""
+    """The run's `config.json`, None when there is none, a `ConfigError` naming it when unusable.
+    Read for its settings only: the module of a method of the user's own is not imported (its code
+    does not run)."""
     if not path.is_file():
         return None
     try:
         fields = json.loads(path.read_text())
         if not isinstance(fields, dict):
             raise ConfigError("expected a JSON object of config fields")
-        return Config.from_dict(fields)
+        with playing_saved_run():
+            return Config.from_dict(fields)
     except json.JSONDecodeError as error:
         raise ConfigError(f"{path}: not valid JSON ({error})") from None
     except (OSError, TypeError, ValueError) as error:
