@@ -50,6 +50,7 @@ from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
 from dqfd_bc_keras.envs.episodes import EvalResult
+from dqfd_bc_keras.evaluation import unmade_env
 from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from dqfd_bc_keras.runs.provenance import provenance
 from dqfd_bc_keras.runs.writers import (
@@ -419,15 +420,19 @@ def differences(was: dict, now: dict) -> list[str]:
 
 
 def _read_config(path: Path) -> Config:
-    """A run's config.json or its checkpoint's copy, holding every field of Config."""
+    """A run's config.json or its checkpoint's copy, holding every field of Config; a run of a
+    Python env object is refused as such (only Python can give it its env again), not as broken."""
     try:
         fields = json.loads(path.read_text())
-        config = Config.from_dict(fields)
+        env = fields.get("task") if isinstance(fields, dict) else None
+        if not unmade_env(env):
+            return Config.from_dict(fields)
     except (OSError, ValueError) as error:
-        raise BrokenRunError(
-            f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force"
-        ) from None
-    return config
+        raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
+    raise RunDirectoryError(
+        f"{path}: trained on a Python env object ({env}), which no other process can make; "
+        "give it again from Python: DQfD.load(path, env=...)"
+    )
 
 
 def _start(
