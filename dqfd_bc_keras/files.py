@@ -44,9 +44,8 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
 
     The temporary's name is unmistakably the program's (`TEMPORARY`) and ends in `path`'s name, so
     writers that check the suffix (Keras wants `.keras`, numpy appends `.npz` otherwise) work
-    unchanged. On error the temporary file is
-    removed and `path` is left as it was. `durable`: fsync the file before the rename and the
-    directory after it.
+    unchanged. On error the temporary file is removed and `path` is left as it was. `durable`:
+    fsync the file before the rename and the directory after it.
     """
     path = Path(path)
     if path.is_dir():

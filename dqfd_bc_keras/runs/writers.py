@@ -122,23 +122,31 @@ OWN_LAYOUT = {
 
 
 def clear(out: Path) -> None:
-    """Delete what a run wrote in `out`: RUN_FILES (in checkpoints/ and tb/, only what the run
-    writes there: OWN_LAYOUT) and the temporaries of its writes. Its lock and every other file or
-    folder are kept: nothing a user put there is deleted."""
+    """Delete what a run wrote in `out`: the files of RUN_FILES, in checkpoints/ and tb/ only what
+    the run writes there (OWN_LAYOUT), and the temporaries of its writes. Its lock and every other
+    file or folder are kept: nothing a user put there is deleted."""
     for path in out.iterdir():
-        if path.name in OWN_LAYOUT and path.is_dir() and not path.is_symlink():
-            _delete(path, OWN_LAYOUT[path.name])
-        elif path.name in RUN_FILES or temporary_of(path.name) is not None:
-            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+        if _folder(path) and path.name in OWN_LAYOUT:
+            _clear(path, OWN_LAYOUT[path.name])
+        elif not _folder(path) and (path.name in RUN_FILES or temporary_of(path.name) is not None):
+            path.unlink()
 
 
-def _delete(folder: Path, own: Callable[[str], object]) -> None:
-    """The entries of `folder` that `own` names and the temporaries in it; the folder too, once empty."""
+def _clear(folder: Path, own: Callable[[str], object]) -> None:
+    """What the run writes in its `folder` (`own`: files, and checkpoint folders, deleted whole) and
+    the temporaries there; the folder too, once empty."""
     for path in folder.iterdir():
-        if own(path.name) or temporary_of(path.name) is not None:
-            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+        if _folder(path) and own(path.name):
+            shutil.rmtree(path)
+        elif not _folder(path) and (own(path.name) or temporary_of(path.name) is not None):
+            path.unlink()
     with contextlib.suppress(OSError):  # a user's file is left in it
         folder.rmdir()
+
+
+def _folder(path: Path) -> bool:
+    """A folder itself (a link to one is unlinked like a file: nothing it points to is deleted)."""
+    return path.is_dir() and not path.is_symlink()
 
 
 def _writer(file: IO[str], record: type[Record]) -> csv.DictWriter:
