@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import keras
 import numpy as np
 import tensorflow as tf
@@ -21,9 +22,10 @@ import tensorflow as tf
 from dqfd_bc_keras.choices import POLICY_FILES, TIMEOUT_MODES
 from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import BUILT_IN, playing_saved_run
 from dqfd_bc_keras.core.uncertainty import EnsembleDense
 from dqfd_bc_keras.envs.episodes import EvalResult, check_video, play, video_env
-from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
+from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
 
 FRAME_LAYERS = (keras.layers.Conv2D, keras.layers.Rescaling, keras.layers.Flatten, keras.layers.Reshape)
@@ -256,9 +258,10 @@ def load_policy(
     if not target.exists():  # before looking for a config.json beside it
         raise ModelFileError(f"{target}: no such file or directory")
     model_path = target / POLICY_FILES[policy or "q"] if target.is_dir() else target
-    config = read_config(model_path.parent / "config.json")
+    config = read_config(model_path.parent / "config.json", task)
     if target.is_dir() and not model_path.exists():
-        why = f" (expert loss {config.expert_loss!r} fits no BC model)" if config and not config.uses_bc else ""
+        built_in = config is not None and config.expert_loss in BUILT_IN  # a user's method is not imported here
+        why = f" (expert loss {config.expert_loss!r} fits no BC model)" if built_in and not config.uses_bc else ""
         raise ModelFileError(f"{target}: run directory without {model_path.name}{why}")
     model = load_model(model_path)
     try:
@@ -283,16 +286,34 @@ def load_policy(
     return greedy, settings
 
 
-def read_config(path: Path) -> Config | None:
-    """The run's `config.json`, None when there is none, a `ConfigError` naming it when unusable."""
+def read_config(path: Path, task: str | None = None) -> Config | None:
+    """The run's `config.json`, None when there is none, a `ConfigError` naming it when unusable.
+    Read for its settings only: the module of a method of the user's own is not imported (its code
+    does not run). `task`, the task the run is played on instead of its own, stands in for the id of
+    a Python env object, which no other process can make (`unmade_env`)."""
     if not path.is_file():
         return None
     try:
         fields = json.loads(path.read_text())
         if not isinstance(fields, dict):
             raise ConfigError("expected a JSON object of config fields")
-        return Config.from_dict(fields)
+        if unmade_env(fields.get("task")):
+            if task is None:
+                raise ConfigError(
+                    f"trained on a Python env object ({fields['task']}), which no other process can make: "
+                    "evaluate it from Python, DQfD.load(path, env=...).evaluate(), or here with --env ID, "
+                    "a registered id of the same env"
+                )
+            fields = {**fields, "task": task}
+        with playing_saved_run():
+            return Config.from_dict(fields)
     except json.JSONDecodeError as error:
         raise ConfigError(f"{path}: not valid JSON ({error})") from None
     except (OSError, TypeError, ValueError) as error:
         raise ConfigError(f"{path}: {error}") from None
+
+
+def unmade_env(task: object) -> bool:
+    """Whether `task` names a Python env object (`DQfD(env=<object>)`, `envs.make.env_id_of`) that
+    this process has not been given again: its id was registered only in the process that made it."""
+    return isinstance(task, str) and task.startswith(PYTHON_ENV_PREFIX) and task not in gym.registry

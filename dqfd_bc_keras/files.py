@@ -14,10 +14,9 @@ import errno
 import fcntl
 import os
 import re
-import shutil
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from dqfd_bc_keras.errors import DirectoryInUseError, OutputExistsError, RunDirectoryError
@@ -43,10 +42,10 @@ def sync_tree(root: Path) -> None:
 def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success it is renamed to `path`.
 
-    The temporary name keeps `path`'s suffix, so writers that check it (Keras wants
-    `.keras`, numpy appends `.npz` otherwise) work unchanged. On error the temporary file is
-    removed and `path` is left as it was. `durable`: fsync the file before the rename and the
-    directory after it.
+    The temporary's name is unmistakably the program's (`TEMPORARY`) and ends in `path`'s name, so
+    writers that check the suffix (Keras wants `.keras`, numpy appends `.npz` otherwise) work
+    unchanged. On error the temporary file is removed and `path` is left as it was. `durable`:
+    fsync the file before the rename and the directory after it.
     """
     path = Path(path)
     if path.is_dir():
@@ -54,15 +53,15 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
     if not overwrite and path.exists():
         raise OutputExistsError(f"{path} exists; pass --force to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
-    with _naming(path, None):
-        fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    with naming(path):
+        fd, name = tempfile.mkstemp(prefix=f"{TEMPORARY_PREFIX}{os.getpid()}-", suffix=f"-{path.name}", dir=path.parent)
     os.close(fd)
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(name, 0o666 & ~umask)  # mkstemp makes 0600; a result should be as readable as any file
     tmp = Path(name)
     try:
-        with _naming(path, tmp):
+        with naming(path, tmp):
             yield tmp
             if durable:
                 _sync(tmp)
@@ -74,7 +73,7 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
 
 
 @contextlib.contextmanager
-def _naming(path: Path, tmp: Path | None) -> Iterator[None]:
+def naming(path: Path, tmp: Path | None = None) -> Iterator[None]:
     """An OSError writing `path` names `path`: the user's file, not the temporary one beside it (a
     read-only directory) nor none at all (a full disk in `write`, which names no file)."""
     try:
@@ -85,22 +84,30 @@ def _naming(path: Path, tmp: Path | None) -> Iterator[None]:
         raise OSError(error.errno, error.strerror, str(path)) from None
 
 
-TEMPORARY = re.compile(r"\.(.+)\.[a-z0-9_]{8}(\.[^.]+)?")
-"""The name `atomic_path` gives its temporary file: `.{stem}.{8 random characters}{suffix}`."""
+TEMPORARY_PREFIX = ".dqfd-tmp-"
+TEMPORARY = re.compile(r"\.dqfd-tmp-\d+-[a-z0-9_]{8}-(.+)")
+"""The name `atomic_path` gives its temporary file: `.dqfd-tmp-{pid}-{8 random characters}-{name}`.
+Only a name of exactly this form is ever taken for a temporary (and deleted): until 2026-12-06 it
+was `.{stem}.{8 characters}{suffix}`, which a user's `.thesis.20261206.tex` matched too."""
 
 
 def temporary_of(name: str) -> str | None:
     """The file whose temporary `name` is (`TEMPORARY`), else None."""
     match = TEMPORARY.fullmatch(name)
-    return None if match is None else f"{match[1]}{match[2] or ''}"
+    return None if match is None else match[1]
 
 
 def remove_temporaries(directory: Path) -> list[Path]:
     """Delete the temporaries `atomic_path` left in `directory` and its subdirectories (a writer
-    killed before its rename); returns them."""
-    found = [path for path in Path(directory).rglob(".*") if TEMPORARY.fullmatch(path.name)]
+    killed before its rename); returns them. Only regular files named `TEMPORARY` go: nothing else
+    is touched, and no directory is deleted."""
+    found = [
+        path
+        for path in Path(directory).rglob(f"{TEMPORARY_PREFIX}*")
+        if TEMPORARY.fullmatch(path.name) and path.is_file() and not path.is_symlink()
+    ]
     for path in found:
-        shutil.rmtree(path) if path.is_dir() else path.unlink()
+        path.unlink()
     return found
 
 
@@ -114,43 +121,116 @@ class DirectoryLock:
     """One writer per directory: an exclusive `flock` on DIR/.lock, which holds the writer's PID.
 
     The kernel drops the lock when its process dies, so a lock file that still names a PID but
-    can be locked was left by a writer that died: it is taken over with a warning. The file is
-    emptied on release, never deleted (deleting it would let two writers lock two different
-    files of the same name).
+    can be locked was left by a writer that died: it is taken over with a warning. Only the
+    program's own lock file is ever written: one this lock makes (O_EXCL), or one holding what a
+    lock writes (a PID, or nothing once released); any other `.lock` is refused, untouched.
+    `check`, called holding the lock before anything is written, may refuse the directory (its
+    result is `checked`): a refusal writes nothing, and a lock file or directory this lock made
+    for it is removed. On release the file is emptied, never deleted while other files are beside
+    it; one this lock made and left alone goes, with the directories made for it.
     """
 
     NAME = ".lock"
+    OWN = re.compile(r"(\d+\n)?")
+    """What the program's lock file holds: its writer's PID while held, nothing once released."""
 
-    def __init__(self, directory: Path) -> None:
-        self.directory = directory
+    def __init__(self, directory: Path, check: Callable[[], object] | None = None) -> None:
+        self.directory, self.check = Path(directory), check
+        self.checked: object = None
         self.fd: int | None = None
+        self.created = self.written = False
+        """Whether this lock made its file, and has written it (a refusal writes nothing)."""
+        self.made: list[Path] = []
+        """The directories this lock made, deepest first."""
 
     def __enter__(self) -> DirectoryLock:
         if self.directory.exists() and not self.directory.is_dir():
             raise RunDirectoryError(f"{self.directory} is a file, not a run directory")
-        self.directory.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.directory / self.NAME, os.O_RDWR | os.O_CREAT, 0o644)
-        holder = os.pread(fd, 64, 0).decode(errors="replace").strip()
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise DirectoryInUseError(
-                f"{self.directory} is in use by process {holder or '(unknown)'}; wait for it to finish or stop it"
-            ) from None
-        stale = os.pread(fd, 64, 0).decode(errors="replace").strip()  # a clean release leaves it empty
-        if stale:
-            print(
-                f"warning: {self.directory}: taking over the lock left by process {stale}, which is no longer running",
-                file=sys.stderr,
-            )
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        self.fd = fd
+            self._acquire()
+        except BaseException:
+            self._release()
+            raise
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        if self.fd is not None:
+    def _acquire(self) -> None:
+        path = self.directory / self.NAME
+        while self.fd is None:  # again if the file was deleted by the writer that held it
+            self.made += [p for p in (self.directory, *self.directory.parents) if not p.exists()]
+            self.directory.mkdir(parents=True, exist_ok=True)
+            fd = self._open(path)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 64, 0).decode(errors="replace").strip()
+                os.close(fd)
+                raise DirectoryInUseError(
+                    f"{self.directory} is in use by process {holder or '(unknown)'}; wait for it to finish or stop it"
+                ) from None
+            if _same_file(fd, path):
+                self.fd = fd
+            else:
+                os.close(fd)
+        held = os.pread(self.fd, 64, 0).decode(errors="replace")
+        if self.check is not None:
+            self.checked = self.check()
+        if os.fstat(self.fd).st_size > 64 or not self.OWN.fullmatch(held):
+            raise RunDirectoryError(
+                f"{path} is not this program's lock file (it holds other text), and a file the program did "
+                "not write is never written; move it away, or choose another directory"
+            )
+        if held:  # a clean release leaves it empty
+            print(
+                f"warning: {self.directory}: taking over the lock left by process {held.strip()}, "
+                "which is no longer running",
+                file=sys.stderr,
+            )
+        self.written = True
+        with naming(path):  # a full disk: the lock file named
             os.ftruncate(self.fd, 0)
+            os.pwrite(self.fd, f"{os.getpid()}\n".encode(), 0)
+
+    def _open(self, path: Path) -> int:
+        """The lock file, made (O_EXCL: `created`) or opened as it is: never created over, truncated,
+        nor followed (a symbolic link, a directory: refused)."""
+        flags = os.O_RDWR | os.O_NOFOLLOW | os.O_CLOEXEC
+        try:
+            fd = os.open(path, flags | os.O_CREAT | os.O_EXCL, 0o644)
+            self.created = True
+            return fd
+        except FileExistsError:
+            self.created = False
+            if path.is_symlink() or not path.is_file():
+                raise RunDirectoryError(
+                    f"{path} is not this program's lock file (not a regular file); move it away, or choose "
+                    "another directory"
+                ) from None
+            return os.open(path, flags)
+
+    def __exit__(self, *exc: object) -> None:
+        self._release()
+
+    def _release(self) -> None:
+        """Unlock, having emptied the lock file if it was written. A file this lock made is
+        deleted when it was never written (a refusal) or is alone in its directory (before the
+        unlock: whoever opened it finds it gone, `_same_file`), and with it the directories made
+        for it, if empty."""
+        if self.fd is not None:
+            if self.created and (not self.written or os.listdir(self.directory) == [self.NAME]):
+                (self.directory / self.NAME).unlink()
+            elif self.written:
+                os.ftruncate(self.fd, 0)
             os.close(self.fd)  # closing releases the flock
             self.fd = None
+        for directory in self.made:
+            with contextlib.suppress(OSError):  # not empty: something else was put there
+                directory.rmdir()
+        self.made = []
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether `path` is still the file `fd` opened (a releasing writer may have deleted it)."""
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
+    except FileNotFoundError:
+        return False

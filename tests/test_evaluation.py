@@ -169,6 +169,32 @@ def test_a_broken_config_json_is_named(run_dir, tmp_path, text, problem):
         load_policy(tmp_path)
 
 
+PLUG_IN_WITH_A_SIDE_EFFECT = """from pathlib import Path
+
+Path(__file__).with_name("imported.txt").write_text("my_evil_module's top-level code ran")
+
+
+def term(agent, q, batch):
+    return 0.0
+"""
+
+
+def test_evaluate_never_imports_the_module_of_a_runs_expert_loss(tmp_path):
+    """Playing a run needs its network and its env: the module its config.json names for the expert
+    loss is never imported (its top-level code would run), whichever model is played."""
+    code = tmp_path / "code"
+    code.mkdir()
+    (code / "my_evil_module.py").write_text(PLUG_IN_WITH_A_SIDE_EFFECT)
+    run = make_run(tmp_path / "run")
+    fields = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**fields, "expert_loss": "my_evil_module:term"}))
+    for policy in ("q", "bc"):
+        done = call("evaluate.py", run, "--episodes", "2", "--policy", policy, path=[code])
+        assert (done.returncode, done.stderr) == (0, ""), done.stderr
+        assert f"{policy} policy, 2 greedy episodes" in done.stdout
+    assert not (code / "imported.txt").exists()
+
+
 def test_a_model_for_another_action_count_does_not_fit(tmp_path):
     build_q_network(4, 3, (8,)).save(tmp_path / "three.keras")
     with pytest.raises(ModelFileError, match="has 3 outputs, task cartpole has 2 actions"):

@@ -43,6 +43,7 @@ from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.memory import machine_memory, memory_needed
 from dqfd_bc_keras.demos import record, save
 from dqfd_bc_keras.envs.make import checked_spaces, make_task
+from dqfd_bc_keras.files import temporary_of
 from dqfd_bc_keras.runs import directory as runs
 
 NO_TENSORFLOW = 'raise ImportError("tensorflow is blocked by the test")\n'
@@ -136,7 +137,7 @@ def test_force_replaces_a_run_but_keeps_a_file_the_user_put_in_it(finished, tmp_
     run = tmp_path / "run"
     shutil.copytree(finished, run)
     (run / "notes.txt").write_text("my notes")
-    (run / ".eval.abcd1234.json").write_text("{")  # a temporary a killed run left
+    (run / ".dqfd-tmp-4242-abcd1234-eval.json").write_text("{")  # a temporary a killed run left
     one_line(
         capsys,
         cli.run(train_main, [*TINY_RUN, "--out", str(run)]),
@@ -145,7 +146,7 @@ def test_force_replaces_a_run_but_keeps_a_file_the_user_put_in_it(finished, tmp_
     old_metrics = (run / "metrics.csv").read_bytes()
     assert cli.run(train_main, [*TINY_RUN, "--set", "seed=1", "--force", "--out", str(run)]) == 0
     assert (run / "notes.txt").read_text() == "my notes"
-    assert not (run / ".eval.abcd1234.json").exists()
+    assert not (run / ".dqfd-tmp-4242-abcd1234-eval.json").exists()
     assert json.loads((run / "config.json").read_text())["seed"] == 1 and (run / runs.COMPLETE).is_file()
     assert (run / "metrics.csv").read_bytes() != old_metrics
 
@@ -269,10 +270,10 @@ def test_a_full_disk_in_the_final_phase_names_the_file(finished, tmp_path, capsy
     run = tmp_path / "run"
     shutil.copytree(finished, run)
     (run / runs.COMPLETE).unlink()  # cut off in its final phase: a resume finishes it
-    stem, real_text, real_save = Path(name).stem, Path.write_text, keras.Model.save
+    real_text, real_save = Path.write_text, keras.Model.save
 
     def full(path):
-        if Path(path).name.startswith(f".{stem}."):
+        if temporary_of(Path(path).name) == name:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(Path, "write_text", lambda self, *a, **k: full(self) or real_text(self, *a, **k))

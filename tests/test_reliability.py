@@ -24,7 +24,7 @@ from dqfd_bc_keras.core.config import QUICK, Config
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, RunDirectoryError
 from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.experiments.sweep import run_suite
-from dqfd_bc_keras.files import DirectoryLock
+from dqfd_bc_keras.files import DirectoryLock, temporary_of
 from dqfd_bc_keras.runs import directory as runs
 from dqfd_bc_keras.training.loop import TrainingState
 
@@ -335,6 +335,38 @@ def test_a_full_disk_mid_run_is_one_line_and_keeps_a_resumable_checkpoint(tmp_pa
     assert not [p for p in out.rglob(".*") if p.name != ".lock"]  # no temporary files left behind
 
 
+def _full_disk(*args, **kwargs):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # as `write` raises it: naming no file
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["new", "empty"])
+@pytest.mark.parametrize("write", [".lock", "config.json"])
+def test_a_full_disk_before_the_first_checkpoint_names_the_file_and_leaves_no_directory(
+    tmp_path, monkeypatch, capsys, write, existing
+):
+    """The first bytes a run writes (the PID in its lock, then its config.json) fail on a full disk:
+    one line naming the file, and nothing left of the run, not even the directories made for it."""
+    out = tmp_path / "runs" / "run"
+    if existing:
+        out.mkdir(parents=True)
+    if write == ".lock":
+        monkeypatch.setattr(os, "pwrite", _full_disk)
+    else:
+        real = Path.write_text
+        monkeypatch.setattr(
+            Path,
+            "write_text",
+            lambda self, *a, **k: (_full_disk if temporary_of(self.name) == write else real)(self, *a, **k),
+        )
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quick", "--quiet", "--out", str(out)]),
+        f"error: {out / write}: No space left on device\n",
+    )
+    assert list(tmp_path.iterdir()) == ([tmp_path / "runs"] if existing else [])
+    assert not existing or list(out.iterdir()) == []
+
+
 def test_a_real_full_disk_where_the_machine_allows_mounting_one(tmp_path, capsys):
     """The same on a 500 kB tmpfs (needs root; the injected cases above run everywhere)."""
     disk = tmp_path / "disk"
@@ -490,6 +522,32 @@ def test_sigterm_stops_a_run_like_ctrl_c_and_it_resumes(tmp_path):
     resumed = call("train.py", *args[2:], "--resume")  # the resume itself needs no process of its own
     assert resumed.returncode == 0, resumed.stderr
     assert (out / "eval.json").is_file()
+
+
+SIGTERM_BEFORE_THE_RUN = """
+import os, signal, sys
+from dqfd_bc_keras.commands import cli, train
+# The signal lands while the command is still checking its arguments: the run directory does not exist yet.
+train.try_demonstrator = lambda config: os.kill(os.getpid(), signal.SIGTERM)
+sys.exit(cli.run(train.main, sys.argv[1:]))
+"""
+
+
+def test_sigterm_before_the_run_directory_exists_says_nothing_was_written(tmp_path):
+    out = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-c", SIGTERM_BEFORE_THE_RUN, "--quick", "--quiet", "--out", str(out)],
+        cwd=REPO,
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert (done.returncode, done.stderr) == (
+        143,
+        "interrupted (SIGTERM); nothing was written; run the same command again\n",
+    )
+    assert not out.exists()
 
 
 # --- round 2: a resumed run is the run it says it is --------------------------------------------

@@ -21,10 +21,12 @@ import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dqfd_bc_keras import demos
 from dqfd_bc_keras.choices import EXPERT_NAMES, TARGETS, TIMEOUT_MODES
 from dqfd_bc_keras.commands.cli import (
+    RESUMABLE,
     ArgumentParser,
     add_task_arguments,
     chosen_task,
@@ -40,7 +42,10 @@ from dqfd_bc_keras.demos.experts import try_demonstrator
 from dqfd_bc_keras.envs.make import checked_spaces, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.files import DirectoryLock
-from dqfd_bc_keras.runs.writers import check_dir
+from dqfd_bc_keras.runs.writers import check_dir, has_checkpoint
+
+if TYPE_CHECKING:
+    from dqfd_bc_keras.runs.directory import RunResult
 
 
 def parse(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -110,6 +115,50 @@ def check_out(out: str | None) -> None:
             ) from None
 
 
+NOTHING_WRITTEN = "nothing was written; run the same command again"
+"""What an interrupt before the run's first checkpoint left, when training did not say it."""
+
+
+def train_into(args: argparse.Namespace, task: str | None, overrides: dict, out: str) -> RunResult:
+    """The run the arguments ask for, in `out`: a new one checked before TensorFlow loads, or the
+    one there resumed in its own config (a flag that would change it is refused)."""
+    dataset = None
+    if not args.resume:  # what a new run needs, checked before TensorFlow loads
+        task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
+        config = Config.for_task(task, **overrides)
+        check_memory(config, checked_spaces(config))
+        if not (Path(out) / DirectoryLock.NAME).exists():  # else the lock's holder is named first, in `train`
+            check_dir(Path(out), resume=False, force=args.force)
+        if args.demos:
+            dataset = demos.load_source(
+                args.demos,
+                task=config.task,
+                timeout=config.timeout,
+                env_kwargs=config.env_kwargs,
+                max_transitions=config.demo_capacity,
+            )
+            config = dataclasses.replace(config, expert=demos.given_expert(args.demos, dataset))
+        elif config.uses_demos:
+            try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
+    from dqfd_bc_keras.runs.directory import (  # TensorFlow from here on: every argument has been checked
+        saved_config,
+        train,
+    )
+
+    if args.resume:
+        config = saved_config(out)
+        refuse_changes(
+            config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}, args.demos
+        )
+    if not args.quiet:
+        print(
+            f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
+            f"config: {out}/config.json",
+            flush=True,
+        )
+    return train(config, out, dataset, resume=args.resume, force=args.force, quiet=args.quiet)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse(argv)
     flags = {
@@ -136,42 +185,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"runs/{task_slug(task)}-{overrides.get('expert_loss', defaults['expert_loss'].default)}"
         f"-seed{overrides.get('seed', defaults['seed'].default)}"
     )
-    dataset = None
-    if not args.resume:  # what a new run needs, checked before TensorFlow loads
-        task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
-        config = Config.for_task(task, **overrides)
-        check_memory(config, checked_spaces(config))
-        if not (Path(out) / DirectoryLock.NAME).exists():  # else the lock's holder is named first, in `train`
-            check_dir(Path(out), resume=False, force=args.force)
-        if args.demos:
-            dataset = demos.load_source(
-                args.demos,
-                task=config.task,
-                timeout=config.timeout,
-                env_kwargs=config.env_kwargs,
-                max_transitions=config.demo_capacity,
-            )
-            config = dataclasses.replace(config, expert=demos.given_expert(args.demos, dataset))
-        elif config.uses_demos:
-            try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
-    from dqfd_bc_keras.runs.directory import (  # TensorFlow from here on: every argument has been checked
-        saved_config,
-        train,
-    )
-
-    # A resumed run is the run in `out`, as its config.json says; a flag that would change it is refused.
-    if args.resume:
-        config = saved_config(out)
-        refuse_changes(
-            config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}, args.demos
-        )
-    if not args.quiet:
-        print(
-            f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
-            f"config: {out}/config.json",
-            flush=True,
-        )
-    result = train(config, out, dataset, resume=args.resume, force=args.force, quiet=args.quiet)
+    try:
+        result = train_into(args, task, overrides, out)
+    except KeyboardInterrupt as error:  # what it left, as the disk says, unless training said it
+        error.args = error.args or (RESUMABLE if has_checkpoint(Path(out)) else NOTHING_WRITTEN,)
+        raise
     if not args.quiet:
         print(
             f"{result.episodes} episodes, {result.env_steps} env steps, {result.interactions} interactions in all"

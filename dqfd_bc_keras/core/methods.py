@@ -167,10 +167,27 @@ def reading_saved_config() -> Iterator[None]:
         _SAVED.reset(token)
 
 
+_PLAYING = ContextVar("playing_saved_run", default=False)
+
+
+@contextmanager
+def playing_saved_run() -> Iterator[None]:
+    """While a saved run is read to be played (evaluate.py), a method of the user's own, `module:NAME`,
+    is not imported at all (its module's top-level code does not run): it stands in as a plain
+    `Method`. Playing a run needs its network and its env, never its loss."""
+    token = _PLAYING.set(True)
+    try:
+        yield
+    finally:
+        _PLAYING.reset(token)
+
+
 def get_method(name: str) -> Method:
     """The method called `name`, or a user's `module:NAME` (a `Method` object in an importable module)."""
     if name in METHODS:
         return METHODS[name]
+    if _PLAYING.get() and parse(name) is not None:
+        return Method(name, "a method of your own, not imported: a run is played without its loss")
     if parse(name) is None:
         if _SAVED.get():  # a run of a Method a script registered (DQfD(expert_loss=Method(...)))
             return Method(name, "a method a script registered, not registered here")

@@ -22,10 +22,11 @@ The files of records are written by `runs/writers.py`.
 
 A directory is a run directory when it holds `checkpoints/latest.json` or `complete.json`, or a
 `config.json` that train.py wrote (a JSON object with a `task` and an `expert_loss`: a run's first
-file). Only such a directory is replaced (`--force`), and replacing it deletes only the names above
-(and the temporaries of their writes): a file a user put beside them is kept. Any other directory
-that is not empty (its lock aside) is refused. A run killed before its first checkpoint holds its
-config.json but no checkpoint: a rerun, or `--resume`, starts it over, with a warning.
+file). Only such a directory is replaced (`--force`), and replacing it deletes only the names above,
+in tb/ and checkpoints/ only the run's own files (and the temporaries of its writes): any other file
+or folder a user put there is kept. Any other directory that is not empty (its lock aside) is
+refused. A run killed before its first checkpoint holds its config.json but no checkpoint: a rerun,
+or `--resume`, starts it over, with a warning.
 """
 
 from __future__ import annotations
@@ -49,10 +50,13 @@ from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
 from dqfd_bc_keras.envs.episodes import EvalResult
+from dqfd_bc_keras.evaluation import unmade_env
 from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from dqfd_bc_keras.runs.provenance import provenance
 from dqfd_bc_keras.runs.writers import (
+    CHECKPOINT,
     COMPLETE,
+    GIVEN_DEMOS,
     METRICS,
     RESTART,
     RESUME,
@@ -71,9 +75,6 @@ from dqfd_bc_keras.training.loop import Callback, Learner, build, evaluate_at, r
 from dqfd_bc_keras.training.records import DemoSummary, EpisodeRow, EvalRow
 from dqfd_bc_keras.training.state import TrainingState
 
-GIVEN_DEMOS = "demos_given.npz"
-"""D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
-demonstrations whatever their source (a file, a Minari dataset, a recording)."""
 EVAL_FIELDS = EvalRow.columns()
 """evals.csv's columns, as the record spells them."""
 
@@ -224,8 +225,8 @@ class RunDirectory:
         # deletes it (an interrupt here leaves one complete checkpoint or the other, and the
         # next save deletes whichever is not current).
         write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
-        for old in root.iterdir():
-            if old.is_dir() and old != target:
+        for old in root.iterdir():  # the run's own (writers.CHECKPOINT): a folder a user put there is kept
+            if old.is_dir() and old != target and CHECKPOINT.fullmatch(old.name):
                 shutil.rmtree(old, ignore_errors=True)
 
     def restore_checkpoint(self) -> None:
@@ -309,24 +310,21 @@ def train(
     if not resume:
         # before anything is written: a run that cannot fit (or whose env cannot) is refused, not killed halfway
         check_memory(config, checked_spaces(config))
-    created = not out.exists()
-    if not (out / DirectoryLock.NAME).exists():  # else a live writer is named first, holding the lock
-        check_dir(out, resume, force)
-    with DirectoryLock(out):
-        mode = check_dir(out, resume, force)
+    with DirectoryLock(out, check=lambda: check_dir(out, resume, force)) as lock:  # a live writer is named first
+        mode = lock.checked
         if mode == RESTART:
             dataset = _restart(out, config, dataset, resume)
         resume = mode == RESUME
-        if not resume:
-            clear(out)
         try:
+            if not resume:
+                clear(out)
             run = _start(config, out, dataset, resume, quiet, source)
         except BaseException as error:
             if not resume:
-                shutil.rmtree(out) if created else clear(out)
+                clear(out)  # and the lock removes a directory it made, left empty
             if isinstance(error, DivergedError):
                 raise DivergedError(f"{out}: {error}; nothing was kept") from None
-            if isinstance(error, KeyboardInterrupt):  # what the command line says the interrupt left
+            if isinstance(error, KeyboardInterrupt) and not resume:  # what the command line says it left
                 error.args = (f"{out}: nothing was kept (the run had not reached its first checkpoint)",)
             raise
         if resume:  # restored: what a kill cut short goes
@@ -377,9 +375,7 @@ def save_run(out: str | Path, learner: Learner, state: TrainingState, source: st
     """Write `learner` and its `state`, trained in this process, as a complete run directory `out`
     (replacing a run there): what `evaluate.py`, `train.py --resume` and `DQfD.load` read."""
     out = Path(out)
-    check_dir(out, resume=False, force=True)
-    with DirectoryLock(out):
-        check_dir(out, resume=False, force=True)
+    with DirectoryLock(out, check=lambda: check_dir(out, resume=False, force=True)):
         clear(out)
         write_config(learner.config, out)
         run = RunDirectory(learner.config, out, learner, state, quiet=True)
@@ -424,15 +420,19 @@ def differences(was: dict, now: dict) -> list[str]:
 
 
 def _read_config(path: Path) -> Config:
-    """A run's config.json or its checkpoint's copy, holding every field of Config."""
+    """A run's config.json or its checkpoint's copy, holding every field of Config; a run of a
+    Python env object is refused as such (only Python can give it its env again), not as broken."""
     try:
         fields = json.loads(path.read_text())
-        config = Config.from_dict(fields)
+        env = fields.get("task") if isinstance(fields, dict) else None
+        if not unmade_env(env):
+            return Config.from_dict(fields)
     except (OSError, ValueError) as error:
-        raise BrokenRunError(
-            f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force"
-        ) from None
-    return config
+        raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
+    raise RunDirectoryError(
+        f"{path}: trained on a Python env object ({env}), which no other process can make; "
+        "give it again from Python: DQfD.load(path, env=...)"
+    )
 
 
 def _start(

@@ -10,17 +10,19 @@ lab's test fixture (tests/data/make_suite.py), so the lab reads what runs write.
     dynamic_demos.json   one `DemoUpdate` per dynamic-demonstration update
 
 Every file is written atomically; metrics.csv may also grow by one appended row. Which
-directories hold a run, and what replacing one deletes (`check_dir`, `clear`), is decided here
-too, without TensorFlow, so that `train.py` refuses a wrong `--out` in a second.
+directories hold a run, and what replacing one deletes (`check_dir`, `clear`: only what the run
+wrote), is decided here too, without TensorFlow, so that `train.py` refuses a wrong `--out` in a second.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
+import re
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO
 
@@ -29,13 +31,16 @@ import numpy as np
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.make import get_task, task_spaces
 from dqfd_bc_keras.errors import ConfigError, OutputExistsError
-from dqfd_bc_keras.files import DirectoryLock, atomic_path, temporary_of, write_text
+from dqfd_bc_keras.files import DirectoryLock, atomic_path, naming, temporary_of, write_text
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Record
 
 METRICS, EVALS = "metrics.csv", "evals.csv"
 DEMONSTRATIONS, DYNAMIC_DEMOS = "demonstrations.json", "dynamic_demos.json"
 COMPLETE = "complete.json"
 """Written last, atomically, by a finished run: a run without it is resumed, never taken as done."""
+GIVEN_DEMOS = "demos_given.npz"
+"""D_demo as the run was given it, kept beside its checkpoints: a resume starts from the same
+demonstrations whatever their source (a file, a Minari dataset, a recording)."""
 RUN_FILES = frozenset(
     {
         "config.json",
@@ -60,9 +65,14 @@ NEW, RESUME, RESTART = "new", "resume", "restart"
 over the one there that was stopped before its first checkpoint."""
 
 
+def has_checkpoint(out: Path) -> bool:
+    """Whether `out` holds a run with a checkpoint: what `--resume` continues."""
+    return (out / "checkpoints" / "latest.json").is_file()
+
+
 def is_run(out: Path) -> bool:
     """Whether `out` holds a run (the rule of runs/directory.py's docstring): what `--force` may replace."""
-    if (out / "checkpoints" / "latest.json").is_file() or (out / COMPLETE).is_file():
+    if has_checkpoint(out) or (out / COMPLETE).is_file():
         return True
     try:
         config = json.loads((out / "config.json").read_text())
@@ -74,7 +84,8 @@ def is_run(out: Path) -> bool:
 def check_dir(out: Path, resume: bool, force: bool) -> str:
     """NEW, RESUME or RESTART for training into `out`; refuses what would overwrite a run (unless
     `force`), or anything that is not a run, or resuming what has no checkpoint. Checked before
-    TensorFlow loads and before the lock is taken (so a refusal writes nothing), and again holding it."""
+    TensorFlow loads, and again holding the lock before it writes anything (DirectoryLock's
+    `check`): a refusal writes nothing."""
     contents = sorted(p.name for p in out.iterdir() if p.name != DirectoryLock.NAME) if out.is_dir() else []
     if resume and not (contents and is_run(out)):
         raise ConfigError(f"{out} has no checkpoint to resume from")
@@ -86,7 +97,7 @@ def check_dir(out: Path, resume: bool, force: bool) -> str:
             f"{out} is not a run directory (it holds {shown}), and only a run is ever replaced; "
             "choose a new or empty --out"
         )
-    if (out / "checkpoints" / "latest.json").is_file():
+    if has_checkpoint(out):
         if resume:
             return RESUME
         if force:
@@ -101,12 +112,41 @@ def check_dir(out: Path, resume: bool, force: bool) -> str:
     )
 
 
+CHECKPOINT = re.compile(r"ckpt-\d+(\.\d+)?")
+"""The name of a checkpoint directory in RUN/checkpoints (`ckpt-{env step}`, `.k` when taken)."""
+OWN_LAYOUT = {
+    "checkpoints": lambda name: name in ("latest.json", GIVEN_DEMOS) or CHECKPOINT.fullmatch(name),
+    "tb": lambda name: name.startswith("events.out.tfevents."),
+}
+"""What the run writes inside its two folders: all of them that `clear` deletes."""
+
+
 def clear(out: Path) -> None:
-    """Delete what a run wrote in `out`: RUN_FILES and their temporaries. Its lock and every other
-    file are kept: nothing a user put there is deleted."""
+    """Delete what a run wrote in `out`: the files of RUN_FILES, in checkpoints/ and tb/ only what
+    the run writes there (OWN_LAYOUT), and the temporaries of its writes. Its lock and every other
+    file or folder are kept: nothing a user put there is deleted."""
     for path in out.iterdir():
-        if path.name in RUN_FILES or temporary_of(path.name) in RUN_FILES:
-            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+        if _folder(path) and path.name in OWN_LAYOUT:
+            _clear(path, OWN_LAYOUT[path.name])
+        elif not _folder(path) and (path.name in RUN_FILES or temporary_of(path.name) is not None):
+            path.unlink()
+
+
+def _clear(folder: Path, own: Callable[[str], object]) -> None:
+    """What the run writes in its `folder` (`own`: files, and checkpoint folders, deleted whole) and
+    the temporaries there; the folder too, once empty."""
+    for path in folder.iterdir():
+        if _folder(path) and own(path.name):
+            shutil.rmtree(path)
+        elif not _folder(path) and (own(path.name) or temporary_of(path.name) is not None):
+            path.unlink()
+    with contextlib.suppress(OSError):  # a user's file is left in it
+        folder.rmdir()
+
+
+def _folder(path: Path) -> bool:
+    """A folder itself (a link to one is unlinked like a file: nothing it points to is deleted)."""
+    return path.is_dir() and not path.is_symlink()
 
 
 def _writer(file: IO[str], record: type[Record]) -> csv.DictWriter:
@@ -124,8 +164,9 @@ def write_rows(path: Path, record: type[Record], rows: Sequence[Record]) -> None
 
 
 def append_row(path: Path, row: Record) -> None:
-    """One more row at the end of the CSV file `path` (written by `write_rows` for its type)."""
-    with open(path, "a", newline="") as file:
+    """One more row at the end of the CSV file `path` (written by `write_rows` for its type); an
+    OSError names `path` (a full disk's, raised by the write, names no file)."""
+    with naming(path), open(path, "a", newline="") as file:
         _writer(file, type(row)).writerow(row.to_row())
 
 

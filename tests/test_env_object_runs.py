@@ -1,0 +1,72 @@
+"""A run trained on a Python env object (`DQfD(env=<object>)`, saved with `DQfD.save`) read again by
+the command line in another process: `evaluate.py` and `train.py --resume` say that the env was a
+Python object and how to give it again, as `DQfD.save` warned, not that the task is unknown; and
+`evaluate.py --env ID` plays it on a registered id of the same env."""
+
+import json
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import pytest
+from helpers import call
+from test_python_api import TINY, walk_right
+from toy_envs import Chain
+
+from dqfd_bc_keras import DQfD
+from dqfd_bc_keras.errors import DqfdWarning
+
+TESTS = Path(__file__).resolve().parent
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory) -> tuple[Path, str, list[float]]:
+    """A run of Chain() given as an object, saved; its env id; its greedy returns on 3 episodes."""
+    run = tmp_path_factory.mktemp("env-object") / "chain"
+    model = DQfD(Chain(), walk_right, max_steps=20, seed=1, **TINY).learn(150)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DqfdWarning)  # what a later process cannot make: said by save
+        model.save(run)
+    return run, model.config.task, model.evaluate(3).returns
+
+
+@pytest.fixture
+def elsewhere(saved, monkeypatch) -> tuple[Path, str, list[float]]:
+    """As another process finds the run: the id registered for the object is not registered there."""
+    monkeypatch.delitem(gym.registry, saved[1])
+    return saved
+
+
+def files(run: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(run)): p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()}
+
+
+def test_evaluate_says_the_env_was_a_python_object_and_how_to_give_it_again(elsewhere):
+    run, task, _ = elsewhere
+    done = call("evaluate.py", run)
+    assert (done.returncode, done.stdout) == (2, "")
+    assert done.stderr == (
+        f"error: {run / 'config.json'}: trained on a Python env object ({task}), which no other process can "
+        "make: evaluate it from Python, DQfD.load(path, env=...).evaluate(), or here with --env ID, a "
+        "registered id of the same env\n"
+    )
+
+
+def test_evaluate_plays_it_on_a_registered_id_of_the_same_env(elsewhere):
+    run, _, returns = elsewhere
+    done = call("evaluate.py", run, "--env", "toy_envs:ToyChainNoLimit-v0", "--episodes", "3", "--json", path=[TESTS])
+    assert (done.returncode, done.stderr) == (0, "")
+    result = json.loads(done.stdout)
+    assert (result["task"], result["returns"]) == ("toy_envs:ToyChainNoLimit-v0", returns)
+
+
+def test_resume_says_the_env_was_a_python_object_and_changes_nothing(elsewhere):
+    run, task, _ = elsewhere
+    before = files(run)
+    done = call("train.py", "--out", run, "--resume", "--quiet")
+    assert done.returncode == 2
+    assert done.stderr == (
+        f"error: {run / 'config.json'}: trained on a Python env object ({task}), which no other process can "
+        "make; give it again from Python: DQfD.load(path, env=...)\n"
+    )
+    assert files(run) == before
