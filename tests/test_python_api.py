@@ -236,6 +236,21 @@ def test_progress_bar_and_the_default_budget(capsys):
         model.learn(0)
 
 
+def test_a_users_calls_show_no_numpy_deprecation_warning(tmp_path):
+    """Keras 3 converts its variables with np.array(x), and NumPy 2 warns about the copy keyword at
+    each conversion: silenced where the package makes Keras convert, so a user's learn, predict,
+    evaluate, save and load show none, whatever their warning filters."""
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        model = DQfD("cartpole", out=tmp_path / "run", **TINY).learn(100)
+        model.predict(np.zeros(4, np.float32))
+        model.save(tmp_path / "copy")
+        again = DQfD.load(tmp_path / "copy")
+        again.predict(np.zeros(4, np.float32))
+        again.learn(20).evaluate(1)
+    assert [str(w.message) for w in seen if "copy keyword" in str(w.message)] == []
+
+
 # --- a user's Method object -----------------------------------------------------------------------------
 
 METHOD_MODULE = """

@@ -66,6 +66,7 @@ from dqfd_bc_keras.runs.writers import (
     write_evals,
     write_metrics,
 )
+from dqfd_bc_keras.runtime import keras_conversions
 from dqfd_bc_keras.seeds import final_eval_seed
 from dqfd_bc_keras.training.loop import Callback, Learner, build, evaluate_at, run_evaluation, train_with_callback
 from dqfd_bc_keras.training.records import DemoSummary, EpisodeRow, EvalRow
@@ -252,10 +253,10 @@ class RunDirectory:
         if self.progress is not None:
             self.progress.close()
         learner, out = self.learner, self.out
-        with atomic_path(out / "q_network.keras") as tmp:
+        with atomic_path(out / "q_network.keras") as tmp, keras_conversions():
             learner.agent.q_network.save(tmp)
         if learner.bc is not None:
-            with atomic_path(out / "bc_model.keras") as tmp:
+            with atomic_path(out / "bc_model.keras") as tmp, keras_conversions():
                 learner.bc.save(tmp)
         if learner.dynamic is not None:
             demo_io.save(learner.dynamic.dataset, out / "demos.npz", force=True)
