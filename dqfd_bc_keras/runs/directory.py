@@ -37,7 +37,7 @@ import json
 import shutil
 import sys
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -301,11 +301,13 @@ def train(
     quiet: bool = False,
     source: str | None = None,
     callback: Callback | None = None,
+    started: Callable[[RunDirectory], None] | None = None,
 ) -> RunResult:
     """Train `config` into run directory `out` (or continue the run there with `resume`), as
     its only writer. A new run that fails before its first checkpoint leaves nothing behind.
     `source` says where a given `dataset` came from (DEMO_SOURCES; None: a file or a Minari
-    dataset, as its metadata says); `callback` is given each episode's and evaluation's row."""
+    dataset, as its metadata says); `callback` is given each episode's and evaluation's row;
+    `started`, the run once it has its first checkpoint (stopped later, it goes on: `continue_run`)."""
     out = Path(out)
     if not resume:
         # before anything is written: a run that cannot fit (or whose env cannot) is refused, not killed halfway
@@ -330,6 +332,8 @@ def train(
             if isinstance(error, KeyboardInterrupt):  # what the command line says the interrupt left
                 error.args = (f"{out}: nothing was kept (the run had not reached its first checkpoint)",)
             raise
+        if started is not None:
+            started(run)
         if resume:  # restored: what a kill cut short goes
             remove_temporaries(out)
             (out / COMPLETE).unlink(missing_ok=True)  # written again when it finishes again
@@ -355,7 +359,9 @@ def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None 
         run.learner.extend(total_steps)
         run.config = run.learner.config
         run.progress = None
-        run.__dict__.pop("tb", None)  # closed by `finish`: opened again at the next summary
+        tb = run.__dict__.pop("tb", None)  # closed by `finish`, or left open by a stop: opened again when used
+        if tb is not None:
+            tb.close()
         (run.out / COMPLETE).unlink(missing_ok=True)
         run.save_checkpoint()
         write_config(run.config, run.out)
