@@ -27,9 +27,16 @@ from dqfd_bc_keras.core.uncertainty import EnsembleDense
 from dqfd_bc_keras.envs.episodes import EvalResult, check_video, play, video_env
 from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
+from dqfd_bc_keras.runtime import keras_conversions
 
 FRAME_LAYERS = (keras.layers.Conv2D, keras.layers.Rescaling, keras.layers.Flatten, keras.layers.Reshape)
 """Layers of a network on frames (networks.torso_layers), which plays through the model itself."""
+
+
+def _float32(variable: keras.Variable) -> np.ndarray:
+    """A Keras variable's values as float32 NumPy (NumPy 2's warning about the conversion silenced)."""
+    with keras_conversions():
+        return keras.ops.convert_to_numpy(variable).astype(np.float32)
 
 
 class GreedyPolicy:
@@ -71,8 +78,8 @@ class GreedyPolicy:
             if isinstance(layer, (keras.layers.InputLayer, keras.layers.Dropout)):
                 continue  # dropout is the identity at inference
             if isinstance(layer, keras.layers.Normalization) and not layer.invert:
-                mean = keras.ops.convert_to_numpy(layer.mean).astype(np.float32).reshape(-1)
-                var = keras.ops.convert_to_numpy(layer.variance).astype(np.float32).reshape(-1)
+                mean = _float32(layer.mean).reshape(-1)
+                var = _float32(layer.variance).reshape(-1)
                 std = np.maximum(np.sqrt(var), np.float32(keras.config.epsilon()))  # as Keras does
                 ops.append(("scale", mean, std))
                 continue
@@ -85,12 +92,8 @@ class GreedyPolicy:
                 raise ModelFileError(
                     f"unsupported activation {activation!r} of layer {layer.name!r} in model {model.name!r}"
                 )
-            kernel = keras.ops.convert_to_numpy(layer.kernel).astype(np.float32)
-            bias = (
-                keras.ops.convert_to_numpy(layer.bias).astype(np.float32)
-                if getattr(layer, "use_bias", True)
-                else np.zeros(kernel.shape[1], np.float32)
-            )
+            kernel = _float32(layer.kernel)
+            bias = _float32(layer.bias) if getattr(layer, "use_bias", True) else np.zeros(kernel.shape[1], np.float32)
             ops.append((activation, kernel, bias))
         return cls(ops, kind)
 

@@ -6,7 +6,10 @@ below are only read when TensorFlow loads. Every setting can be overridden from 
 
 from __future__ import annotations
 
+import contextlib
 import os
+import warnings
+from collections.abc import Iterator
 
 # The C++ runtime's log lines (tf.data prints a harmless "unknown attribute" ERROR line on
 # every Keras fit; real failures still surface as Python exceptions), and oneDNN's banner:
@@ -31,3 +34,16 @@ def configure_tensorflow() -> None:
         tf.config.threading.set_inter_op_parallelism_threads(1)
     except RuntimeError:
         pass  # the runtime is already initialised (someone ran an op first): keep its pools
+
+
+@contextlib.contextmanager
+def keras_conversions() -> Iterator[None]:
+    """Around the package's calls that make Keras 3 convert its variables with `np.array(x)`
+    (reading weights into NumPy, saving a model): NumPy 2 warns at each that `__array__` takes no
+    `copy` keyword, a DeprecationWarning meant for Keras, not for our users. Silenced there only,
+    not process-wide."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings(
+            "ignore", message="__array__ implementation doesn't accept a copy keyword", category=DeprecationWarning
+        )
+        yield

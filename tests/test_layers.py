@@ -20,7 +20,7 @@ LAYERS = [
     ("demos", ["demos"]),
     ("training", ["training"]),
     ("runs", ["runs"]),
-    ("interfaces", ["model", "commands", "__init__"]),
+    ("interfaces", ["model", "arguments", "commands", "__init__"]),
     ("lab", ["experiments"]),
 ]
 """Lowest first; each entry names the top-level modules and folders of `dqfd_bc_keras/` in it."""

@@ -20,17 +20,21 @@ def test_the_quickstart_notebook_runs_top_to_bottom(tmp_path, monkeypatch):
     nbclient.NotebookClient(
         notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
     ).execute()
-    printed = "".join(
-        output.get("text", "")
-        for cell in notebook.cells
-        if cell.cell_type == "code"
-        for output in cell.outputs
-        if output.get("name") == "stdout"
+    printed, shown = (
+        "".join(
+            output.get("text", "")
+            for cell in notebook.cells
+            if cell.cell_type == "code"
+            for output in cell.outputs
+            if output.get("name") == stream
+        )
+        for stream in ("stdout", "stderr")
     )
     assert printed.count("greedy episodes") == 3  # CartPole, the user's env, CartPole loaded and trained more
     assert "python callable walk_right" in printed and "demonstrations from minari:cartpole/push-v0" in printed
     assert "episode 5: return" in printed and "episode 6:" not in printed  # the callback stopped training
     assert "'complete.json'" in printed and "'q_network.keras'" in printed
+    assert "3000/3000" in shown  # learn(progress_bar=True) in Jupyter: tqdm.auto's bar (text without ipywidgets)
     [work] = tmp_path.glob("dqfd-quickstart-*")
     assert (work / "cartpole" / "complete.json").is_file() and (work / "minari" / "cartpole" / "push-v0").is_dir()
     assert sorted(p.name for p in (REPO / "docs").iterdir()) == docs_before

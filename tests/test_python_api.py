@@ -6,6 +6,7 @@ import csv
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import warnings
@@ -19,7 +20,7 @@ from toy_envs import Chain
 
 from dqfd_bc_keras import DQfD, demos
 from dqfd_bc_keras.core.config import QUICK
-from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.errors import ConfigError, DqfdWarning, OutputExistsError
 from dqfd_bc_keras.evaluation import EvalResult, evaluate, load_policy
 from dqfd_bc_keras.seeds import EVAL_SEED
 from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
@@ -72,8 +73,8 @@ def test_an_env_object_a_callable_expert_callbacks_save_load(tmp_path):
     assert [type(r) for r in events].count(EpisodeRow) == 2 and isinstance(events[0], EvalRow)
     assert model.learner.interactions < 300
     assert model.config.expert == "python callable walk_right"
-    assert model.predict(np.eye(5, dtype=np.float32)[0]) in (0, 1)
-    assert model.predict(np.eye(5, dtype=np.float32)).shape == (5,)
+    assert model.predict(np.eye(5, dtype=np.float32)[0])[0] in (0, 1)
+    assert model.predict(np.eye(5, dtype=np.float32))[0].shape == (5,)
 
     with pytest.warns(DqfdWarning) as warned:
         model.save(tmp_path / "chain")
@@ -100,8 +101,8 @@ def test_a_third_party_env_instance_and_predict_on_what_it_gives():
     model = DQfD(env, lambda obs: 2, expert_loss="margin", **TINY).learn(200)
     assert model.config.task == "FrozenLake-v1" and model.config.env_kwargs == {"is_slippery": False}
     obs, _ = env.reset(seed=0)
-    assert isinstance(model.predict(obs), int)
-    assert model.predict(np.array([0, 5, 14])).shape == (3,)
+    assert isinstance(model.predict(obs)[0], int)
+    assert model.predict(np.array([0, 5, 14]))[0].shape == (3,)
     assert model.evaluate(2).task == "FrozenLake-v1"
 
 
@@ -228,12 +229,36 @@ def test_a_factory_env_and_a_gym_make_limit():
     assert short.evaluate(1).lengths[0] > 30  # plays the plain CartPole-v1, 500 steps, as evaluate.py does
 
 
-def test_progress_bar_and_the_default_budget(capsys):
+def test_progress_bar_and_the_default_budget(capsys, tmp_path):
+    """tqdm.auto's bar (a widget in Jupyter, else text on stderr, a terminal or not), in memory and
+    into a run directory, at every learn that asks for it, counting the budget of the run."""
     model = DQfD("cartpole", total_steps=120, **TINY).learn(progress_bar=True)
-    assert int(model.learner.interaction.env_steps.numpy()) == 120
-    assert "step" in capsys.readouterr().err
+    assert model.num_timesteps == 120 and "120/120" in capsys.readouterr().err
+    model.learn(60, progress_bar=True)
+    assert "180/180" in capsys.readouterr().err
+    into = DQfD("cartpole", out=tmp_path / "run", **TINY).learn(100, progress_bar=True)
+    assert "100/100" in capsys.readouterr().err
+    into.learn(50, progress_bar=True)
+    assert "150/150" in capsys.readouterr().err
+    into.learn(50)
+    assert "200/200" not in capsys.readouterr().err
     with pytest.raises(ConfigError, match="total_timesteps=0"):
         model.learn(0)
+
+
+def test_a_users_calls_show_no_numpy_deprecation_warning(tmp_path):
+    """Keras 3 converts its variables with np.array(x), and NumPy 2 warns about the copy keyword at
+    each conversion: silenced where the package makes Keras convert, so a user's learn, predict,
+    evaluate, save and load show none, whatever their warning filters."""
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        model = DQfD("cartpole", out=tmp_path / "run", **TINY).learn(100)
+        model.predict(np.zeros(4, np.float32))
+        model.save(tmp_path / "copy")
+        again = DQfD.load(tmp_path / "copy")
+        again.predict(np.zeros(4, np.float32))
+        again.learn(20).evaluate(1)
+    assert [str(w.message) for w in seen if "copy keyword" in str(w.message)] == []
 
 
 # --- a user's Method object -----------------------------------------------------------------------------
@@ -298,6 +323,77 @@ def test_a_method_made_in_the_script_is_registered_and_said_at_save(tmp_path):
 # --- load, and a learn-more stopped halfway ----------------------------------------------------------
 
 
+class ThreeActions(Chain):
+    """Chain with a third action (it stays where it is)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.action_space = gym.spaces.Discrete(3)
+
+
+def test_load_refuses_an_env_that_does_not_fit_the_run(tmp_path):
+    """Another observation size, another number of actions: one line naming both, the run untouched;
+    the env it was trained on loads."""
+    model = DQfD(Chain(), walk_right, max_steps=20, **TINY).learn(100)
+    with pytest.warns(DqfdWarning):
+        model.save(tmp_path / "chain")
+    files = {p: p.read_bytes() for p in (tmp_path / "chain").rglob("*") if p.is_file()}
+    loading = f"DQfD.load({str(tmp_path / 'chain')!r}, env=...): "
+    with pytest.raises(ConfigError) as refused:
+        DQfD.load(tmp_path / "chain", env=Chain(size=7))
+    assert str(refused.value) == (
+        loading + "the run was trained on observations Box(5,) float32 (5 features), and the env given "
+        "observes Box(7,) float32 (7 features): give the env it was trained on"
+    )
+    with pytest.raises(
+        ConfigError,
+        match="^"
+        + re.escape(loading + "the env given (Box(5,) float32, 3 actions) does not fit the networks the run trained ("),
+    ):
+        DQfD.load(tmp_path / "chain", env=ThreeActions())
+    assert files == {p: p.read_bytes() for p in (tmp_path / "chain").rglob("*") if p.is_file()}
+    again = DQfD.load(tmp_path / "chain", env=Chain())
+    assert again.predict(np.eye(5, dtype=np.float32)[0]) == model.predict(np.eye(5, dtype=np.float32)[0])
+
+
+def test_load_with_resume_goes_on_into_the_directory_as_train_py_resume(tmp_path):
+    """A run stopped halfway (Ctrl-C): DQfD.load(run, resume=True).learn() finishes it in place, as
+    train.py --resume does a copy of it; DQfD.load(run) without resume never writes to it."""
+    run = tmp_path / "run"
+
+    def ctrl_c_at_the_third_episode(row):
+        if isinstance(row, EpisodeRow) and row.episode == 3:
+            raise KeyboardInterrupt
+
+    stopped = DQfD("cartpole", seed=0, out=run, **{**TINY, "checkpoint_every": 100})
+    with pytest.raises(KeyboardInterrupt):
+        stopped.learn(400, callback=ctrl_c_at_the_third_episode)
+    shutil.copytree(run, tmp_path / "cli")
+    files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    with pytest.raises(OutputExistsError) as refused:  # a new model into it: the way to continue it is named
+        DQfD("cartpole", seed=0, out=run, **TINY).learn(10)
+    assert str(refused.value) == (
+        f"{run} already holds a run: DQfD.load({str(run)!r}, resume=True) continues it; "
+        "choose another out= for a new one"
+    )
+    DQfD.load(run).learn(50)
+    assert files == {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+
+    resumed = DQfD.load(run, resume=True)
+    assert resumed.num_timesteps < 400 and resumed.config.total_steps == 400
+    resumed.learn()  # the rest of the run's budget, as --resume
+    done = call("train.py", "--resume", "--quiet", "--out", tmp_path / "cli")
+    assert done.returncode == 0, done.stderr
+
+    def metrics(directory):
+        with open(directory / "metrics.csv") as file:
+            return [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(file)]
+
+    assert metrics(run) == metrics(tmp_path / "cli") and len(metrics(run)) == len(resumed.state.metrics)
+    for directory in (run, tmp_path / "cli"):
+        assert json.loads((directory / "complete.json").read_text())["env_steps"] == 400
+
+
 def test_load_refuses_what_is_not_a_run(tmp_path):
     from dqfd_bc_keras.errors import RunDirectoryError
 
@@ -343,7 +439,7 @@ def test_a_third_party_env_from_pypi_made_by_gym_make(tmp_path):
     model = DQfD(env, lambda obs: 1 if obs[4 + (3 * 7 + 5) * 3] == 2 else 2, max_steps=100, **TINY).learn(200)
     assert model.config.task == "minigrid:MiniGrid-Empty-5x5-v0" and model.config.max_steps == 100
     obs, _ = env.reset(seed=0)
-    assert isinstance(obs, dict) and isinstance(model.predict(obs), int)
+    assert isinstance(obs, dict) and isinstance(model.predict(obs)[0], int)
     model.save(tmp_path / "run")
     done = subprocess.run(
         [sys.executable, "evaluate.py", tmp_path / "run", "--episodes", "2", "--json"],

@@ -396,7 +396,8 @@ def env_id_of(
         while f"{base}-v{k}" in gym.registry:
             k += 1
         env_id = f"{base}-v{k}"
-    gym.registry.pop(env_id, None)
+    if gym.registry.pop(env_id, None) is not None:  # another object under the id: the spaces found were the old one's
+        _task_spaces.cache_clear()
     gym.register(id=env_id, entry_point=make, max_episode_steps=None, disable_env_checker=True)
     return env_id, {}, limit
 

@@ -38,7 +38,7 @@ import json
 import shutil
 import sys
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,6 +70,7 @@ from dqfd_bc_keras.runs.writers import (
     write_evals,
     write_metrics,
 )
+from dqfd_bc_keras.runtime import keras_conversions
 from dqfd_bc_keras.seeds import final_eval_seed
 from dqfd_bc_keras.training.loop import Callback, Learner, build, evaluate_at, run_evaluation, train_with_callback
 from dqfd_bc_keras.training.records import DemoSummary, EpisodeRow, EvalRow
@@ -253,10 +254,10 @@ class RunDirectory:
         if self.progress is not None:
             self.progress.close()
         learner, out = self.learner, self.out
-        with atomic_path(out / "q_network.keras") as tmp:
+        with atomic_path(out / "q_network.keras") as tmp, keras_conversions():
             learner.agent.q_network.save(tmp)
         if learner.bc is not None:
-            with atomic_path(out / "bc_model.keras") as tmp:
+            with atomic_path(out / "bc_model.keras") as tmp, keras_conversions():
                 learner.bc.save(tmp)
         if learner.dynamic is not None:
             demo_io.save(learner.dynamic.dataset, out / "demos.npz", force=True)
@@ -301,11 +302,13 @@ def train(
     quiet: bool = False,
     source: str | None = None,
     callback: Callback | None = None,
+    started: Callable[[RunDirectory], None] | None = None,
 ) -> RunResult:
     """Train `config` into run directory `out` (or continue the run there with `resume`), as
     its only writer. A new run that fails before its first checkpoint leaves nothing behind.
     `source` says where a given `dataset` came from (DEMO_SOURCES; None: a file or a Minari
-    dataset, as its metadata says); `callback` is given each episode's and evaluation's row."""
+    dataset, as its metadata says); `callback` is given each episode's and evaluation's row;
+    `started`, the run once it has its first checkpoint (stopped later, it goes on: `continue_run`)."""
     out = Path(out)
     if not resume:
         # before anything is written: a run that cannot fit (or whose env cannot) is refused, not killed halfway
@@ -327,6 +330,8 @@ def train(
             if isinstance(error, KeyboardInterrupt) and not resume:  # what the command line says it left
                 error.args = (f"{out}: nothing was kept (the run had not reached its first checkpoint)",)
             raise
+        if started is not None:
+            started(run)
         if resume:  # restored: what a kill cut short goes
             remove_temporaries(out)
             (out / COMPLETE).unlink(missing_ok=True)  # written again when it finishes again
@@ -352,7 +357,9 @@ def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None 
         run.learner.extend(total_steps)
         run.config = run.learner.config
         run.progress = None
-        run.__dict__.pop("tb", None)  # closed by `finish`: opened again at the next summary
+        tb = run.__dict__.pop("tb", None)  # closed by `finish`, or left open by a stop: opened again when used
+        if tb is not None:
+            tb.close()
         (run.out / COMPLETE).unlink(missing_ok=True)
         run.save_checkpoint()
         write_config(run.config, run.out)

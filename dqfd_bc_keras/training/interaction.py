@@ -32,6 +32,9 @@ class Interaction(tf.Module):
         )
         """ε's decay length, a variable: a budget raised after tracing (`Learner.extend`) stretches it."""
         self.episode = EpisodeStats()
+        self.obs: np.ndarray | None = None
+        """The running episode's observation between two graph calls (None between episodes): an
+        exception there (a callback's, Ctrl-C) leaves it, and the next `train_episodes` goes on from it."""
         self.recorder = (
             EpisodeRecorder(env, task=config.task, source="agent", seed=config.seed, env_kwargs=config.env_kwargs)
             if record

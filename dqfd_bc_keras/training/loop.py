@@ -363,12 +363,17 @@ def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode
     steps = lambda: int(interaction.env_steps.numpy())
     while steps() < c.total_steps and not state.stopped_early:
         started = time.perf_counter()
-        obs, done = interaction.reset(episode_seed(c.seed, state.episode)), False
+        obs, done = interaction.obs, False  # an episode an exception stopped between two graph calls goes on
+        if obs is None:
+            obs = interaction.reset(episode_seed(c.seed, state.episode))
         while not done and steps() < c.total_steps:
+            interaction.obs = obs  # where a callback at an evaluation may stop it
             evaluate_due(learner, state, on_eval)
             budget = min(c.total_steps - steps(), state.next_eval - learner.interactions)
+            interaction.obs = None  # stopped inside the graph call, the env's state is unknown: a new episode
             obs, done = interaction.play(tf.constant(obs, agent.net_input.dtype), tf.constant(budget, tf.int64))
             obs, done = obs.numpy(), bool(done)
+        interaction.obs = None  # the episode ends here (its row is next), whole or at the budget
         stats = interaction.episode
         losses = {name: float(value) for name, value in agent.take_losses().items()}
         check_finite(losses, f"episode {state.episode + 1} (env step {steps()})")
