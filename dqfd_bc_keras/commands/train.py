@@ -124,7 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen = {k: v for k, v in flags.items() if v is not None}
     # Every override before the one validation: --max-steps or --set max_steps=N makes an env
     # without a time limit usable.
-    overrides = {**(QUICK if args.quick else {}), **chosen, **env_settings(args), **parse_assignments(args.set)}
+    given = {**chosen, **env_settings(args), **parse_assignments(args.set)}
+    overrides = {**(QUICK if args.quick else {}), **given}
     task = chosen_task(args)
     check_out(args.out)
     if args.demos and args.expert:
@@ -151,7 +152,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 env_kwargs=config.env_kwargs,
                 max_transitions=config.demo_capacity,
             )
-            config = dataclasses.replace(config, expert=demos.given_expert(args.demos, dataset))
+            config = dataclasses.replace(
+                config,
+                expert=demos.given_expert(args.demos, dataset),
+                demo_episodes=demos.given_episodes(f"--demos {args.demos}", dataset, given.get("demo_episodes")),
+            )
         elif config.uses_demos:
             try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
     from dqfd_bc_keras.runs.directory import (  # TensorFlow from here on: every argument has been checked
@@ -162,9 +167,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     # A resumed run is the run in `out`, as its config.json says; a flag that would change it is refused.
     if args.resume:
         config = saved_config(out)
-        refuse_changes(
-            config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}, args.demos
-        )
+        changes = {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}
+        if config.expert.startswith(demos.GIVEN) and "demo_episodes" not in given:
+            changes.pop("demo_episodes", None)  # --quick's is a count to record; the run's, its dataset's
+        refuse_changes(config, changes, args.demos)
     if not args.quiet:
         print(
             f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "

@@ -24,15 +24,18 @@ from dqfd_bc_keras.demos.minari import check_exportable, from_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import EpisodeRecorder, record, rollout
 from dqfd_bc_keras.demos.replaying import show
+from dqfd_bc_keras.errors import ConfigError
 
 __all__ = [
     "ARRAYS",
     "FORMAT_VERSION",
+    "GIVEN",
     "DemoDataset",
     "DemoMeta",
     "EpisodeRecorder",
     "check_exportable",
     "concatenate",
+    "given_episodes",
     "given_expert",
     "given_source",
     "load",
@@ -62,9 +65,25 @@ def given_source(dataset: DemoDataset) -> str:
     return "minari" if dataset.meta.expert.startswith("minari:") else "file"
 
 
+GIVEN = "demonstrations from "
+"""How `given_expert` names demonstrations given, not recorded (one of tasks.NOT_REMADE)."""
+
+
 def given_expert(source: str, dataset: DemoDataset) -> str:
     """What a run's config names as its `expert` when demonstrations were given, not recorded:
     where they came from and who demonstrated them, as their metadata says. Not a demonstrator
     any process could call (tasks.registry.NOT_REMADE): the run keeps its D_demo in its checkpoints."""
     by = dataset.meta.expert
-    return f"demonstrations from {source}" + ("" if by == source else f" ({by})")
+    return f"{GIVEN}{source}" + ("" if by == source else f" ({by})")
+
+
+def given_episodes(source: str, dataset: DemoDataset, asked: int | None = None) -> int:
+    """What a run's config records as its `demo_episodes` when demonstrations were given: the
+    episodes it trains on, the dataset's. `asked` (a `demo_episodes` given with them) must agree:
+    it is how many episodes an expert records, and none is recorded."""
+    if asked is not None and asked != dataset.n_episodes:
+        raise ConfigError(
+            f"{source} holds {dataset.n_episodes} episodes, not demo_episodes={asked} (the episodes an expert "
+            "records): drop it, or record that many"
+        )
+    return dataset.n_episodes
