@@ -73,6 +73,22 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
         tmp.unlink(missing_ok=True)
 
 
+def check_writable(path: str | os.PathLike) -> None:
+    """An `OSError` naming `path`, before work that would be lost, if `atomic_path` could not write
+    it: a directory in its place, a file where a folder of its path belongs, a folder without write
+    permission or on a read-only filesystem. Nothing it tries stays behind."""
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a directory, not a file", str(path))
+    folder = next(p for p in (path.parent, *path.parent.parents) if p.exists())  # atomic_path makes the rest
+    if not folder.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, f"{folder} is a file, not a folder", str(path))
+    with _naming(path, None):
+        fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=folder)
+    os.close(fd)
+    os.unlink(name)
+
+
 @contextlib.contextmanager
 def _naming(path: Path, tmp: Path | None) -> Iterator[None]:
     """An OSError writing `path` names `path`: the user's file, not the temporary one beside it (a

@@ -5,7 +5,8 @@ Minari datasets convert both ways (`demos/minari.py`).
 
 This module is the public face of the package's modules: `dataset` (the dataset and its
 invariants), `recording` (demonstrators played on a task env), `human` (a person playing:
-`play`, with `keys` and `window`), `replaying` (`show`), `npz` (the `.npz` format) and `minari`;
+`play`, and `controls`, the keys and pace it plays with; with `keys` and `window`), `replaying`
+(`show`), `npz` (the `.npz` format) and `minari`;
 `load_source` reads either kind of source. The command line is `commands/demos.py`:
 
     python -m dqfd_bc_keras.demos record --task cartpole --expert imperfect --episodes 5 --out demos.npz
@@ -19,7 +20,7 @@ from __future__ import annotations
 from typing import Any
 
 from dqfd_bc_keras.demos.dataset import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, concatenate, validate
-from dqfd_bc_keras.demos.human import play
+from dqfd_bc_keras.demos.human import controls, play
 from dqfd_bc_keras.demos.minari import check_exportable, from_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import EpisodeRecorder, record, rollout
@@ -35,6 +36,7 @@ __all__ = [
     "EpisodeRecorder",
     "check_exportable",
     "concatenate",
+    "controls",
     "given_episodes",
     "given_expert",
     "given_source",
