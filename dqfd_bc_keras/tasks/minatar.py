@@ -264,7 +264,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
         keys={"": 0, "left": 1, "right": 2},
-        fps=10,
+        fps=4,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
     )
 )
@@ -280,7 +280,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
         keys={"": 0, "up": 1, "down": 2},
-        fps=10,
+        fps=8,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
     )
 )
