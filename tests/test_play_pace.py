@@ -74,3 +74,14 @@ def test_each_minatar_preset_plays_at_its_measured_pace(task):
     assert measured["delays"][str(measured["delay"] + 1)]["share"] < 0.8
     answer = call("dqfd_bc_keras.demos", "play", "--task", task, "--list-keys")
     assert answer.returncode == 0 and f"pace: {measured['pace']:g} steps/s" in answer.stdout
+
+
+def test_a_minatar_env_given_by_id_plays_and_records_at_its_games_pace():
+    """`--env MinAtar/Asterix-v0` (all six actions: no preset plays that env) takes Asterix's pace, which
+    is also its videos' frame rate."""
+    answer = call("dqfd_bc_keras.demos", "play", "--env", "MinAtar/Asterix-v0", "--max-steps", 100, "--list-keys")
+    assert answer.returncode == 0, answer.stderr
+    assert f"pace: {TASKS['minatar-asterix'].fps:g} steps/s" in answer.stdout
+    env = make_task("MinAtar/Asterix-v0", max_steps=100, render_mode="rgb_array")
+    assert env.metadata["render_fps"] == TASKS["minatar-asterix"].fps
+    env.close()
