@@ -44,7 +44,8 @@ in the window:
 """
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parser() -> ArgumentParser:
+    """The command line: record, inspect, export, play, show."""
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.demos", description=__doc__.split("\n\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
     rec = commands.add_parser("record", help="record a dataset with a demonstrator")
@@ -97,7 +98,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     shw.add_argument("--video", metavar="DIR", help="write one MP4 per episode in DIR instead of showing them")
     shw.add_argument("--check", action="store_true", help="only replay and check, without a window")
     shw.add_argument("--fps", type=positive_float, help="steps per second (default: the rate they were played at)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     if args.command == "play":
         from dqfd_bc_keras.demos.human import controls, play  # pygame from here on
 
@@ -106,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("\n".join(controls(chosen_task(args), keys=args.keys, fps=args.fps, **env)))
             return 0
         if args.out is None:
-            ply.error("--out is required (the file to write), unless --list-keys")
+            raise ConfigError("play: --out is required (the file to write), unless --list-keys")
         dataset = play(
             chosen_task(args),
             args.out,
