@@ -93,7 +93,7 @@ CONTROLS_TEXT = "Enter start · P pause · Backspace discard the episode · Esc 
 
 
 def _keys_and_pace(
-    task: str, env: gym.Env, keys: Mapping[str, int] | str | None, fps: float | None, env_kwargs
+    task: str, env: gym.Env, keys: Mapping[str, int] | str | None, fps: float | None, env_kwargs: Mapping | None
 ) -> tuple[KeyMap, float]:
     """The key map and the steps per second `task` is played with on `env`: the given ones, else its own."""
     keymap = key_map(get_task(task), env, keys)

@@ -53,7 +53,8 @@ class Window:
             self.pg.display.init()
         except self.pg.error as error:  # the driver asked for has no display to open (x11 without DISPLAY)
             self.pg.display.quit()
-            raise ConfigError(_no_display(f"SDL_VIDEODRIVER={asked} says {str(error)!r}")) from None
+            said = f"SDL_VIDEODRIVER={asked} says" if asked else "SDL says"
+            raise ConfigError(_no_display(f"{said} {str(error)!r}")) from None
         driver = self.pg.display.get_driver()
         if driver in HEADLESS and asked != driver:  # SDL's fallback, not a choice
             self.pg.display.quit()
