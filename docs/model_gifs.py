@@ -3,9 +3,9 @@
     .venv/bin/python docs/model_gifs.py --out docs/figures [--seed 12345] [--models minatar-breakout,...]
 
 Plays `models/<name>/` on its plain env with `render_mode="rgb_array"` (the episode of
-evaluate.py's first seed), keeps every `--every`-th frame at half size (a MinAtar grid, 10×10
-cells in [0, 1], at 16 pixels a cell), and writes `<out>/model-<name>.gif` atomically with Pillow
-(installed with matplotlib).
+evaluate.py's first seed), keeps every `--every`-th frame at half size (MinAtar's grid, drawn in
+its own colours at 48 pixels a cell by `envs/minatar_pixels.py`, at 24), and writes
+`<out>/model-<name>.gif` atomically with Pillow (installed with matplotlib).
 """
 
 from __future__ import annotations
@@ -41,14 +41,8 @@ def episode_frames(name: str, seed: int) -> tuple[list, float]:
 
 
 def picture(frame) -> Image.Image:
-    """A rendered frame as a GIF frame: half size, or a small grid of [0, 1] colours (MinAtar's)
-    blown up with square cells."""
-    if frame.dtype != "uint8":
-        frame = (frame * 255).round().astype("uint8")
-    image = Image.fromarray(frame)
-    if max(image.size) < 100:
-        return image.resize((image.width * 16, image.height * 16), Image.NEAREST)
-    return image.reduce(2)
+    """A rendered frame (RGB uint8) as a GIF frame: half size."""
+    return Image.fromarray(frame).reduce(2)
 
 
 def main(argv=None) -> int:

@@ -53,8 +53,7 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
     if not overwrite and path.exists():
         raise OutputExistsError(f"{path} exists; pass --force to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
-    with naming(path):
-        fd, name = tempfile.mkstemp(prefix=f"{TEMPORARY_PREFIX}{os.getpid()}-", suffix=f"-{path.name}", dir=path.parent)
+    fd, name = _temporary(path, path.parent)
     os.close(fd)
     umask = os.umask(0)
     os.umask(umask)
@@ -70,6 +69,28 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True, durable: boo
                 _sync(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def check_writable(path: str | os.PathLike) -> None:
+    """An `OSError` naming `path`, before work that would be lost, if `atomic_path` could not write
+    it: a directory in its place, a file where a folder of its path belongs, a folder without write
+    permission or on a read-only filesystem. Nothing it tries stays behind."""
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a directory, not a file", str(path))
+    folder = next(p for p in (path.parent, *path.parent.parents) if p.exists())  # atomic_path makes the rest
+    if not folder.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, f"{folder} is a file, not a folder", str(path))
+    fd, name = _temporary(path, folder)
+    os.close(fd)
+    os.unlink(name)
+
+
+def _temporary(path: Path, folder: Path) -> tuple[int, str]:
+    """A new empty file in `folder` named as the program's temporaries are (`TEMPORARY`), for
+    `path`: (its descriptor, its name); an OSError names `path`."""
+    with naming(path):
+        return tempfile.mkstemp(prefix=f"{TEMPORARY_PREFIX}{os.getpid()}-", suffix=f"-{path.name}", dir=folder)
 
 
 @contextlib.contextmanager

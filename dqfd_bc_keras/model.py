@@ -116,6 +116,8 @@ class DQfD:
         dataset, self._source, rule, expert = demonstrations(demos, task, settings)
         if expert is not None:
             settings["expert"] = expert
+        if dataset is not None:
+            settings["demo_episodes"] = demo_io.given_episodes("demos", dataset, fields.get("demo_episodes"))
         self.config = Config.for_task(task, **settings)
         checked_spaces(self.config)  # a bad env or torso refused here, not at `learn`
         if rule is not None and self.config.uses_demos:  # step 1 for a callable: recorded now, given to training

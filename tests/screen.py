@@ -1,6 +1,7 @@
-"""A virtual X screen (Xvfb) and real key presses on it (xdotool): how tests/test_play.py and
-docs/play_screenshot.py use `demos play` as a person would. Light: imports neither TensorFlow
-nor the package. Debian's xvfb and xdotool; `.ci/run` installs them where they are missing."""
+"""A virtual X screen (Xvfb), real key presses on it (xdotool) and its pixels (Pillow's ImageGrab):
+how the tests of `demos play` and `demos show` and docs/play_screenshot.py use the window as a
+person would. Light: imports neither TensorFlow nor the package. Debian's xvfb and xdotool;
+`.ci/run` installs them where they are missing."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import contextlib
 import os
 import shutil
 import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -63,3 +65,27 @@ def focus(env: dict[str, str], process: subprocess.Popen, timeout: float = 60.0)
     process.kill()
     _, stderr = process.communicate()
     raise RuntimeError(f"no window was shown: {stderr or '(nothing on stderr)'}")
+
+
+def launch(env: dict[str, str], *args: object) -> tuple[subprocess.Popen, str]:
+    """`python -m dqfd_bc_keras.demos ARGS` on the screen of `env`, once its window is shown and has
+    the keyboard: the process (its output piped, as text) and its window's id."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "dqfd_bc_keras.demos", *map(str, args)],
+        env=env,
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    return process, focus(env, process)
+
+
+def grab(env: dict[str, str], window: str):  # -> PIL.Image.Image (Pillow imported only here)
+    """What `window` shows on the screen of `env`, as a person sees it (with no window manager the
+    window's geometry is its content)."""
+    from PIL import ImageGrab
+
+    geometry = dict(line.split("=") for line in xdotool(env, "getwindowgeometry", "--shell", window).split())
+    x, y, w, h = (int(geometry[k]) for k in ("X", "Y", "WIDTH", "HEIGHT"))
+    return ImageGrab.grab(bbox=(x, y, x + w, y + h), xdisplay=env["DISPLAY"])

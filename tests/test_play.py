@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import REPO, call
-from screen import focus, virtual_screen, xdotool
+from screen import launch, virtual_screen, xdotool
 
 from dqfd_bc_keras import demos
 from dqfd_bc_keras.demos.keys import CONTROLS, env_keys, key_map
@@ -32,11 +32,7 @@ def screen() -> Iterator[dict[str, str]]:
 
 def start(env: dict[str, str], *args: object) -> subprocess.Popen:
     """`demos play ARGS` in a window on the virtual screen, once its window is shown and has the keyboard."""
-    process = subprocess.Popen(
-        [*PLAY, *map(str, args)], env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-    focus(env, process)
-    return process
+    return launch(env, "play", *args)[0]
 
 
 def episodes_in(path: Path, timeout: float = 60.0, at_least: int = 1) -> int:

@@ -14,6 +14,7 @@ every check a learner relies on; Minari datasets convert both ways (`demos/minar
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 
 from dqfd_bc_keras.choices import EXPERT_NAMES, TIMEOUT_MODES
@@ -32,8 +33,19 @@ from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import record
 from dqfd_bc_keras.errors import ConfigError
 
+PLAY_CONTROLS = """\
+in the window:
+  Enter (or an action key)  start an episode
+  P                         pause, and go on
+  Backspace                 discard the episode in play (it is not written) and start the next
+  Esc, or close the window  quit (the finished episodes are already written)
+  the action keys           the task's (a preset's, else the env's own, else --keys): the window
+                            lists them beneath the game; --list-keys prints them with the pace
+"""
 
-def main(argv: Sequence[str] | None = None) -> int:
+
+def _parser() -> ArgumentParser:
+    """The command line: record, inspect, export, play, show."""
     parser = ArgumentParser(prog="python -m dqfd_bc_keras.demos", description=__doc__.split("\n\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
     rec = commands.add_parser("record", help="record a dataset with a demonstrator")
@@ -58,12 +70,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     exp.add_argument("path", help="the .npz dataset (recorded with --timeout bootstrap)")
     exp.add_argument("--minari", required=True, metavar="DATASET_ID", help="e.g. acrobot/imperfect-v0")
     exp.add_argument("--force", action="store_true", help="replace an existing Minari dataset of that id")
-    ply = commands.add_parser("play", help="record your own demonstrations: play the env in a window")
+    ply = commands.add_parser(
+        "play",
+        help="record your own demonstrations: play the env in a window",
+        description="Play the env in a window; each finished episode is written to --out as it ends.",
+        epilog=PLAY_CONTROLS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,  # the controls' lines as written
+    )
     add_task_arguments(ply, required=True)
-    ply.add_argument("--out", required=True, help="the .npz file to write (or minari:DATASET_ID)")
+    ply.add_argument("--out", help="the .npz file to write (or minari:DATASET_ID); required unless --list-keys")
+    ply.add_argument(
+        "--list-keys", action="store_true", help="print the task's keys, pace and controls, and open no window"
+    )
     ply.add_argument("--episodes", type=positive_int, help="episodes to record (default: until you quit)")
     ply.add_argument("--keys", help='a key map as JSON, e.g. \'{"a": 0, "d": 2, "": 1}\' ("" = no key pressed)')
-    ply.add_argument("--fps", type=positive_float, help="steps per second (default: the task's)")
+    ply.add_argument(
+        "--fps", type=positive_float, help="steps per second (default: the task's pace; --list-keys says it)"
+    )
     ply.add_argument(
         "--seed", type=seed, help="episode i resets with seed + i (default 0; with --append after the last)"
     )
@@ -75,11 +98,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     shw.add_argument("--video", metavar="DIR", help="write one MP4 per episode in DIR instead of showing them")
     shw.add_argument("--check", action="store_true", help="only replay and check, without a window")
     shw.add_argument("--fps", type=positive_float, help="steps per second (default: the rate they were played at)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     if args.command == "play":
-        from dqfd_bc_keras.demos.human import play  # pygame from here on
+        from dqfd_bc_keras.demos.human import controls, play  # pygame from here on
 
         env = env_settings(args)
+        if args.list_keys:
+            print("\n".join(controls(chosen_task(args), keys=args.keys, fps=args.fps, **env)))
+            return 0
+        if args.out is None:
+            raise ConfigError("play: --out is required (the file to write), unless --list-keys")
         dataset = play(
             chosen_task(args),
             args.out,

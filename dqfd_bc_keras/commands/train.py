@@ -119,9 +119,11 @@ NOTHING_WRITTEN = "nothing was written; run the same command again"
 """What an interrupt before the run's first checkpoint left, when training did not say it."""
 
 
-def train_into(args: argparse.Namespace, task: str | None, overrides: dict, out: str) -> RunResult:
+def train_into(args: argparse.Namespace, task: str | None, given: dict, out: str) -> RunResult:
     """The run the arguments ask for, in `out`: a new one checked before TensorFlow loads, or the
-    one there resumed in its own config (a flag that would change it is refused)."""
+    one there resumed in its own config (a flag that would change it is refused). `given`: the
+    settings the user gave (flags, --env-kwargs, --set), which --quick's budget does not override."""
+    overrides = {**(QUICK if args.quick else {}), **given}
     dataset = None
     if not args.resume:  # what a new run needs, checked before TensorFlow loads
         task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
@@ -137,7 +139,11 @@ def train_into(args: argparse.Namespace, task: str | None, overrides: dict, out:
                 env_kwargs=config.env_kwargs,
                 max_transitions=config.demo_capacity,
             )
-            config = dataclasses.replace(config, expert=demos.given_expert(args.demos, dataset))
+            config = dataclasses.replace(
+                config,
+                expert=demos.given_expert(args.demos, dataset),
+                demo_episodes=demos.given_episodes(f"--demos {args.demos}", dataset, given.get("demo_episodes")),
+            )
         elif config.uses_demos:
             try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
     from dqfd_bc_keras.runs.directory import (  # TensorFlow from here on: every argument has been checked
@@ -147,9 +153,10 @@ def train_into(args: argparse.Namespace, task: str | None, overrides: dict, out:
 
     if args.resume:
         config = saved_config(out)
-        refuse_changes(
-            config, {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}, args.demos
-        )
+        changes = {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}
+        if config.expert.startswith(demos.GIVEN) and "demo_episodes" not in given:
+            changes.pop("demo_episodes", None)  # --quick's is a count to record; the run's, its dataset's
+        refuse_changes(config, changes, args.demos)
     if not args.quiet:
         print(
             f"training {config.task} with expert loss {config.expert_loss} (seed {config.seed}) into {out}; "
@@ -173,7 +180,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen = {k: v for k, v in flags.items() if v is not None}
     # Every override before the one validation: --max-steps or --set max_steps=N makes an env
     # without a time limit usable.
-    overrides = {**(QUICK if args.quick else {}), **chosen, **env_settings(args), **parse_assignments(args.set)}
+    given = {**chosen, **env_settings(args), **parse_assignments(args.set)}
+    overrides = {**(QUICK if args.quick else {}), **given}
     task = chosen_task(args)
     check_out(args.out)
     if args.demos and args.expert:
@@ -186,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"-seed{overrides.get('seed', defaults['seed'].default)}"
     )
     try:
-        result = train_into(args, task, overrides, out)
+        result = train_into(args, task, given, out)
     except KeyboardInterrupt as error:  # what it left, as the disk says, unless training said it
         error.args = error.args or (RESUMABLE if has_checkpoint(Path(out)) else NOTHING_WRITTEN,)
         raise

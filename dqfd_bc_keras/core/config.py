@@ -152,7 +152,7 @@ class Config:
     expert_epsilon: float = 0.0
     """Probability that the demonstrator acts uniformly at random instead (a noisy expert)."""
     demo_episodes: int = 5
-    """Episodes recorded from `expert` (seeds seed·1000 + i)."""
+    """Episodes recorded from `expert` (seeds seed·1000 + i); with demonstrations given, the episodes they hold."""
     dynamic_demos: str = "episodes"
     """DQfD-BC's dynamic demonstrations (BC-based expert losses only): at each new best moving
     average, `episodes` inserts the agent's own training episodes since the last update that

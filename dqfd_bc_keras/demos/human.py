@@ -27,6 +27,7 @@ from dqfd_bc_keras.demos.window import Window
 from dqfd_bc_keras.envs.atari import is_atari, split_kwargs
 from dqfd_bc_keras.envs.make import get_task, make_task, step_limit
 from dqfd_bc_keras.errors import ConfigError, OutputExistsError
+from dqfd_bc_keras.files import check_writable
 
 HUMAN = "human"
 """The `expert` of a person's demonstrations."""
@@ -61,6 +62,7 @@ def _previous(out: str, append: bool, force: bool, task: str, timeout: str, env_
         if dataset_dir(dataset_id).exists() and not force:
             raise OutputExistsError(f"{out}: a Minari dataset of that id exists; pass --force to replace it")
         return None
+    check_writable(out)  # before the window opens: a played episode is never lost to an unwritable --out
     if not append:
         if Path(out).exists() and not force:
             raise OutputExistsError(f"{out} exists; pass --append to add episodes to it or --force to overwrite it")
@@ -88,6 +90,40 @@ def _check_same_play(out: str, previous: DemoDataset, keys: KeyMap, fps: float, 
 
 
 CONTROLS_TEXT = "Enter start · P pause · Backspace discard the episode · Esc quit"
+
+
+def _keys_and_pace(
+    task: str, env: gym.Env, keys: Mapping[str, int] | str | None, fps: float | None, env_kwargs: Mapping | None
+) -> tuple[KeyMap, float]:
+    """The key map and the steps per second `task` is played with on `env`: the given ones, else its own."""
+    keymap = key_map(get_task(task), env, keys)
+    fps = float(fps) if fps is not None else default_fps(task, env, env_kwargs)
+    if fps <= 0:
+        raise ConfigError(f"fps must be > 0, got {fps}")
+    return keymap, fps
+
+
+def legend(keymap: KeyMap) -> str:
+    """The key map as the window shows it."""
+    return "keys: " + " · ".join(keymap.legend())
+
+
+def controls(
+    task: str,
+    *,
+    keys: Mapping[str, int] | str | None = None,
+    fps: float | None = None,
+    max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> list[str]:
+    """How `play` would play `task`, without a window (`play --list-keys`): the action keys as the
+    window lists them, where the map comes from, the pace and the control keys."""
+    env = make_task(task, max_steps=max_steps, env_kwargs=env_kwargs)
+    try:
+        keymap, fps = _keys_and_pace(task, env, keys, fps, env_kwargs)
+    finally:
+        env.close()
+    return [f"{legend(keymap)} (from {keymap.source})", f"pace: {fps:g} steps/s (--fps changes it)", CONTROLS_TEXT]
 
 
 def play(
@@ -119,10 +155,7 @@ def play(
     limit = step_limit(task, max_steps)
     env = make_task(task, timeout, max_steps, render_mode="rgb_array", env_kwargs=env_kwargs)
     try:
-        keymap = key_map(get_task(task), env, keys)
-        fps = float(fps) if fps is not None else default_fps(task, env, env_kwargs)
-        if fps <= 0:
-            raise ConfigError(f"fps must be > 0, got {fps}")
+        keymap, fps = _keys_and_pace(task, env, keys, fps, env_kwargs)
         if previous is not None:
             _check_same_play(out, previous, keymap, fps, limit)
         known = [s for s in previous.meta.episode_seeds if s is not None] if previous is not None else []
@@ -186,7 +219,7 @@ class Player:
                 f"{self.recorder.task} · {title} · {saved}",
                 f"return {ret:g} · step {steps} · {self.limit - steps} steps left",
                 STATES[state].format(fps=self.fps),
-                "keys: " + " · ".join(self.keymap.legend()),
+                legend(self.keymap),
                 CONTROLS_TEXT,
             ]
             self.window.draw(self.env.render(), lines)
@@ -204,10 +237,11 @@ def _record(
 ) -> DemoDataset | None:
     """Episodes until `episodes` are kept or the person quits, each written as it ends; returns what was written."""
     written, seed, kept = None, player.recorder.seed, 0
+    before = previous.n_episodes if previous is not None else 0  # `--append`: the numbers go on from the file's
     try:
         while episodes is None or kept < episodes:
-            title = f"episode {kept + 1}{'' if episodes is None else f' of {episodes}'} (seed {seed})"
-            saved = f"{written.n_episodes if written else 0} saved in {Path(out).name}"
+            title = f"episode {before + kept + 1}{'' if episodes is None else f' of {before + episodes}'} (seed {seed})"
+            saved = f"{written.n_episodes if written else before} saved in {Path(out).name}"
             outcome, ret, steps = player.episode(seed, title, saved)
             seed += 1
             if outcome == "quit":

@@ -27,8 +27,11 @@ from dqfd_bc_keras.tasks import TASKS, TaskSpec
 CONTROLS = {"return": "start", "p": "pause", "backspace": "discard", "escape": "quit"}
 """Keys that steer the recording (pygame names → what they do), never an action."""
 
-MINATAR_KEYS = {"n": "", "l": "left", "u": "up", "r": "right", "d": "down", "f": "space"}
-"""MinAtar's action letters, in the order of its full set (`minatar.Environment.action_map`) → keys."""
+MINATAR_KEYS = {"NOOP": "", "LEFT": "left", "UP": "up", "RIGHT": "right", "DOWN": "down", "FIRE": "space"}
+"""MinAtar's actions in the order of its full set (`minatar.Environment.action_map`'s letters n l u r d f,
+named as the ALE names them) → keys."""
+ARROWS = {"left": "Left arrow", "right": "Right arrow", "up": "Up arrow", "down": "Down arrow"}
+"""pygame's names of the arrow keys → what the window calls them (pygame's own font has no arrow glyphs)."""
 HIGHWAY_KEYS = {"LANE_LEFT": "up", "IDLE": "", "LANE_RIGHT": "down", "FASTER": "right", "SLOWER": "left"}
 """highway-env's meta-actions → keys, as its own manual control (`EventHandler`) has them."""
 EXAMPLE = '--keys \'{"left": 0, "right": 1, "": 2}\''
@@ -71,11 +74,20 @@ class KeyMap:
         return {name for combo in self.keys if combo for name in combo.split("+")}
 
     def legend(self) -> list[str]:
-        """One short text per entry: "left: 3 LEFT", "(no key): 0" (ASCII: pygame's own font has no arrows)."""
+        """One short text per entry, the keys as a keyboard names them and the action by its name
+        where the env names it: "Left arrow = LEFT", "Space = FIRE", "no key = NOOP", "A = action 3"."""
         return [
-            f"{combo or '(no key)'}: {action}" + (f" {self.meanings[action]}" if action < len(self.meanings) else "")
+            f"{key_label(combo)} = " + (self.meanings[action] if action < len(self.meanings) else f"action {action}")
             for combo, action in self.keys.items()
-        ] + ([] if "" in self.keys else ["(no key): the last action"])
+        ] + ([] if "" in self.keys else ["no key = the last action"])
+
+
+def key_label(combo: str) -> str:
+    """A key map entry's keys as a keyboard names them: "Left arrow", "Space", "A", "Up arrow + Space";
+    "" is "no key"."""
+    if not combo:
+        return "no key"
+    return " + ".join(ARROWS.get(name, name.upper() if len(name) == 1 else name.title()) for name in combo.split("+"))
 
 
 def check_keys(keys: Mapping[str, int], n_actions: int, source: str) -> dict[str, int]:
@@ -130,8 +142,8 @@ def env_keys(env: gym.Env) -> tuple[dict[str, int], str, tuple[str, ...]] | None
         return {HIGHWAY_KEYS[name]: indexes[name] for name in names}, "highway-env's meta-actions", names
     action_set = getattr(base, "action_set", None)
     if type(base).__module__.startswith("minatar") and action_set is not None and len(action_set) == n:
-        letters = [list(MINATAR_KEYS)[int(a)] for a in action_set]
-        return {MINATAR_KEYS[letter]: i for i, letter in enumerate(letters)}, "MinAtar's action set", tuple(letters)
+        names = tuple(list(MINATAR_KEYS)[int(a)] for a in action_set)
+        return {MINATAR_KEYS[name]: i for i, name in enumerate(names)}, "MinAtar's action set", names
     return None
 
 

@@ -35,22 +35,30 @@ class Input:
     """The window was closed."""
 
 
+def _no_display(why: str) -> str:
+    """What a person without a screen is told, and what to do."""
+    return (
+        f"cannot open a window (no display: {why}): run it on a desktop (DISPLAY or WAYLAND_DISPLAY set), "
+        "or headless under a virtual display (xvfb-run python -m dqfd_bc_keras.demos …)"
+    )
+
+
 class Window:
     """A pygame window: `draw` a frame and text, `poll` the keyboard, `tick` at a frame rate."""
 
     def __init__(self, title: str) -> None:
         self.pg = pygame()
+        asked = os.environ.get("SDL_VIDEODRIVER")
         try:
             self.pg.display.init()
-            driver = self.pg.display.get_driver()
-        except self.pg.error as error:
-            driver = str(error)
-        if driver in HEADLESS and os.environ.get("SDL_VIDEODRIVER") != driver:  # SDL's fallback, not a choice
+        except self.pg.error as error:  # the driver asked for has no display to open (x11 without DISPLAY)
             self.pg.display.quit()
-            raise ConfigError(
-                f"cannot open a window (no display: SDL found {driver!r}): run it on a desktop, or headless under "
-                "a virtual display (xvfb-run python -m dqfd_bc_keras.demos …)"
-            )
+            said = f"SDL_VIDEODRIVER={asked} says" if asked else "SDL says"
+            raise ConfigError(_no_display(f"{said} {str(error)!r}")) from None
+        driver = self.pg.display.get_driver()
+        if driver in HEADLESS and asked != driver:  # SDL's fallback, not a choice
+            self.pg.display.quit()
+            raise ConfigError(_no_display(f"SDL found only {driver!r}"))
         self.pg.display.set_caption(title)
         self.pg.font.init()
         self.font = self.pg.font.Font(None, LINE + 2)  # pygame's own font: nothing to find on the system

@@ -41,6 +41,7 @@ import gymnasium as gym
 import numpy as np
 
 from dqfd_bc_keras.envs.atari import ATARI_DEFAULTS, ATARI_STEP_LIMIT, is_atari, split_kwargs, wrap_atari
+from dqfd_bc_keras.envs.minatar_pixels import MinAtarPixels
 from dqfd_bc_keras.envs.network_input import NetworkInput, resolve_torso
 from dqfd_bc_keras.envs.observations import (
     FlattenObservation,
@@ -53,7 +54,7 @@ from dqfd_bc_keras.envs.wrappers import FallPenalty, ForgetLastAction, GoalCount
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.plugins import bare_id, import_module, parse
 from dqfd_bc_keras.tasks import ENV_DEFAULTS, TASKS, TaskSpec, find_preset
-from dqfd_bc_keras.tasks.minatar import require_minatar
+from dqfd_bc_keras.tasks.minatar import pace, require_minatar
 
 SUPPORTED_SPACES = (
     "a Discrete action space starting at 0 and an observation of Box, Discrete, MultiDiscrete or "
@@ -244,7 +245,8 @@ def _task_spaces(name: str, kwargs_key: str) -> TaskSpaces:
 def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True, **options: Any) -> gym.Env:
     """`gym.make` of task `name`'s plain env with `env_kwargs`; a bad keyword is one `ConfigError`
     line. An Atari env gets its preprocessing (`atari.py`): the learner's when `learning`, else
-    the evaluation's (raw rewards, whole games)."""
+    the evaluation's (raw rewards, whole games); a MinAtar env its fresh sticky action at each
+    reset and its frames in MinAtar's colours (`minatar_pixels.py`)."""
     env_id, env_kwargs = get_task(name).env_id, dict(env_kwargs or {})
     minatar = bare_id(env_id).startswith("MinAtar/")
     if minatar:
@@ -255,7 +257,7 @@ def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True
         return wrap_atari(gym.make(bare_id(env_id), **options, **make_kwargs), atari, learning)
     try:
         env = gym.make(env_id, **options, **env_kwargs)
-        return ForgetLastAction(env) if minatar else env
+        return MinAtarPixels(ForgetLastAction(env), pace(env.unwrapped.game.env_name)) if minatar else env
     except (TypeError, ValueError, AssertionError) as error:
         if not env_kwargs:
             raise

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.tasks.registry import TaskSpec, register_task
+from dqfd_bc_keras.tasks.registry import TASKS, TaskSpec, register_task
 
 GAMES = ("asterix", "breakout", "freeway", "seaquest", "space_invaders")
 """MinAtar's games, as `minatar.gym.register_envs` names them (Breakout-v0: all 6 actions, -v1: the minimal set)."""
@@ -75,6 +75,13 @@ def require_minatar() -> None:
 
 if importlib.util.find_spec("minatar") is not None:
     _register_ids()
+
+
+def pace(game: str) -> float | None:
+    """Steps per second a person plays MinAtar's `game` at (any action set): the `fps` of the
+    preset that plays it (measured: docs/DEMONSTRATIONS.md); None if no preset plays it."""
+    prefix = f"MinAtar/{game.title().replace('_', '')}-"
+    return next((spec.fps for spec in TASKS.values() if spec.env_id.startswith(prefix) and spec.fps), None)
 
 
 # --- Breakout -------------------------------------------------------------------------------------
@@ -264,7 +271,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": breakout_strong, "imperfect": breakout_imperfect},
         keys={"": 0, "left": 1, "right": 2},
-        fps=10,
+        fps=4,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar Breakout (minimal actions: noop, left, right), +1 per brick, 1000-step limit",
     )
 )
@@ -280,7 +287,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": freeway_strong, "imperfect": freeway_imperfect},
         keys={"": 0, "up": 1, "down": 2},
-        fps=10,
+        fps=8,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar Freeway (minimal actions: noop, up, down), +1 per crossing, 2500-step limit",
     )
 )

@@ -127,7 +127,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": asterix_strong, "imperfect": asterix_imperfect},
         keys={"": 0, "left": 1, "up": 2, "right": 3, "down": 4},
-        fps=10,
+        fps=4,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar Asterix (minimal actions: noop, left, up, right, down), +1 per treasure, 1000-step limit",
     )
 )

@@ -176,7 +176,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": seaquest_strong, "imperfect": seaquest_imperfect},
         keys={"": 0, "left": 1, "up": 2, "right": 3, "down": 4, "space": 5},
-        fps=10,
+        fps=4,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar Seaquest (minimal actions: noop, left, up, right, down, fire), +1 per enemy, 1000-step limit",
     )
 )

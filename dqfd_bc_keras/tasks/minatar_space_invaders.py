@@ -146,7 +146,7 @@ register_task(
         defaults=DEFAULTS,
         experts={"strong": space_invaders_strong, "imperfect": space_invaders_imperfect},
         keys={"": 0, "left": 1, "right": 2, "space": 3},
-        fps=10,
+        fps=4,  # the pace measured for a person reacting in 0.25 s (benchmarks/play_pace.py)
         doc="MinAtar SpaceInvaders (minimal actions: noop, left, right, fire), +1 per alien, 1000-step limit",
     )
 )
