@@ -17,7 +17,7 @@ from test_reliability import tree
 
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.errors import BrokenRunError, ConfigError
 
 WORDS = {
     "int": "an integer",
@@ -171,6 +171,22 @@ RESUMED = {
         f"env_kwargs must be {WORDS['dict[str, Any]']}, got {{'x': nan}}",
     ),
     "config.json []": (edit("config.json", None, []), "expected a JSON object of config fields, got []"),
+    "episode -5": (edit("state.json", "episode", -5), "episode must be an integer ≥ 0, got -5"),
+    "episode 1.5": (edit("state.json", "episode", 1.5), "episode must be an integer ≥ 0, got 1.5"),
+    "interactions '600'": (edit("state.json", "interactions", "600"), "interactions must be an integer ≥ 0, got '600'"),
+    "returns [null]": (edit("state.json", "returns", [None]), "returns must be a list of finite numbers, got [None]"),
+    "best_average NaN": (
+        edit("state.json", "best_average", math.nan),
+        "best_average must be a number (or -Infinity: no best yet), got nan",
+    ),
+    "stopped_early 0": (edit("state.json", "stopped_early", 0), "stopped_early must be true or false, got 0"),
+    "metrics [{}]": (edit("state.json", "metrics", [{}]), "metrics: a row has no 'episode'"),
+    "wall_time -1": (edit("state.json", "wall_time", -1.0), "wall_time must be a finite number ≥ 0, got -1.0"),
+    "next_checkpoint null": (
+        edit("state.json", "next_checkpoint", None),
+        "next_checkpoint must be an integer ≥ 0, got None",
+    ),
+    "state.json []": (edit("state.json", None, []), "state.json must hold an object, got list"),
 }
 """An edit of a finished run (`train.py --quick`) and what the refusal says of it."""
 
@@ -192,3 +208,11 @@ def test_resuming_a_run_whose_files_hold_a_wrong_value_is_one_line_naming_file_a
         rf"error: {re.escape(f'{path}: {said}')}.*\); start the run over with --force\n", done.stderr
     ), done.stderr
     assert tree(run) == before
+
+
+def test_loading_a_run_whose_state_json_is_impossible_names_it(quick_run, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(quick_run().out, run)
+    path = edit("state.json", "episode", -5)(run)
+    with pytest.raises(BrokenRunError, match=re.escape(f"{path}: the checkpoint cannot be resumed (ValueError: ")):
+        DQfD.load(run)
