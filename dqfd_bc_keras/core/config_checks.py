@@ -16,14 +16,14 @@ import math
 import numbers
 import typing
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from dqfd_bc_keras.choices import DYNAMIC_MODES, PRIOR_CENTERS, TARGETS, TD_LOSSES, TIMEOUT_MODES, TORSOS, UNCERTAINTIES
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.seeds import MAX_SEED
 
-if TYPE_CHECKING:
-    from dqfd_bc_keras.core.config import Config
+Config = Any
+"""A `core.config.Config`: that module imports this one, so this one names it without importing it."""
 
 
 def check(config: Config) -> None:
