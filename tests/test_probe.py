@@ -365,7 +365,7 @@ def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_pa
     one_line(
         capsys,
         cli.run(train_main, ["--quiet", "--resume", "--out", str(run)]),
-        f"error: {_checkpoint(run)}: the checkpoint cannot be resumed (TypeError: episode must be int, got 'x'); "
+        f"error: {state}: the checkpoint cannot be resumed (ValueError: episode must be an integer ≥ 0, got 'x'); "
         "start the run over with --force\n",
     )
     assert tree(run) == before

@@ -2,26 +2,25 @@
 
 Where the paper is silent, ALGORITHM.md decides; where that is silent too, the value is ours
 and the field's comment says so. `Config.for_task(name)` gives a task preset's defaults (the
-registry in `tasks/`; any other Gymnasium env id gets `tasks.ENV_DEFAULTS`); `validate` rejects
-settings the algorithm cannot use with a `ConfigError` naming the value, without making an env:
-whether the env takes the config is `envs.checked_spaces`'s to say, where envs are about to be made.
+registry in `tasks/`; any other Gymnasium env id gets `tasks.ENV_DEFAULTS`); `validate`, run by
+every Config made, rejects settings the algorithm cannot use (a wrong type, a name outside its
+choices, a number out of range: `config_checks.py`) with a `ConfigError` naming the field, without
+making an env: whether the env takes the config is `envs.checked_spaces`'s to say, where envs are
+about to be made.
 Nothing here imports TensorFlow: reading a config.json is cheap.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
-from dqfd_bc_keras.choices import DYNAMIC_MODES, PRIOR_CENTERS, TARGETS, TD_LOSSES, TIMEOUT_MODES, TORSOS, UNCERTAINTIES
+from dqfd_bc_keras.core.config_checks import check, parsed, typed
 from dqfd_bc_keras.core.methods import Method, get_method, reading_saved_config
 from dqfd_bc_keras.envs.make import get_task, step_limit
 from dqfd_bc_keras.errors import OLDER, ConfigError, DqfdWarning
-from dqfd_bc_keras.seeds import MAX_SEED
 from dqfd_bc_keras.tasks import check_demonstrator
 
 QUICK: dict[str, object] = {
@@ -203,6 +202,10 @@ class Config:
     def for_task(cls, task: str, **overrides: object) -> Config:
         """Task `task`'s defaults (its preset's, or `ENV_DEFAULTS` for any other Gymnasium env) with
         `overrides`, validated. Use it rather than `Config(...)`, whose defaults are no task's."""
+        task = typed("task", str, task)  # the preset is looked up by it before the fields are checked
+        unknown = [key for key in overrides if key not in cls.__dataclass_fields__]
+        if unknown:
+            raise ConfigError(unknown_field(unknown[0]))
         get_task(task)
         return cls(**{**preset_defaults(task), **overrides})
 
@@ -210,7 +213,10 @@ class Config:
     def from_dict(cls, fields: dict) -> Config:
         """The inverse of `to_dict` (a saved config.json, whose derived `observation` record is
         skipped). Every field must be there: the value a file lacks is not known (a default may
-        have changed since it was written). Unknown keys are an error too."""
+        have changed since it was written). Unknown keys are an error too, and every value is
+        checked as the constructor checks it (a list stands for a tuple)."""
+        if not isinstance(fields, dict):
+            raise ConfigError(f"expected a JSON object of config fields, got {fields!r:.100}")
         known = [f.name for f in dataclasses.fields(cls)]
         fields = {k: v for k, v in fields.items() if k not in DERIVED_KEYS}
         unknown = sorted(set(fields) - set(known))
@@ -219,9 +225,8 @@ class Config:
         missing = [name for name in known if name not in fields]
         if missing:
             raise ConfigError(f"no {missing}: {OLDER}")
-        values = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
         with reading_saved_config():  # its method (the user's) is imported to train, not to read its settings
-            return cls.for_task(values.pop("task", "cartpole"), **values)
+            return cls.for_task(fields.pop("task"), **fields)
 
     def with_overrides(self, assignments: list[str]) -> Config:
         """A copy with `key=value` assignments applied (values typed by the field), validated."""
@@ -260,11 +265,10 @@ class Config:
         return self.method.bc_fit == "map"
 
     def validate(self) -> Config:
-        """Raise ConfigError for the first value the algorithm cannot use; return self."""
-        self._check_kinds()
-        for name, ok, expected in self._ranges():
-            if not ok:
-                raise ConfigError(f"{name} must be {expected}, got {getattr(self, name)!r}")
+        """Raise ConfigError for the first value the algorithm cannot use (a wrong type, a name
+        outside its choices, a number out of range: config_checks.py); return self, each field
+        holding its plain Python value."""
+        check(self)
         check_demonstrator(self.expert, get_task(self.task))
         if not self.uses_demos and self.total_steps < self.batch_size:
             raise ConfigError(
@@ -279,86 +283,6 @@ class Config:
                 stacklevel=2,
             )
         return self
-
-    def _check_kinds(self) -> None:
-        """Values of the wrong kind: env kwargs, a method that trains no Q-network, names outside
-        their choices, numbers that are not finite (inf or NaN passes every range check, or none)."""
-        if not isinstance(self.env_kwargs, dict) or not all(isinstance(k, str) for k in self.env_kwargs):
-            raise ConfigError(f"env_kwargs must be a JSON object of keyword arguments, got {self.env_kwargs!r}")
-        if not self.method.q_learning:
-            raise ConfigError(
-                f"expert_loss={self.expert_loss!r} trains no Q-network: behavioural cloning alone is "
-                "run by the lab's imitation arms (python -m dqfd_bc_keras.experiments grid)"
-            )
-        choices = {
-            "timeout": TIMEOUT_MODES,
-            "target": TARGETS,
-            "td_loss": TD_LOSSES,
-            "prior_center": PRIOR_CENTERS,
-            "dynamic_demos": DYNAMIC_MODES,
-            "uncertainty": UNCERTAINTIES,
-            "torso": TORSOS,
-        }
-        for name, allowed in choices.items():
-            if getattr(self, name) not in allowed:
-                raise ConfigError(f"{name}={getattr(self, name)!r} is not one of {allowed}")
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ConfigError(f"{f.name} must be a finite number, got {value!r}")
-
-    def _ranges(self) -> list[tuple[str, bool, str]]:
-        """(field, whether its value is in range, the range in words), in the order checked."""
-        return [
-            ("seed", 0 <= self.seed <= MAX_SEED, f"in [0, {MAX_SEED}]"),
-            ("gamma", 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
-            ("n_step", self.n_step >= 1, "≥ 1"),
-            ("batch_size", self.batch_size >= 1, "≥ 1"),
-            ("mc_passes", self.mc_passes >= 1, "≥ 1"),
-            ("ensemble_members", self.ensemble_members >= 2, "≥ 2 (a variance needs two members)"),
-            (
-                "mc_dropout",
-                self.mc_dropout or self.uncertainty == "mc_dropout",
-                "True when uncertainty is not mc_dropout (False ablates the MC-dropout estimator)",
-            ),
-            ("expert_epsilon", 0.0 <= self.expert_epsilon <= 1.0, "in [0, 1]"),
-            ("sigma0_sq", self.sigma0_sq > 0, "> 0"),
-            ("temperature", self.temperature > 0, "> 0"),
-            ("prior_scale", self.prior_scale > 0, "> 0"),
-            ("bc_prior_scale", self.bc_prior_scale > 0, "> 0"),
-            ("bc_dropout", 0.0 <= self.bc_dropout < 1.0, "in [0, 1)"),
-            ("learning_rate", self.learning_rate > 0, "> 0"),
-            ("bc_learning_rate", self.bc_learning_rate > 0, "> 0"),
-            ("target_update_period", self.target_update_period >= 1, "≥ 1"),
-            ("pretrain_steps", self.pretrain_steps >= 0, "≥ 0"),
-            ("replay_capacity", self.replay_capacity >= self.n_step, "≥ n_step"),
-            (
-                "demo_capacity",
-                not self.uses_demos or self.demo_capacity >= self.limit,  # no D_demo without demos
-                f"≥ the episode limit {self.limit}",
-            ),
-            ("priority_alpha", self.priority_alpha >= 0, "≥ 0"),
-            ("priority_beta0", 0.0 <= self.priority_beta0 <= 1.0, "in [0, 1]"),
-            ("priority_eps_agent", self.priority_eps_agent > 0, "> 0"),
-            ("priority_eps_demo", self.priority_eps_demo > 0, "> 0"),
-            ("max_steps", self.max_steps is None or self.max_steps >= 1, "≥ 1 or None"),
-            ("demo_episodes", self.demo_episodes >= 1, "≥ 1"),
-            ("dynamic_window", self.dynamic_window >= 1, "≥ 1"),
-            ("dynamic_rollouts", self.dynamic_rollouts >= 1, "≥ 1"),
-            ("bc_refit_epochs", self.bc_refit_epochs >= 0, "≥ 0"),
-            ("total_steps", self.total_steps >= 1, "≥ 1"),
-            ("train_freq", self.train_freq >= 1, "≥ 1"),
-            ("epsilon_start", self.epsilon_start is None or 0 <= self.epsilon_start <= 1, "in [0, 1] or None"),
-            ("epsilon_end", 0.0 <= self.epsilon_end <= 1.0, "in [0, 1]"),
-            ("epsilon_fraction", 0.0 < self.epsilon_fraction <= 1.0, "in (0, 1]"),
-            ("early_stop_window", self.early_stop_window >= 0, "≥ 0"),
-            ("eval_every", self.eval_every >= 1, "≥ 1"),
-            ("eval_episodes", self.eval_episodes >= 1, "≥ 1"),
-            ("final_eval_episodes", self.final_eval_episodes >= 1, "≥ 1"),
-            ("checkpoint_every", self.checkpoint_every >= 1, "≥ 1"),
-            ("hidden", len(self.hidden) >= 1 and min(self.hidden) >= 1, "a non-empty list of positive sizes"),
-            ("bc_hidden", len(self.bc_hidden) >= 1 and min(self.bc_hidden) >= 1, "a non-empty list of positive sizes"),
-        ]
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -397,7 +321,7 @@ def parse_assignments(assignments: list[str]) -> dict[str, object]:
             raise ConfigError(f"--set {assignment!r}: expected key=value")
         if key not in types:
             raise ConfigError(f"--set {assignment!r}: {unknown_field(key)}")
-        changes[key] = _parse(key, types[key], text.strip())
+        changes[key] = parsed(key, types[key], text.strip())
     return changes
 
 
@@ -408,29 +332,3 @@ def unknown_field(key: str) -> str:
     near = difflib.get_close_matches(key, [f.name for f in dataclasses.fields(Config)], n=1)
     hint = f"did you mean {near[0]}?" if near else "Config's fields are listed in dqfd_bc_keras/core/config.py"
     return f"unknown Config field {key!r}; {hint}"
-
-
-def _parse(key: str, annotation: str, text: str) -> object:
-    """`text` as the type named by the dataclass annotation `annotation`."""
-    optional = annotation.endswith("| None")
-    if optional and text.lower() == "none":
-        return None
-    base = annotation.removesuffix(" | None")
-    if base.startswith("dict"):
-        try:
-            value = json.loads(text)
-        except json.JSONDecodeError:
-            value = None
-        if not isinstance(value, dict):
-            raise ConfigError(f"--set {key}={text!r}: expected a JSON object, e.g. {key}='{{\"use_lidar\": false}}'")
-        return value
-    try:
-        if base == "bool":
-            if text.lower() not in ("true", "false", "1", "0"):
-                raise ValueError(text)
-            return text.lower() in ("true", "1")
-        if base.startswith("tuple"):
-            return tuple(int(part) for part in text.split(",") if part)
-        return {"int": int, "float": float, "str": str}[base](text)
-    except ValueError:
-        raise ConfigError(f"--set {key}={text!r}: expected {annotation}") from None

@@ -234,14 +234,17 @@ class RunDirectory:
         root = self.out / "checkpoints"
         source = root / "latest.json"
         try:
-            source = root / json.loads(source.read_text())["dir"]
+            checkpoint = root / json.loads(source.read_text())["dir"]
+            source = checkpoint / "state.json"  # first: the file a person may have edited is named
+            state = TrainingState.from_dict(json.loads(source.read_text()))
+            source = checkpoint
             self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
             dynamic = self.learner.dynamic
             if dynamic is not None:
                 dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
                 recent = source / "recent.npz"
                 dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
-            self.state = TrainingState.from_dict(json.loads((source / "state.json").read_text()))
+            self.state = state
         # AssertionError: the checkpoint lacks a variable the learner has (a checkpoint of an earlier version).
         except (OSError, ValueError, LookupError, TypeError, AssertionError, tf.errors.OpError) as error:
             raise BrokenRunError(

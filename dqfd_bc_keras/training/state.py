@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import typing
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,22 +54,17 @@ class TrainingState:
 
     @classmethod
     def from_dict(cls, fields: dict[str, Any]) -> TrainingState:
-        """The state a state.json holds; keys it does not know are ignored. A value of the wrong
-        type raises TypeError naming its key (a resume reports it rather than fail mid-run)."""
+        """The state a state.json holds; keys it does not know are ignored. A value of the wrong type
+        or an impossible one (a negative count, a NaN) raises ValueError naming its key: a resume
+        reports it rather than fail mid-run, or rewrite the run's files from it."""
         if not isinstance(fields, dict):
-            raise TypeError(f"state.json must hold an object, got {type(fields).__name__}")
+            raise ValueError(f"state.json must hold an object, got {type(fields).__name__}")
         known = {f.name: fields[f.name] for f in dataclasses.fields(cls) if f.name in fields}
-        hints = typing.get_type_hints(cls)
         for name, value in known.items():
-            if name not in RECORDS and not _is(value, hints[name]):
-                kind = hints[name]
-                shown = kind.__name__ if isinstance(kind, type) else kind
-                raise TypeError(f"{name} must be {shown}, got {value!r:.60}")
-        for name, record in RECORDS.items():
-            rows = known.get(name, [])
-            if not isinstance(rows, list) or not all(isinstance(row, dict) for row in rows):
-                raise TypeError(f"{name} must be a list of objects, got {rows!r:.60}")
-            known[name] = [record.from_row(row) for row in rows]
+            if name in RECORDS:
+                known[name] = _records(name, value)
+            elif not VALUES[name][1](value):
+                raise ValueError(f"{name} must be {VALUES[name][0]}, got {value!r:.60}")
         return cls(**known)
 
 
@@ -77,14 +72,45 @@ RECORDS = {"metrics": EpisodeRow, "evals": EvalRow, "demo_updates": DemoUpdate}
 """TrainingState's lists of records and the record of each."""
 
 
-def _is(value: Any, kind: Any) -> bool:
-    """Whether a JSON value is of type `kind` (int, float, bool or list[float]; an int counts as a
-    float, a bool as nothing but a bool)."""
-    if typing.get_origin(kind) is list:
-        return isinstance(value, list) and all(_is(v, typing.get_args(kind)[0]) for v in value)
-    if kind is bool or isinstance(value, bool):
-        return kind is bool and isinstance(value, bool)
-    return isinstance(value, int) if kind is int else isinstance(value, (int, float))
+def _records(name: str, rows: Any) -> list[Any]:
+    """The list of records `name` of a state.json, or ValueError naming it and the row at fault."""
+    if not isinstance(rows, list) or not all(isinstance(row, dict) for row in rows):
+        raise ValueError(f"{name} must be a list of objects, got {rows!r:.60}")
+    try:
+        return [RECORDS[name].from_row(row) for row in rows]
+    except KeyError as error:
+        raise ValueError(f"{name}: a row has no {error}") from None
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name}: {error}") from None
+
+
+def _number(value: Any) -> bool:
+    """A JSON number (a bool is none)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+VALUES: dict[str, tuple[str, Callable[[Any], bool]]] = {
+    "episode": ("an integer ≥ 0", _count),
+    "interactions": ("an integer ≥ 0", _count),
+    "returns": (
+        "a list of finite numbers",
+        lambda v: isinstance(v, list) and all(_number(r) and math.isfinite(r) for r in v),
+    ),
+    "best_average": (
+        "a number (or -Infinity: no best yet)",
+        lambda v: _number(v) and not math.isnan(v) and v < math.inf,
+    ),
+    "next_eval": ("an integer ≥ 0", _count),
+    "next_checkpoint": ("an integer ≥ 0", _count),
+    "bc_fits": ("an integer ≥ 0", _count),
+    "wall_time": ("a finite number ≥ 0", lambda v: _number(v) and 0 <= v < math.inf),
+    "stopped_early": ("true or false", lambda v: isinstance(v, bool)),
+}
+"""What each of state.json's values (its records aside) must be, in words and as a test."""
 
 
 def early_stop(config: Config, returns: list[float]) -> bool:
