@@ -32,8 +32,8 @@ or `--resume`, starts it over, with a warning.
 from __future__ import annotations
 
 import contextlib
-import functools
 import dataclasses
+import functools
 import json
 import shutil
 import sys
@@ -47,9 +47,9 @@ import tensorflow as tf
 from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.memory import check_memory
+from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
-from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.evaluation import unmade_env
 from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from dqfd_bc_keras.runs.provenance import provenance
@@ -409,7 +409,9 @@ def saved_config(out: str | Path) -> Config:
     except (OSError, ValueError, KeyError, TypeError):
         return config  # an unreadable latest.json is the restore's to report
     trained = _read_config(own)
-    if trained.total_steps > config.total_steps and trained == dataclasses.replace(config, total_steps=trained.total_steps):
+    if trained.total_steps > config.total_steps and trained == dataclasses.replace(
+        config, total_steps=trained.total_steps
+    ):
         return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
     changed = differences(trained.to_dict(), config.to_dict())
     if changed:
@@ -438,7 +440,9 @@ def _read_config(path: Path) -> Config:
         if not unmade_env(env):
             return Config.from_dict(fields)
     except (OSError, ValueError) as error:
-        raise BrokenRunError(f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force") from None
+        raise BrokenRunError(
+            f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force"
+        ) from None
     raise RunDirectoryError(
         f"{path}: trained on a Python env object ({env}), which no other process can make; "
         "give it again from Python: DQfD.load(path, env=...)"

@@ -13,8 +13,13 @@ import platform
 import subprocess
 from pathlib import Path
 
-RULES = ("dqfd_bc_keras/experiments/claims.py", "dqfd_bc_keras/experiments/metrics.py", "dqfd_bc_keras/experiments/arms.py",
-         "dqfd_bc_keras/tasks", "docs/PREREGISTRATION.md")
+RULES = (
+    "dqfd_bc_keras/experiments/claims.py",
+    "dqfd_bc_keras/experiments/metrics.py",
+    "dqfd_bc_keras/experiments/arms.py",
+    "dqfd_bc_keras/tasks",
+    "docs/PREREGISTRATION.md",
+)
 """Where the verdict rules live: `rules_commit` is the last commit that changed any of them."""
 
 ISA_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512_vnni", "amx_tile")
@@ -42,8 +47,13 @@ def machine() -> dict:
                 flags = set(value.split())
     except OSError:
         pass
-    return {"cpu": model, "isa": [flag for flag in ISA_FLAGS if flag in flags], "cores": os.cpu_count(),
-            "system": platform.platform(), "python": platform.python_version()}
+    return {
+        "cpu": model,
+        "isa": [flag for flag in ISA_FLAGS if flag in flags],
+        "cores": os.cpu_count(),
+        "system": platform.platform(),
+        "python": platform.python_version(),
+    }
 
 
 def tensorflow_build() -> dict:
@@ -51,11 +61,15 @@ def tensorflow_build() -> dict:
     import tensorflow as tf
 
     threading = tf.config.threading
-    return {"version": tf.__version__, "git_version": tf.version.GIT_VERSION, "compiler": tf.version.COMPILER_VERSION,
-            "build": {key: value for key, value in tf.sysconfig.get_build_info().items() if isinstance(value, bool)},
-            "onednn": os.environ.get("TF_ENABLE_ONEDNN_OPTS", "(TensorFlow's default)"),
-            "intra_op_threads": threading.get_intra_op_parallelism_threads(),
-            "inter_op_threads": threading.get_inter_op_parallelism_threads()}
+    return {
+        "version": tf.__version__,
+        "git_version": tf.version.GIT_VERSION,
+        "compiler": tf.version.COMPILER_VERSION,
+        "build": {key: value for key, value in tf.sysconfig.get_build_info().items() if isinstance(value, bool)},
+        "onednn": os.environ.get("TF_ENABLE_ONEDNN_OPTS", "(TensorFlow's default)"),
+        "intra_op_threads": threading.get_intra_op_parallelism_threads(),
+        "inter_op_threads": threading.get_inter_op_parallelism_threads(),
+    }
 
 
 def provenance() -> dict:
@@ -68,7 +82,11 @@ def provenance() -> dict:
     import tensorflow
 
     status = _git("status", "--porcelain", "--untracked-files=no")
-    return {"code_commit": _git("rev-parse", "HEAD"), "rules_commit": _git("log", "-1", "--format=%H", "--", *RULES),
-            "dirty": bool(status) if status is not None else None,
-            "versions": {m.__name__: m.__version__ for m in (tensorflow, keras, gymnasium, numpy)},
-            "machine": machine(), "tensorflow": tensorflow_build()}
+    return {
+        "code_commit": _git("rev-parse", "HEAD"),
+        "rules_commit": _git("log", "-1", "--format=%H", "--", *RULES),
+        "dirty": bool(status) if status is not None else None,
+        "versions": {m.__name__: m.__version__ for m in (tensorflow, keras, gymnasium, numpy)},
+        "machine": machine(),
+        "tensorflow": tensorflow_build(),
+    }
