@@ -29,6 +29,7 @@ from dqfd_bc_keras.core.config import Config, unknown_field
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import BUILT_IN, METHODS, Method, register
 from dqfd_bc_keras.demos.recording import callable_name, try_demonstrator
+from dqfd_bc_keras.envs.frames import as_frames
 from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy
@@ -172,7 +173,7 @@ class DQfD:
         learner = self._trained()
         layout = task_spaces(self.config.task, self.config.env_kwargs).layout
         if layout.image:
-            x = np.asarray(obs, dtype=np.uint8)
+            x = as_frames(obs, layout.frames.channels_first)
             batch = None if x.ndim == len(layout.frames.shape) else len(x)
         else:
             batch = _batch_size(layout.kept, obs)

@@ -37,7 +37,7 @@ from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.demos.experts import try_demonstrator
-from dqfd_bc_keras.envs.make import checked_spaces, task_slug, task_spaces
+from dqfd_bc_keras.envs.make import checked_spaces, get_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.files import DirectoryLock
 from dqfd_bc_keras.runs.writers import check_dir
@@ -76,7 +76,11 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--out", help="run directory (default: runs/TASK-LOSS-seedSEED)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     parser.add_argument("--force", action="store_true", help="replace an existing run in --out")
-    parser.add_argument("--quick", action="store_true", help="a tiny budget (seconds), for tests and smoke checks")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="a tiny budget (seconds), for tests and smoke checks (an Atari game: episodes of at most 500 steps)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="any Config field")
     return parser.parse_args(argv)
@@ -124,8 +128,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen = {k: v for k, v in flags.items() if v is not None}
     # Every override before the one validation: --max-steps or --set max_steps=N makes an env
     # without a time limit usable.
-    overrides = {**(QUICK if args.quick else {}), **chosen, **env_settings(args), **parse_assignments(args.set)}
     task = chosen_task(args)
+    quick = {**QUICK, **get_task(task).quick} if args.quick else {}
+    overrides = {**quick, **chosen, **env_settings(args), **parse_assignments(args.set)}
     check_out(args.out)
     if args.demos and args.expert:
         raise ConfigError(
