@@ -30,7 +30,8 @@ from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import BUILT_IN, METHODS, Method, register
 from dqfd_bc_keras.demos.recording import callable_name, try_demonstrator
 from dqfd_bc_keras.envs.frames import as_frames
-from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, checked_spaces, env_id_of, task_spaces
+from dqfd_bc_keras.envs.make import checked_spaces, task_spaces
+from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX, env_id_of
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DqfdWarning, RunDirectoryError, one_line
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy
 from dqfd_bc_keras.runs.directory import RunDirectory, continue_run, save_run, saved_config, train

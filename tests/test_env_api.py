@@ -40,7 +40,8 @@ def test_an_old_api_env_trains_and_evaluates_from_the_command_line(tmp_path):
 
 
 def test_an_old_api_env_object_from_python_learns_and_predicts():
-    model = DQfD(OldApiChain(), lambda obs: 1, max_steps=10, total_steps=100, pretrain_steps=5, eval_every=100)
+    tiny = {"total_steps": 100, "pretrain_steps": 5, "eval_every": 100, "bc_epochs": 1, "demo_episodes": 3}
+    model = DQfD(OldApiChain(), lambda obs: 1, max_steps=10, **tiny)
     assert model.dataset.rewards.sum() == model.config.demo_episodes  # np.array([1.]) each goal, summed as floats
     played = model.learn().evaluate(2)
     assert set(played.returns) <= {0.0, 1.0} and all(n <= 8 for n in played.lengths)  # the goal, or cut at 8
@@ -57,4 +58,4 @@ def test_a_reward_of_several_values_is_one_line(tmp_path):
     assert done.returncode == 2 and done.stderr.strip().count("\n") == 0, done.stderr
     assert "reward of shape (2,)" in done.stderr
     with pytest.raises(ConfigError, match=re.escape("reward of shape (2,)")):
-        DQfD("toy_envs:ToyVectorReward-v0", "toy_envs:go_right", total_steps=100).learn()
+        DQfD("toy_envs:ToyVectorReward-v0", "toy_envs:go_right", total_steps=100)

@@ -17,6 +17,8 @@ GREY = {"type": "GrayscaleObservation", "stack_size": 4, "weights": [0.2989, 0.5
 SHORT = ["--quick", "--quiet", "--max-steps", 8, "--set", "total_steps=40", "--set", "eval_every=40"]
 SHORT += ["--set", "pretrain_steps=5", "--set", "demo_episodes=1", "--set", "eval_episodes=1"]
 SHORT += ["--set", "final_eval_episodes=1"]
+TINY = {"demo_episodes": 1, "pretrain_steps": 5, "bc_epochs": 1, "eval_every": 20, "eval_episodes": 1}
+TINY |= {"final_eval_episodes": 1, "replay_capacity": 100, "demo_capacity": 500}
 
 
 def test_a_tuple_on_the_command_line_is_recorded_as_one_and_made_as_one():
@@ -70,7 +72,7 @@ def test_highway_image_observation_from_the_command_line_trains_resumes_and_eval
 def test_highway_image_observation_from_python_keeps_its_tuple():
     pytest.importorskip("highway_env")
     env = gym.make("highway_env:highway-fast-v0", config={"observation": {**GREY, "observation_shape": (84, 84)}})
-    model = DQfD(env, lambda obs: 1, max_steps=8, total_steps=40)
+    model = DQfD(env, lambda obs: 1, max_steps=8, **TINY)
     assert model.config.task == "highway_env:highway-fast-v0"
     assert model.config.env_kwargs["config"]["observation"]["observation_shape"] == {"__tuple__": [84, 84]}
     obs, _ = env.reset(seed=0)

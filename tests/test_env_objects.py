@@ -9,9 +9,12 @@ import pytest
 from helpers import call
 
 from dqfd_bc_keras import DQfD
-from dqfd_bc_keras.envs.make import PYTHON_ENV_PREFIX, task_spaces
+from dqfd_bc_keras.envs.make import task_spaces
+from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX
 from dqfd_bc_keras.errors import DqfdWarning
 
+TINY = {"demo_episodes": 1, "pretrain_steps": 5, "bc_epochs": 1, "eval_every": 20, "eval_episodes": 1}
+TINY |= {"final_eval_episodes": 1, "replay_capacity": 100, "demo_capacity": 500}
 GREY = {"type": "GrayscaleObservation", "observation_shape": (84, 84), "stack_size": 4, "weights": [0.3, 0.6, 0.1]}
 
 
@@ -23,7 +26,7 @@ def test_a_highway_env_configured_after_gym_make_is_trained_on_as_configured():
     env.unwrapped.configure({"observation": GREY})
     env.reset(seed=0)
     with pytest.warns(DqfdWarning, match=r"highway-fast-v0 made again from its id is not the env given \(observation"):
-        model = DQfD(env, lambda obs: 1, max_steps=5, total_steps=40)
+        model = DQfD(env, lambda obs: 1, max_steps=5, **TINY)
     assert model.config.task.startswith(PYTHON_ENV_PREFIX)
     layout = task_spaces(model.config.task).layout
     assert layout.space == env.observation_space and layout.frames.shape == (84, 84, 4)
@@ -31,17 +34,17 @@ def test_a_highway_env_configured_after_gym_make_is_trained_on_as_configured():
     configured = gym.make("highway_env:highway-fast-v0")
     configured.unwrapped.configure({"duration": 3})  # the spaces alike, the config not: still the object
     with pytest.warns(DqfdWarning, match="its config was changed after gym.make"):
-        assert DQfD(configured, lambda obs: 1, max_steps=5).config.task.startswith(PYTHON_ENV_PREFIX)
+        assert DQfD(configured, lambda obs: 1, max_steps=5, **TINY).config.task.startswith(PYTHON_ENV_PREFIX)
 
     same = gym.make("highway_env:highway-fast-v0")  # untouched: its id, which a later process can make
-    assert DQfD(same, lambda obs: 1, max_steps=5).config.task == "highway_env:highway-fast-v0"
+    assert DQfD(same, lambda obs: 1, max_steps=5, **TINY).config.task == "highway_env:highway-fast-v0"
 
 
 def test_an_env_whose_spaces_were_changed_after_gym_make_is_trained_on_itself(tmp_path):
     env = gym.make("CartPole-v1")
     env.unwrapped.action_space = gym.spaces.Discrete(3)  # the user's change; its id makes Discrete(2)
     with pytest.warns(DqfdWarning, match=r"action_space Discrete\(3\) given, Discrete\(2\) made"):
-        model = DQfD(env, lambda obs: 2, total_steps=100, pretrain_steps=5, eval_every=100, demo_episodes=1)
+        model = DQfD(env, lambda obs: 2, **TINY)
     assert task_spaces(model.config.task).n_actions == 3
     assert model.dataset.actions.max() == 2  # the demonstrations were played on the object's actions
 
@@ -50,9 +53,9 @@ def test_minigrid_made_with_its_own_max_steps_is_its_limit():
     """MiniGrid registers no limit but truncates its episodes itself after `max_steps`: that is the
     run's limit, for the API's object and for `--env-kwargs max_steps=...` alike."""
     pytest.importorskip("minigrid")
-    model = DQfD(gym.make("minigrid:MiniGrid-Empty-5x5-v0", max_steps=50), lambda obs: 2)
+    model = DQfD(gym.make("minigrid:MiniGrid-Empty-5x5-v0", max_steps=50), lambda obs: 2, **TINY)
     assert model.config.env_kwargs == {"max_steps": 50} and model.config.limit == 50
-    assert DQfD("minigrid:MiniGrid-Empty-5x5-v0", lambda obs: 2).config.limit == 100  # its default: 4·5²
+    assert DQfD("minigrid:MiniGrid-Empty-5x5-v0", lambda obs: 2, **TINY).config.limit == 100  # its default: 4·5²
 
 
 def test_minigrid_from_the_command_line_takes_its_own_max_steps_as_the_limit(tmp_path):
@@ -72,10 +75,10 @@ def test_minigrid_object_ids_are_not_pixels_when_the_user_says_so():
     from minigrid.wrappers import ImgObsWrapper
 
     view = ImgObsWrapper(gym.make("minigrid:MiniGrid-Empty-5x5-v0"))
-    assert DQfD(view, lambda obs: 2).config.limit == 100  # the wrapped env's own max_steps
-    ids = DQfD(view, lambda obs: 2, env_kwargs={"frame_scale": "none"})
+    assert DQfD(view, lambda obs: 2, **TINY).config.limit == 100  # the wrapped env's own max_steps
+    ids = DQfD(view, lambda obs: 2, env_kwargs={"frame_scale": "none"}, **TINY)
     frames = task_spaces(ids.config.task, ids.config.env_kwargs).layout.frames
     assert frames.scale == 1.0 and frames.shape == (7, 7, 3)
     assert task_spaces(ids.config.task).layout.frames.scale == 1 / 255
     obs, _ = view.reset(seed=0)
-    assert obs.max() == 10  # the goal's object id
+    assert obs.max() == 8  # the goal's object id (an id, not a brightness)

@@ -79,7 +79,7 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="a tiny budget (seconds), for tests and smoke checks (an Atari game: episodes of at most 500 steps)",
+        help="a tiny budget (seconds), for tests and smoke checks (an Atari game: episodes of at most 200 steps)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="any Config field")

@@ -42,9 +42,8 @@ from dqfd_bc_keras.envs.atari import ATARI_DEFAULTS, ATARI_QUICK, ATARI_STEP_LIM
 from dqfd_bc_keras.envs.compat import adapted
 from dqfd_bc_keras.envs.frames import FrameObservation, split_frame_options
 from dqfd_bc_keras.envs.functions import class_not_id, factory_task
-from dqfd_bc_keras.envs.kwargs import as_json, as_python, check_env_kwargs, effective_kwargs, kwargs_key  # noqa: F401
+from dqfd_bc_keras.envs.kwargs import as_json, as_python, check_env_kwargs, kwargs_key
 from dqfd_bc_keras.envs.network_input import NetworkInput, resolve_torso
-from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX, env_id_of  # noqa: F401  (the API's, from here)
 from dqfd_bc_keras.envs.observations import FlattenObservation, ObservationLayout, is_flat, observation_layout
 from dqfd_bc_keras.envs.wrappers import FallPenalty, ForgetLastAction, GoalCount, TimeFeature, TimeLimitMode
 from dqfd_bc_keras.errors import ConfigError
