@@ -11,6 +11,7 @@ from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.kwargs import as_json, as_python
+from dqfd_bc_keras.errors import ConfigError
 
 GREY = {"type": "GrayscaleObservation", "stack_size": 4, "weights": [0.2989, 0.587, 0.114]}
 """highway-env's documented image observation, less its `observation_shape`."""
@@ -36,7 +37,7 @@ def test_a_config_from_python_records_a_tuple_so_that_its_json_gives_it_back():
     assert config.env_kwargs == {"sutton_barto_reward": False, "shape": {"__tuple__": [3, 4]}}
     again = Config.from_dict(json.loads(json.dumps(config.to_dict())))
     assert as_python(again.env_kwargs)["shape"] == (3, 4) and again == config
-    with pytest.raises(Exception, match="env kwargs must be JSON values or tuples of them"):
+    with pytest.raises(ConfigError, match="env kwargs must be JSON values or tuples of them"):
         Config.for_task("CartPole-v1", env_kwargs={"shape": {1, 2}})
     assert as_json({"a": (1, [2, (3,)])}) == {"a": {"__tuple__": [1, [2, {"__tuple__": [3]}]]}}
 

@@ -45,8 +45,8 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
         "--env",
         metavar="ID",
         type=env_id,
-        help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
-        "or my_module:MyEnv-v0 (generic defaults: tasks.ENV_DEFAULTS)",
+        help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 or my_module:MyEnv-v0, or "
+        "my_module:make_env, a function returning an env (generic defaults: tasks.ENV_DEFAULTS)",
     )
     parser.add_argument(
         "--max-steps",

@@ -198,7 +198,8 @@ class Config:
     """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
 
     def __post_init__(self) -> None:
-        if isinstance(self.env_kwargs, dict):  # a tuple recorded as {"__tuple__": [...]}: JSON has none
+        if isinstance(self.env_kwargs, dict) and all(isinstance(k, str) for k in self.env_kwargs):
+            # a tuple recorded as {"__tuple__": [...]}: JSON has none
             self.env_kwargs = recorded(self.env_kwargs)
         self.validate()
 

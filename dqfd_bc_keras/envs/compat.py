@@ -34,6 +34,11 @@ class GymnasiumApi(gym.Wrapper):
         super().__init__(env)
         self._reset_takes = _keywords(env.reset, ("seed", "options"))
 
+    @property
+    def spec(self) -> gym.envs.registration.EnvSpec | None:
+        """The env's own: the adapter is no wrapper a later `gym.make` should add (Minari, `env.spec`)."""
+        return self.env.spec
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         given = {"seed": seed, "options": options}
         if seed is not None and "seed" not in self._reset_takes and callable(getattr(self.env, "seed", None)):

@@ -105,11 +105,12 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
 def effective_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> dict[str, Any]:
     """The kwargs env `env_id` is made with when given `env_kwargs`: its constructor's defaults,
     then its registration's, then `env_kwargs`, as JSON values (what a Minari `env_spec` stores);
-    without `render_mode`, which only changes what is drawn."""
+    without `render_mode`, which only changes what is drawn, nor the frame options, which are ours."""
     parameters = constructor_parameters(env_id) or {}
     defaults = {name: p.default for name, p in parameters.items() if p.default is not inspect.Parameter.empty}
     merged = {**defaults, **gym.spec(bare_id(env_id)).kwargs, **as_python(dict(env_kwargs))}
-    merged.pop("render_mode", None)
+    for ours in ("render_mode", *FRAME_OPTIONS):
+        merged.pop(ours, None)
     return json.loads(json.dumps(merged, default=repr))
 
 
