@@ -58,4 +58,4 @@ def test_a_reward_of_several_values_is_one_line(tmp_path):
     assert done.returncode == 2 and done.stderr.strip().count("\n") == 0, done.stderr
     assert "reward of shape (2,)" in done.stderr
     with pytest.raises(ConfigError, match=re.escape("reward of shape (2,)")):
-        DQfD("toy_envs:ToyVectorReward-v0", "toy_envs:go_right", total_steps=100)
+        DQfD("toy_envs:ToyVectorReward-v0", "toy_envs:go_right", total_steps=100, demo_episodes=1).learn()
