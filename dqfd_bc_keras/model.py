@@ -46,14 +46,8 @@ from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import BUILT_IN, Method
 from dqfd_bc_keras.demos.recording import try_demonstrator
 from dqfd_bc_keras.envs.given import network_input
-from dqfd_bc_keras.envs.make import (
-    PYTHON_ENV_PREFIX,
-    TaskSpaces,
-    checked_spaces,
-    env_id_of,
-    make_plain_env,
-    task_spaces,
-)
+from dqfd_bc_keras.envs.make import TaskSpaces, checked_spaces, make_plain_env, task_spaces
+from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX, env_id_of
 from dqfd_bc_keras.envs.observations import FlattenObservation, describe
 from dqfd_bc_keras.errors import (
     BrokenRunError,

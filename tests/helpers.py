@@ -40,7 +40,7 @@ PROGRAMS: dict[str, Callable[[Sequence[str] | None], int]] = {
     "dqfd_bc_keras.experiments.minatar_study": minatar_study_main,
 }
 """Each command by the names a user types it (a script, a console script, a `python -m` module)."""
-PROCESS_CACHES = (make.env_task, make._task_spaces)
+PROCESS_CACHES = (make.env_task, make._task_spaces, make._own_limit)
 """What the package remembers for the rest of its process: each env's task and spaces, and with them
 the warnings said once while working them out. A command answered by `call` starts without them, as
 it would in a process of its own."""

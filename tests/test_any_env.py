@@ -98,8 +98,8 @@ def test_rule_demonstrator_records_on_any_env():
         ("imperfect", "has no scripted imperfect expert"),
         (
             "toy_envs:nothing",
-            "demonstrator toy_envs:nothing: toy_envs (tests/toy_envs.py) has no function 'nothing'; "
-            "it has Chain, Unsupported, breakout_rule, dies, go_left, go_right, out_of_range",
+            "demonstrator toy_envs:nothing: toy_envs (tests/toy_envs.py) has no function 'nothing'; it has "
+            "Chain, OldApiChain, Unsupported, VectorReward, breakout_rule, dies, go_left, go_right, out_of_range",
         ),
         (
             "no_such_module:rule",

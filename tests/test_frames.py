@@ -276,6 +276,24 @@ def test_an_atari_run_trains_from_a_rule_and_a_saved_model_demonstrates(tmp_path
         assert len(demos["actions"]) == 40 or demos["terminated"][-1]
 
 
+def test_quick_caps_an_atari_games_episodes_so_a_policy_that_never_fires_ends(tmp_path):
+    """Breakout waits for FIRE: a greedy agent that never presses it plays every step of the limit
+    (27,000 steps). `--quick` caps an Atari game's limit at 200; `--max-steps` still wins."""
+    (tmp_path / "still.py").write_text("def noop(obs):\n    return 0\n")
+    tiny = ["--set", "total_steps=40", "--set", "eval_every=40", "--set", "pretrain_steps=4", "--set", "batch_size=4"]
+    tiny += ["--set", "bc_epochs=1", "--set", "demo_episodes=1", "--set", "eval_episodes=1"]
+    tiny += ["--set", "final_eval_episodes=1", "--quiet"]
+    args = ["train.py", "--env", BREAKOUT, "--expert", "still:noop", "--quick", *tiny]
+    done = run(*args, "--out", tmp_path / "a", path=[tmp_path])
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "a" / "config.json").read_text())["max_steps"] == 200
+    assert json.loads((tmp_path / "a" / "eval.json").read_text())["lengths"][0] <= 200
+    with np.load(tmp_path / "a" / "demos.npz") as demos:
+        assert len(demos["actions"]) == 200  # never fired: cut at the limit, not at 27,000
+    refused = run(*args, "--max-steps", "30000", "--out", tmp_path / "b", path=[tmp_path])
+    assert refused.returncode == 2 and "the episode limit 30000" in refused.stderr  # the given limit, not --quick's
+
+
 def test_an_unknown_atari_option_is_one_line(tmp_path):
     done = run(
         "train.py",

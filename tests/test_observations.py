@@ -7,10 +7,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from dqfd_bc_keras.envs.frames import FrameObservation, FrameOptions, as_frames, split_frame_options
 from dqfd_bc_keras.envs.observations import (
     MAX_IMAGE_VALUES,
     FlattenObservation,
-    FrameObservation,
     Frames,
     describe,
     is_frames,
@@ -169,3 +169,46 @@ def test_the_wrapper_gives_a_float32_box_of_the_layout():
     assert obs.dtype == np.float32 and obs.tolist() == [0, 1, 2, 3, 4, 5]
     assert env.step(0)[0].tolist() == [0, -1, -2, -3, -4, -5]
     assert describe(Grid.observation_space) == "Box(2, 3) float64"
+
+
+@pytest.mark.parametrize(
+    "shape, read_as, first",
+    [
+        ((4, 84, 84), (84, 84, 4), True),  # highway-env's GrayscaleObservation stack
+        ((1, 36, 48), (36, 48, 1), True),
+        ((84, 84, 4), (84, 84, 4), False),  # Atari's, stacked last
+        ((7, 7, 3), (7, 7, 3), False),  # MiniGrid's view
+        ((4, 4, 16), (4, 4, 16), False),  # a 4×4 board of 16 planes: its first axis is no shorter than a side
+        ((10, 10, 4), (10, 10, 4), False),  # MinAtar's
+        ((3, 84), (3, 84), False),  # 2-D: no channel axis
+    ],
+)
+def test_frames_are_channels_first_only_when_the_shape_says_so(shape, read_as, first):
+    layout = observation_layout(gym.spaces.Box(0, 255, shape, np.uint8))
+    assert (layout.frames.shape, layout.frames.channels_first) == (read_as, first)
+    obs = np.arange(np.prod(shape), dtype=np.uint8).reshape(shape)
+    moved = as_frames(obs, first)
+    assert moved.shape == read_as and (not first or moved[1, 2, 0] == obs[0, 1, 2])
+
+
+def test_frame_options_say_what_the_shape_and_bounds_cannot():
+    space = gym.spaces.Box(0, 255, (4, 4, 3), np.uint8)
+    assert observation_layout(space).frames.channels_first is False  # (4, 4, 3): read channels-last
+    first = observation_layout(space, "e", 1, split_frame_options({"frame_layout": "channels_first"})[0])
+    assert first.frames.shape == (4, 3, 4) and first.frames.channels_first
+    assert observation_layout(space).frames.scale == 1 / 255
+    assert observation_layout(gym.spaces.Box(0, 10, (7, 7, 3), np.uint8)).frames.scale == 1 / 10  # by its bounds
+    options, rest = split_frame_options({"frame_scale": "none", "size": 5})
+    assert observation_layout(space, "e", 1, options).frames.scale == 1.0 and rest == {"size": 5}
+    assert split_frame_options({"frame_scale": 0.1})[0] == FrameOptions("auto", 0.1)
+    for kwargs, says in [
+        ({"frame_scale": 0}, "frame_scale=0: expected auto (1/the space's high), none (values as they are"),
+        ({"frame_scale": "pixels"}, "frame_scale=pixels: expected auto"),
+        ({"frame_layout": "chw"}, "frame_layout=chw: expected one of auto, channels_last, channels_first"),
+    ]:
+        with pytest.raises(ConfigError, match=re.escape(says)):
+            split_frame_options(kwargs)
+    with pytest.raises(ConfigError, match=r"frame_layout=channels_first: the frames \(4, 84\) have no channel axis"):
+        observation_layout(gym.spaces.Box(0, 255, (4, 84), np.uint8), "e", 1, FrameOptions("channels_first"))
+    with pytest.raises(ConfigError, match="toy observes Box\\(5,\\) float32, not frames"):
+        observation_layout(gym.spaces.Box(0, 1, (5,), np.float32), "toy", 1, FrameOptions(scale=1.0))

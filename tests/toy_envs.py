@@ -89,6 +89,8 @@ NOT_CALLABLE = 3
 gym.register("ToyChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, reward_threshold=1.0)
 gym.register("ToyChainNoLimit-v0", entry_point="toy_envs:Chain")
 gym.register("ToyDictChainNoLimit-v0", entry_point="toy_envs:Chain", kwargs={"observe": "dict"})
+gym.register("ToyOldApiChain-v0", entry_point="toy_envs:OldApiChain", max_episode_steps=20)
+gym.register("ToyVectorReward-v0", entry_point="toy_envs:VectorReward", max_episode_steps=20)
 gym.register("ToyGridChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "grid"})
 gym.register("ToyDictChain-v0", entry_point="toy_envs:Chain", max_episode_steps=20, kwargs={"observe": "dict"})
 gym.register(
@@ -131,3 +133,41 @@ def dies(obs: np.ndarray) -> int:
 def pole_rule(obs: np.ndarray) -> int:
     """CartPole: push the way the pole falls (its angular velocity's sign); about 200 of 500."""
     return int(obs[3] > 0)
+
+
+class OldApiChain(Chain):
+    """The chain written for gym 0.21: `reset()` takes no seed (`seed(s)` does) and returns the
+    observation alone; `step` returns (obs, reward, done, info), its reward `np.array([r])`; the
+    episode is cut after `cut` steps with `info["TimeLimit.truncated"]`, that API's convention."""
+
+    def __init__(self, size: int = N_STATES, cut: int = 8) -> None:
+        super().__init__(size)
+        self.cut, self.seeded = cut, []
+
+    def seed(self, seed=None):
+        self.seeded.append(seed)
+        return [seed]
+
+    def reset(self):
+        self.t = 0
+        return super().reset()[0]
+
+    def step(self, action):
+        obs, reward, terminated, _, info = super().step(action)
+        self.t += 1
+        cut = self.t >= self.cut and not terminated
+        return obs, np.array([reward], np.float32), terminated or cut, {"TimeLimit.truncated": cut} if cut else info
+
+
+class VectorReward(Chain):
+    """The chain paying a reward of two values: no loop can know which one is the reward."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, np.array([reward, 0.0]), terminated, truncated, info
+
+
+def wrapped_chain(size: int = N_STATES) -> gym.Env:
+    """A factory, as a CLI user adds a wrapper (`--env toy_envs:wrapped_chain`): the chain in a
+    wrapper of the user's, cut by a `TimeLimit` of 12 steps it keeps inside."""
+    return gym.wrappers.TimeLimit(gym.wrappers.TransformReward(Chain(size), lambda r: 10.0 * r), 12)

@@ -45,8 +45,8 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
         "--env",
         metavar="ID",
         type=env_id,
-        help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 "
-        "or my_module:MyEnv-v0 (generic defaults: tasks.ENV_DEFAULTS)",
+        help="any Gymnasium env id instead of a preset, e.g. Acrobot-v1 or my_module:MyEnv-v0, or "
+        "my_module:make_env, a function returning an env (generic defaults: tasks.ENV_DEFAULTS)",
     )
     parser.add_argument(
         "--max-steps",
@@ -62,7 +62,7 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
         metavar="KEY=VALUE",
         help="keyword arguments of the env's constructor; each value is JSON (use_lidar=false, "
         "config='{\"lanes_count\": 3}'), else a Python literal (is_slippery=False, "
-        "shape='(3, 4)', tuples stored as lists), else a plain string if it is a word: "
+        "observation_shape=84,84 or '(84, 84)', a tuple, kept one), else a plain string if it is a word: "
         "letters, digits and _ . - : / with a letter, not starting with - (obs_type=ram, "
         "map_name=8x8); anything else, e.g. a value that does not parse, is an error",
     )
@@ -144,8 +144,8 @@ def env_kwarg(text: str) -> tuple[str, object]:
     """argparse type of `--env-kwargs`: KEY=VALUE, the value as JSON, else as a Python literal
     (`ast.literal_eval`: `False`, `None`, `'ram'`, tuples), else as a string when it is a `WORD`.
     A value kept as a string by mistake is passed on silently ("False" is truthy), so anything
-    else is refused, naming the key and why. Values are JSON values (tuples become lists), as
-    config.json stores them for every later env of the run."""
+    else is refused, naming the key and why. Values are JSON values (a tuple as `{"__tuple__": [...]}`:
+    `envs.kwargs`), as config.json stores them for every later env of the run."""
     key, sep, value = text.partition("=")
     key = key.strip()
     if not sep or not key.isidentifier():
@@ -159,8 +159,10 @@ def env_kwarg(text: str) -> tuple[str, object]:
     except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError) as error:
         literal_error = f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else 'malformed'}"
     else:
+        from dqfd_bc_keras.envs.kwargs import as_json as recorded_value  # gymnasium: only once needed
+
         try:
-            return key, json.loads(json.dumps(parsed))
+            return key, recorded_value(parsed)
         except TypeError as error:
             raise argparse.ArgumentTypeError(
                 f"{key}={value}: a Python {type(parsed).__name__}, which JSON cannot hold ({error})"

@@ -39,7 +39,7 @@ from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.demos.experts import try_demonstrator
-from dqfd_bc_keras.envs.make import checked_spaces, task_slug, task_spaces
+from dqfd_bc_keras.envs.make import checked_spaces, get_task, task_slug, task_spaces
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.files import DirectoryLock
 from dqfd_bc_keras.runs.writers import check_dir, has_checkpoint
@@ -81,7 +81,11 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--out", help="run directory (default: runs/TASK-LOSS-seedSEED)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     parser.add_argument("--force", action="store_true", help="replace an existing run in --out")
-    parser.add_argument("--quick", action="store_true", help="a tiny budget (seconds), for tests and smoke checks")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="a tiny budget (seconds), for tests and smoke checks (an Atari game: episodes of at most 200 steps)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="any Config field")
     return parser.parse_args(argv)
@@ -119,11 +123,12 @@ NOTHING_WRITTEN = "nothing was written; run the same command again"
 """What an interrupt before the run's first checkpoint left, when training did not say it."""
 
 
-def train_into(args: argparse.Namespace, task: str | None, given: dict, out: str) -> RunResult:
+def train_into(args: argparse.Namespace, task: str | None, quick: dict, given: dict, out: str) -> RunResult:
     """The run the arguments ask for, in `out`: a new one checked before TensorFlow loads, or the
     one there resumed in its own config (a flag that would change it is refused). `given`: the
-    settings the user gave (flags, --env-kwargs, --set), which --quick's budget does not override."""
-    overrides = {**(QUICK if args.quick else {}), **given}
+    settings the user gave (flags, --env-kwargs, --set), which --quick's budget (`quick`) does not
+    override."""
+    overrides = {**quick, **given}
     dataset = None
     if not args.resume:  # what a new run needs, checked before TensorFlow loads
         task_spaces(task, overrides.get("env_kwargs"))  # the env first: the settings' errors assume a usable one
@@ -181,8 +186,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Every override before the one validation: --max-steps or --set max_steps=N makes an env
     # without a time limit usable.
     given = {**chosen, **env_settings(args), **parse_assignments(args.set)}
-    overrides = {**(QUICK if args.quick else {}), **given}
     task = chosen_task(args)
+    quick = {**QUICK, **get_task(task).quick} if args.quick else {}
+    overrides = {**quick, **given}
     check_out(args.out)
     if args.demos and args.expert:
         raise ConfigError(
@@ -194,7 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"-seed{overrides.get('seed', defaults['seed'].default)}"
     )
     try:
-        result = train_into(args, task, given, out)
+        result = train_into(args, task, quick, given, out)
     except KeyboardInterrupt as error:  # what it left, as the disk says, unless training said it
         error.args = error.args or (RESUMABLE if has_checkpoint(Path(out)) else NOTHING_WRITTEN,)
         raise

@@ -19,6 +19,7 @@ from typing import Any
 
 from dqfd_bc_keras.core.config_checks import check, parsed, typed
 from dqfd_bc_keras.core.methods import Method, get_method, reading_saved_config
+from dqfd_bc_keras.envs.kwargs import recorded
 from dqfd_bc_keras.envs.make import get_task, step_limit
 from dqfd_bc_keras.errors import OLDER, ConfigError, DqfdWarning
 from dqfd_bc_keras.tasks import check_demonstrator
@@ -196,6 +197,9 @@ class Config:
     """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
 
     def __post_init__(self) -> None:
+        if isinstance(self.env_kwargs, dict) and all(isinstance(k, str) for k in self.env_kwargs):
+            # a tuple recorded as {"__tuple__": [...]}: JSON has none
+            self.env_kwargs = recorded(self.env_kwargs)
         self.validate()
 
     @classmethod
@@ -236,7 +240,7 @@ class Config:
     @property
     def limit(self) -> int:
         """The episode step limit in force."""
-        return step_limit(self.task, self.max_steps)
+        return step_limit(self.task, self.max_steps, self.env_kwargs)
 
     @property
     def method(self) -> Method:

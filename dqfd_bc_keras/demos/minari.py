@@ -34,7 +34,8 @@ import numpy as np
 
 from dqfd_bc_keras.choices import TIMEOUT_MODES
 from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta, validate
-from dqfd_bc_keras.envs.make import TaskSpaces, TaskSpec, effective_kwargs, get_task, task_spaces
+from dqfd_bc_keras.envs.kwargs import effective_kwargs
+from dqfd_bc_keras.envs.make import TaskSpaces, TaskSpec, get_task, task_spaces
 from dqfd_bc_keras.envs.observations import ObservationLayout, describe
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, one_line
 from dqfd_bc_keras.plugins import bare_id

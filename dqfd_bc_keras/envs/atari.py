@@ -115,6 +115,8 @@ ATARI_OPTIONS = AtariOptions()
 
 ATARI_STEP_LIMIT = 27_000
 """An Atari task's step limit: the ALE's 108,000 frames at 4 frames a step."""
+ATARI_QUICK: Mapping[str, object] = {"max_steps": 200}
+"""`--quick`'s step limit: a greedy agent that never presses FIRE plays every step of each evaluation's."""
 ATARI_DEFAULTS: Mapping[str, object] = {
     "hidden": (512,),
     "bc_hidden": (512,),

@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from dqfd_bc_keras.envs.frames import as_frames
 from dqfd_bc_keras.envs.observations import ObservationLayout, describe
 from dqfd_bc_keras.errors import ConfigError
 
@@ -37,7 +38,7 @@ def network_input(layout: ObservationLayout, obs: Any, where: str = "predict") -
             f"{where}: expected an observation of {describe(layout.space)} or a batch of them, got {given}"
         ) from None
     if layout.image:
-        return np.asarray(obs, dtype=np.uint8), batch
+        return as_frames(obs, layout.frames.channels_first), batch
     return layout.flatten(obs, batch), batch
 
 

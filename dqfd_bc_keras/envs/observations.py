@@ -3,7 +3,8 @@ or frames kept in their own shape for a convolutional torso.
 
 A one-dimensional `Box` passes unchanged. A `Box` of 2 or 3 dimensions of `uint8` or `bool`
 values at the top level (MinAtar's 10×10×C grids, Atari's 84×84×4 frames, MiniGrid's 7×7×3 view
-alone) is a frame: it stays in its shape as `uint8` (`Frames`), and the replay stores it as such.
+alone) is a frame: it stays `uint8` (`frames.Frames`, where channels-first stacks and values that
+are not pixels are told apart), and the replay stores it as such.
 Every other supported space is flattened by `FlattenObservation`, always in this order (the order
 of `gymnasium.spaces.flatten`):
 
@@ -33,6 +34,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from dqfd_bc_keras.envs.frames import AS_GIVEN, FrameOptions, Frames, frames_of, is_frames
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
 
 MAX_IMAGE_VALUES = 64 * 64
@@ -67,40 +69,6 @@ def is_image(space: gym.Space) -> bool:
         and bool(np.all(space.high == 255))
         and int(np.prod(space.shape)) > MAX_IMAGE_VALUES
     )
-
-
-def is_frames(space: gym.Space) -> bool:
-    """A top-level observation the networks take as frames: a Box of 2 or 3 dimensions of uint8
-    or bool values ≥ 0 (a grid of pixels or of binary cells)."""
-    return (
-        isinstance(space, gym.spaces.Box)
-        and len(space.shape) in (2, 3)
-        and space.dtype in (np.uint8, np.bool_)
-        and bool(np.all(space.low >= 0))
-    )
-
-
-@dataclass(frozen=True)
-class Frames:
-    """An observation kept as `uint8` frames: its shape, the scale that brings it to [0, 1] in the
-    network, and how many frames are stacked on its last axis (Atari's 4, newest last; else 1)."""
-
-    shape: tuple[int, ...]
-    """(H, W) or (H, W, C), as the env gives it."""
-    scale: float
-    """1/255 for pixels bounded by 255; 1 for 0/1 cells (MinAtar's bool grids)."""
-    stack: int = 1
-
-    @property
-    def frame_shape(self) -> tuple[int, ...]:
-        """The shape of one stored frame: the observation without its stack axis."""
-        return self.shape[:-1] if self.stack > 1 else self.shape
-
-
-def frames_of(space: gym.spaces.Box, stack: int = 1) -> Frames:
-    """The `Frames` of a frame space (`is_frames`): 1/high as the scale, high ≥ 1."""
-    high = float(np.max(space.high)) if space.dtype != np.bool_ else 1.0
-    return Frames(tuple(int(n) for n in space.shape), 1.0 / max(high, 1.0), int(stack))
 
 
 def is_flat(space: gym.Space) -> bool:
@@ -145,7 +113,12 @@ class ObservationLayout:
         frames = (
             None
             if self.frames is None
-            else {"shape": list(self.frames.shape), "scale": self.frames.scale, "stack": self.frames.stack}
+            else {
+                "shape": list(self.frames.shape),
+                "scale": self.frames.scale,
+                "stack": self.frames.stack,
+                **({"channels_first": True} if self.frames.channels_first else {}),  # (C, H, W) read as `shape`
+            }
         )
         return {
             "space": describe(self.space),
@@ -162,19 +135,28 @@ class ObservationLayout:
             return describe(self.space)
         if self.frames is not None:
             stack = f", {self.frames.stack} stacked" if self.frames.stack > 1 else ""
-            return f"{describe(self.space)} as uint8 frames{stack}"
+            moved = f", channels moved last to {self.frames.shape}" if self.frames.channels_first else ""
+            return f"{describe(self.space)} as uint8 frames{stack}{moved}"
         dropped = f"; dropped {', '.join(self.dropped)}" if self.dropped else ""
         return f"{describe(self.space)} flattened to {self.dim} features{dropped}"
 
 
-def observation_layout(space: gym.Space, env_id: str = "the env", stack: int = 1) -> ObservationLayout:
-    """The layout of `space` (frames stacked `stack` deep on the last axis, for a frame space), or a
-    one-line `ConfigError` for images inside a Dict or Tuple and for spaces with no numeric part;
+def observation_layout(
+    space: gym.Space, env_id: str = "the env", stack: int = 1, options: FrameOptions = AS_GIVEN
+) -> ObservationLayout:
+    """The layout of `space` (frames stacked `stack` deep on the last axis and read as `options`
+    say, for a frame space), or a one-line `ConfigError` for images inside a Dict or Tuple, for
+    spaces with no numeric part and for frame options given for observations that are no frames;
     warns once, naming them, when parts are dropped."""
+    if is_frames(space):
+        return ObservationLayout(space, space, (), int(np.prod(space.shape)), frames_of(space, stack, options))
+    if options != AS_GIVEN:
+        raise ConfigError(
+            f"--env-kwargs frame_layout/frame_scale: {env_id} observes {describe(space)}, not frames "
+            "(a 2-D or 3-D uint8 or bool Box)"
+        )
     if is_flat(space):
         return ObservationLayout(space, space, (), int(space.shape[0]))
-    if is_frames(space):
-        return ObservationLayout(space, space, (), int(np.prod(space.shape)), frames_of(space, stack))
     dropped: list[str] = []
     kept = _numeric(space, "", dropped, env_id)
     if kept is None:
@@ -239,19 +221,6 @@ def _flatten(space: gym.Space, x: Any, batch: int) -> np.ndarray:
         return np.concatenate([_flatten(part, x[key], batch) for key, part in space.spaces.items()], axis=1)
     indices = getattr(space, "indices", range(len(space.spaces)))
     return np.concatenate([_flatten(part, x[i], batch) for i, part in zip(indices, space.spaces, strict=True)], axis=1)
-
-
-class FrameObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
-    """Frames as `uint8` arrays of their own shape (MinAtar's bool grids become 0/1 bytes)."""
-
-    def __init__(self, env: gym.Env) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self)
-        gym.ObservationWrapper.__init__(self, env)
-        space = env.observation_space
-        self.observation_space = gym.spaces.Box(space.low.astype(np.uint8), space.high.astype(np.uint8), dtype=np.uint8)
-
-    def observation(self, observation: Any) -> np.ndarray:
-        return np.asarray(observation, dtype=np.uint8)
 
 
 class FlattenObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):

@@ -58,6 +58,8 @@ class TaskSpec:
     together, "" for no key pressed → action (demos/keys.py)."""
     fps: float | None = None
     """Steps per second a person plays at (`demos play --fps`); None: the env's own rate."""
+    quick: Mapping[str, object] = field(default_factory=dict)
+    """What `train.py --quick` sets on this task besides `config.QUICK` (an Atari game's step limit)."""
     doc: str = ""
 
     @property

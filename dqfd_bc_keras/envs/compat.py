@@ -1,0 +1,93 @@
+"""What the loops may assume of any env's `reset` and `step`, made true beneath the wrappers
+Gymnasium's `gym.make` adds (its env checker included):
+
+* the Gymnasium API: `reset` returns (obs, info) and `step` (obs, reward, terminated, truncated,
+  info). An env written for gym 0.21 (`reset` returns the observation alone, perhaps takes no
+  seed; `step` returns (obs, reward, done, info)) is adapted: `done` is `terminated`, unless its
+  `info["TimeLimit.truncated"]` says the episode was cut, which is `truncated` (that API's own
+  convention); a seed goes to its `seed(s)` method when its `reset` takes none;
+* a reward that is a number: a numpy scalar or an array of one value (`np.array([r])`) becomes a
+  float; a reward of any other shape is one `ConfigError` line (which value would be the reward?).
+
+Gymnasium 1.x removed its own adapter (`EnvCompatibility`; Shimmy has it); this one is the part
+of it that a loop needs.
+"""
+
+from __future__ import annotations
+
+import inspect
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from dqfd_bc_keras.errors import ConfigError
+
+GYM_MAKE_WRAPPERS = (gym.wrappers.PassiveEnvChecker, gym.wrappers.OrderEnforcing, gym.wrappers.TimeLimit)
+"""The wrappers `gym.make` puts around the env it creates: the adapter goes beneath them."""
+
+
+class GymnasiumApi(gym.Wrapper):
+    """An env's `reset` and `step` as the Gymnasium API returns them, with a float reward."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self._reset_takes = _keywords(env.reset, ("seed", "options"))
+
+    @property
+    def spec(self) -> gym.envs.registration.EnvSpec | None:
+        """The env's own: the adapter is no wrapper a later `gym.make` should add (Minari, `env.spec`)."""
+        return self.env.spec
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        given = {"seed": seed, "options": options}
+        if seed is not None and "seed" not in self._reset_takes and callable(getattr(self.env, "seed", None)):
+            self.env.seed(seed)  # gym 0.21: reset() alone, seeded by seed(s)
+        result = self.env.reset(**{key: given[key] for key in self._reset_takes})
+        if isinstance(result, tuple) and len(result) == 2 and isinstance(result[1], dict):
+            return result
+        return result, {}
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        result = self.env.step(action)
+        if len(result) == 4:  # gym 0.21: (obs, reward, done, info)
+            obs, reward, done, info = result
+            cut = bool(info.get("TimeLimit.truncated", False))
+            result = (obs, reward, bool(done) and not cut, bool(done) and cut, info)
+        obs, reward, terminated, truncated, info = result
+        return obs, scalar_reward(reward, self.env), terminated, truncated, info
+
+
+def _keywords(method: Any, names: tuple[str, ...]) -> tuple[str, ...]:
+    """Those of `names` that `method` takes (all of them when its signature cannot be read)."""
+    try:
+        parameters = inspect.signature(method).parameters
+    except (TypeError, ValueError):
+        return names
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return names
+    return tuple(name for name in names if name in parameters)
+
+
+def scalar_reward(reward: Any, env: gym.Env) -> Any:
+    """`reward` as a float when it is a numpy scalar or one value; a number passes as it is."""
+    if isinstance(reward, (int, float)):
+        return reward
+    value = np.asarray(reward)
+    if value.size != 1 or not np.issubdtype(value.dtype, np.number):
+        raise ConfigError(
+            f"{env.spec.id if env.spec else type(env.unwrapped).__name__} returned a reward of shape "
+            f"{value.shape} ({value.dtype}): expected a number (a float, or an array of one value)"
+        )
+    return float(value.reshape(()))
+
+
+def adapted(env: gym.Env) -> gym.Env:
+    """`env` (as `gym.make` returned it) with `GymnasiumApi` beneath `gym.make`'s own wrappers."""
+    outer, inner = None, env
+    while isinstance(inner, GYM_MAKE_WRAPPERS):
+        outer, inner = inner, inner.env
+    if outer is None:
+        return GymnasiumApi(inner)
+    outer.env = GymnasiumApi(inner)
+    return env
