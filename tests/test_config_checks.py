@@ -29,7 +29,7 @@ WORDS = {
     "tuple[int, ...]": "a list of integers",
     "dict[str, Any]": (
         "a JSON object of keyword arguments (string keys; values null, true, false, finite numbers, "
-        "strings, lists or objects)"
+        "strings, lists, tuples or objects)"
     ),
 }
 """What a field of each annotation takes, as the refusal says it."""
@@ -41,7 +41,7 @@ WRONG = {
     "int | None": ["3", 3.0, True, "none"],
     "float | None": ["0.5", False, math.nan],
     "tuple[int, ...]": [64, "64", [64.5], (64, True), [64, None]],
-    "dict[str, Any]": [[], "{}", {"x": math.nan}, {"x": {"y": math.inf}}, {1: 2}, {"x": (1, 2)}, {"x": object()}],
+    "dict[str, Any]": [[], "{}", {"x": math.nan}, {"x": {"y": math.inf}}, {1: 2}, {"x": {1, 2}}, {"x": object()}],
 }
 """Values of the wrong type for a field of each annotation (a bool is no number, 3.0 no integer)."""
 FIELDS = {f.name: f.type for f in dataclasses.fields(Config)}
@@ -49,9 +49,12 @@ FIELDS = {f.name: f.type for f in dataclasses.fields(Config)}
 
 def made(field: str, value: object) -> object:
     """What a user's script makes with `field=value`: `DQfD(env, field=value)`, the task being the
-    env argument (and `expert_loss=None` DQfD's "the default"), so those two through Config."""
+        env argument, `expert_loss=None` DQfD's "the default" and `expert` any demonstrator (a function
+    too), so those three through Config."""
     if field == "task":
         return Config.for_task(value)
+    if field == "expert":  # DQfD's expert= is a demonstrator of any kind, checked by the API itself
+        return Config.for_task("cartpole", expert=value)
     if field == "expert_loss" and value is None:
         return Config.for_task("cartpole", expert_loss=None)
     return DQfD("cartpole", **{field: value})

@@ -12,6 +12,7 @@ Nothing here imports TensorFlow: reading a config.json is cheap.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import warnings
 from dataclasses import dataclass, field
@@ -197,9 +198,9 @@ class Config:
     """TensorFlow op determinism: the same seed gives the same run, resumed or not."""
 
     def __post_init__(self) -> None:
-        if isinstance(self.env_kwargs, dict) and all(isinstance(k, str) for k in self.env_kwargs):
-            # a tuple recorded as {"__tuple__": [...]}: JSON has none
-            self.env_kwargs = recorded(self.env_kwargs)
+        if isinstance(self.env_kwargs, dict):  # a tuple as {"__tuple__": [...]}: JSON has none
+            with contextlib.suppress(ConfigError):  # what JSON cannot hold is refused by `validate`, naming the field
+                self.env_kwargs = recorded(self.env_kwargs)
         self.validate()
 
     @classmethod

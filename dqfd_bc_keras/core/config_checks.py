@@ -72,7 +72,7 @@ KINDS: dict[type, tuple[str, str, Callable[[Any], bool]]] = {
 """Each plain type of a field: its name in a message (one, many) and whether a value is of it."""
 JSON_OBJECT = (
     "a JSON object of keyword arguments (string keys; values null, true, false, finite numbers, "
-    "strings, lists or objects)"
+    "strings, lists, tuples or objects)"
 )
 _WRONG = object()
 """What `_as` answers for a value not of the kind."""
