@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import keras
 import numpy as np
 import tensorflow as tf
@@ -26,7 +25,7 @@ from dqfd_bc_keras.core.methods import BUILT_IN, playing_saved_run
 from dqfd_bc_keras.core.uncertainty import EnsembleDense
 from dqfd_bc_keras.envs.episodes import EvalResult, check_video, play, video_env
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
-from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX
+from dqfd_bc_keras.envs.objects import unmade_env
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
 from dqfd_bc_keras.runtime import keras_conversions
 
@@ -315,9 +314,3 @@ def read_config(path: Path, task: str | None = None) -> Config | None:
         raise ConfigError(f"{path}: not valid JSON ({error})") from None
     except (OSError, TypeError, ValueError) as error:
         raise ConfigError(f"{path}: {error}") from None
-
-
-def unmade_env(task: object) -> bool:
-    """Whether `task` names a Python env object (`DQfD(env=<object>)`, `envs.objects.env_id_of`) that
-    this process has not been given again: its id was registered only in the process that made it."""
-    return isinstance(task, str) and task.startswith(PYTHON_ENV_PREFIX) and task not in gym.registry

@@ -47,7 +47,7 @@ from dqfd_bc_keras.core.methods import BUILT_IN, Method
 from dqfd_bc_keras.demos.recording import try_demonstrator
 from dqfd_bc_keras.envs.given import network_input
 from dqfd_bc_keras.envs.make import TaskSpaces, checked_spaces, make_plain_env, task_spaces
-from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX, env_id_of
+from dqfd_bc_keras.envs.objects import PYTHON_ENV_PREFIX, env_id_of, stand_in, unmade_env
 from dqfd_bc_keras.envs.observations import FlattenObservation, describe
 from dqfd_bc_keras.errors import (
     BrokenRunError,
@@ -294,12 +294,15 @@ class DQfD:
         except (OSError, ValueError, KeyError, TypeError) as error:
             raise BrokenRunError(f"{path / 'config.json'}: cannot be read ({one_line(error)})") from None
         changes = {}
-        if env is not None:
+        if isinstance(env, str) and unmade_env(saved_task):
+            stand_in(saved_task, env)  # the id makes the object's env, under the run's own id
+        elif env is not None:
             task, env_kwargs, _ = env_id_of(env, saved_task if saved_task.startswith(PYTHON_ENV_PREFIX) else None)
             changes = {"task": task, **({} if isinstance(env, str) else {"env_kwargs": env_kwargs})}
-        elif saved_task.startswith(PYTHON_ENV_PREFIX) and saved_task not in gym.registry:
+        elif unmade_env(saved_task):
             raise ConfigError(
-                f"{path}: trained on a Python env object ({saved_task}); give it again: DQfD.load(path, env=...)"
+                f"{path}: trained on a Python env object ({saved_task}); give it again: DQfD.load(path, env=...), "
+                "the object or a registered id of the same env"
             )
         config = dataclasses.replace(saved_config(path), **changes)
         if env is not None:

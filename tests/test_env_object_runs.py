@@ -1,9 +1,11 @@
 """A run trained on a Python env object (`DQfD(env=<object>)`, saved with `DQfD.save`) read again by
 the command line in another process: `evaluate.py` and `train.py --resume` say that the env was a
 Python object and how to give it again, as `DQfD.save` warned, not that the task is unknown; and
-`evaluate.py --env ID` plays it on a registered id of the same env."""
+`evaluate.py --env ID` plays it on a registered id of the same env, and `train.py --resume --env ID`
+and `DQfD.load(path, env="ID")` continue it there, in its own config."""
 
 import json
+import shutil
 import warnings
 from pathlib import Path
 
@@ -67,6 +69,44 @@ def test_resume_says_the_env_was_a_python_object_and_changes_nothing(elsewhere):
     assert done.returncode == 2
     assert done.stderr == (
         f"error: {run / 'config.json'}: trained on a Python env object ({task}), which no other process can "
-        "make; give it again from Python: DQfD.load(path, env=...)\n"
+        "make; give it again: --env ID, a registered id of the same env, or from Python DQfD.load(path, env=...)\n"
     )
+    assert files(run) == before
+
+
+SAME_ENV = "toy_envs:ToyChainNoLimit-v0"
+"""A registered id that makes the env the run was trained on (Chain(), its limit the run's own)."""
+
+
+def test_load_plays_it_on_a_registered_id_of_the_same_env(elsewhere):
+    run, task, returns = elsewhere
+    model = DQfD.load(run, env=SAME_ENV)
+    assert model.config.task == task  # its own config: the id only makes the env
+    assert model.evaluate(3).returns == returns
+
+
+def test_resume_continues_it_on_a_registered_id_of_the_same_env(elsewhere, tmp_path):
+    run, task, _ = elsewhere
+    copy = tmp_path / "chain"
+    shutil.copytree(run, copy)
+    config = json.loads((copy / "config.json").read_text())
+    done = call("train.py", "--out", copy, "--resume", "--env", SAME_ENV, "--quiet", path=[TESTS])
+    assert (done.returncode, done.stderr) == (0, "")
+    assert json.loads((copy / "config.json").read_text()) == config  # the same run, in its own config
+    assert json.loads((copy / "complete.json").read_text())["env_steps"] >= 150
+
+
+def test_a_preset_or_an_unknown_id_does_not_stand_in_for_the_object(elsewhere):
+    run, task, _ = elsewhere
+    before = files(run)
+    for env, said in (
+        (
+            "cartpole",
+            f"error: cartpole: a run trained on a Python env object ({task}) is given its env again as a "
+            "Gymnasium id that makes the same env (e.g. CartPole-v1, my_package:MyEnv-v0)\n",
+        ),
+        ("NoSuchEnv-v0", "train.py: error: argument --env: unknown task 'NoSuchEnv-v0'"),
+    ):
+        done = call("train.py", "--out", run, "--resume", "--env", env, "--quiet")
+        assert done.returncode == 2 and done.stderr.startswith(said), done.stderr
     assert files(run) == before

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -40,6 +41,7 @@ from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.demos.experts import try_demonstrator
 from dqfd_bc_keras.envs.make import checked_spaces, get_task, task_slug, task_spaces
+from dqfd_bc_keras.envs.objects import stand_in, unmade_env
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.files import DirectoryLock
 from dqfd_bc_keras.runs.writers import check_dir, has_checkpoint
@@ -104,6 +106,19 @@ def refuse_changes(config: Config, given: dict, demos_source: str | None) -> Non
         )
 
 
+def gives_env_again(out: str, env_id: str) -> bool:
+    """Whether the run in `out` was trained on a Python env object that `--env env_id` now gives
+    again (`objects.stand_in`): then it is resumed in its own config, on the env `env_id` makes."""
+    try:
+        task = json.loads((Path(out) / "config.json").read_text()).get("task")
+    except (OSError, ValueError, AttributeError):
+        return False  # no readable config.json: saved_config says why
+    if unmade_env(task):
+        stand_in(task, env_id)
+        return True
+    return False
+
+
 def check_out(out: str | None) -> None:
     """`--out` given empty would train into the default directory unasked; a name that is not UTF-8
     (a valid POSIX path) fails in TensorFlow, which writes only to UTF-8 paths: both refused here."""
@@ -157,8 +172,12 @@ def train_into(args: argparse.Namespace, task: str | None, quick: dict, given: d
     )
 
     if args.resume:
+        object_run = args.env is not None and gives_env_again(out, args.env)
         config = saved_config(out)
-        changes = {**overrides, **({"task": args.env or args.task} if args.env or args.task else {})}
+        changes = {
+            **overrides,
+            **({"task": args.env or args.task} if (args.env or args.task) and not object_run else {}),
+        }
         if config.expert.startswith(demos.GIVEN) and "demo_episodes" not in given:
             changes.pop("demo_episodes", None)  # --quick's is a count to record; the run's, its dataset's
         refuse_changes(config, changes, args.demos)

@@ -12,6 +12,7 @@ object, with one warning saying why (a later process cannot make it: `DQfD.load(
 from __future__ import annotations
 
 import copy
+import functools
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -19,8 +20,9 @@ from typing import Any
 import gymnasium as gym
 
 from dqfd_bc_keras.envs.kwargs import as_json
-from dqfd_bc_keras.envs.make import forget_spaces
+from dqfd_bc_keras.envs.make import TASKS, forget_spaces, get_task
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.plugins import bare_id
 
 PYTHON_ENV_PREFIX = "dqfd_bc_keras/python-"
 """The namespace of the ids `env_id_of` registers for env objects: no later process can make them."""
@@ -61,6 +63,26 @@ def env_id_of(
                 stacklevel=3,
             )
     return _registered(env, env_id), {}, limit
+
+
+def unmade_env(task: object) -> bool:
+    """Whether `task` names a Python env object (`DQfD(env=<object>)`, `env_id_of`) that this process
+    has not been given again: its id was registered only in the process that made it."""
+    return isinstance(task, str) and task.startswith(PYTHON_ENV_PREFIX) and task not in gym.registry
+
+
+def stand_in(task: str, env_id: str) -> None:
+    """Let the Gymnasium id `env_id` (`module:ID` imports its module first) make the env of a run
+    trained on a Python env object, `task`: registered under `task` in this process, so that the run
+    is loaded, evaluated and resumed here in its own config. A one-line `ConfigError` for an id
+    that is not a registered Gymnasium env (a preset's shaping is not the object's env)."""
+    get_task(env_id)  # its module imported, an unknown id refused in one line
+    if env_id in TASKS or env_id not in gym.registry and bare_id(env_id) not in gym.registry:
+        raise ConfigError(
+            f"{env_id}: a run trained on a Python env object ({task}) is given its env again as a Gymnasium "
+            "id that makes the same env (e.g. CartPole-v1, my_package:MyEnv-v0)"
+        )
+    _registered(functools.partial(gym.make, bare_id(env_id)), task)
 
 
 def _registered(env: gym.Env | Callable[[], gym.Env], env_id: str | None) -> str:

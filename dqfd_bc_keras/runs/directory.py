@@ -49,8 +49,8 @@ from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.envs.make import checked_spaces
+from dqfd_bc_keras.envs.objects import unmade_env
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
-from dqfd_bc_keras.evaluation import unmade_env
 from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
 from dqfd_bc_keras.runs.provenance import provenance
 from dqfd_bc_keras.runs.writers import (
@@ -445,7 +445,7 @@ def _read_config(path: Path) -> Config:
         ) from None
     raise RunDirectoryError(
         f"{path}: trained on a Python env object ({env}), which no other process can make; "
-        "give it again from Python: DQfD.load(path, env=...)"
+        "give it again: --env ID, a registered id of the same env, or from Python DQfD.load(path, env=...)"
     )
 
 
