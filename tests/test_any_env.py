@@ -99,7 +99,8 @@ def test_rule_demonstrator_records_on_any_env():
         (
             "toy_envs:nothing",
             "demonstrator toy_envs:nothing: toy_envs (tests/toy_envs.py) has no function 'nothing'; it has "
-            "Chain, OldApiChain, Unsupported, VectorReward, breakout_rule, dies, go_left, go_right, out_of_range",
+            "Chain, LegacyChain, OldApiChain, Unsupported, VectorReward, breakout_rule, dies, go_left, go_right, "
+            "legacy_chain, out_of_range",
         ),
         (
             "no_such_module:rule",

@@ -7,7 +7,7 @@ import re
 
 import pytest
 from helpers import call
-from toy_envs import OldApiChain
+from toy_envs import LegacyChain, OldApiChain
 
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.envs.make import make_plain_env, make_task
@@ -47,6 +47,22 @@ def test_an_old_api_env_object_from_python_learns_and_predicts():
     assert set(played.returns) <= {0.0, 1.0} and all(n <= 8 for n in played.lengths)  # the goal, or cut at 8
     action, _ = model.predict(OldApiChain().reset())
     assert action in (0, 1)
+
+
+def test_an_old_api_env_that_is_no_gymnasium_env_learns_from_python_and_the_command_line(tmp_path):
+    """A class of one's own (or of the old `gym` package) with reset, step and Gymnasium's spaces:
+    its instance, the class itself as a factory, and `--env module:function` returning one."""
+    tiny = {"total_steps": 100, "pretrain_steps": 5, "eval_every": 100, "bc_epochs": 1, "demo_episodes": 2}
+    for env in (LegacyChain(), LegacyChain):
+        model = DQfD(env, lambda obs: 1, max_steps=10, **tiny)
+        assert model.dataset.rewards.sum() == 2.0  # the goal in each demonstrated episode, np.array([1.]) as 1.0
+        played = model.learn().evaluate(2)
+        assert set(played.returns) <= {0.0, 1.0} and all(n <= 10 for n in played.lengths)  # the goal, or cut at 10
+    args = ["--env", "toy_envs:legacy_chain", "--max-steps", 10, "--expert", "toy_envs:go_right", *QUICK]
+    done = call("train.py", *args, "--out", tmp_path / "run")
+    assert done.returncode == 0, done.stderr
+    with pytest.raises(ConfigError, match="env: Unsuitable is not an env .no gymnasium.spaces as its spaces."):
+        DQfD(type("Unsuitable", (), {"reset": lambda self: 0, "step": lambda self, a: 0})(), lambda obs: 0)
 
 
 def test_a_reward_of_several_values_is_one_line(tmp_path):

@@ -51,4 +51,4 @@ def test_a_function_that_is_no_factory_is_one_line(tmp_path):
     (tmp_path / "user_envs.py").write_text("def broken():\n    return 3\n")
     done = call("train.py", "--env", "user_envs:broken", "--quick", "--out", tmp_path / "x", path=[tmp_path])
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
-    assert "--env user_envs:broken: returned int, not a gymnasium.Env" in done.stderr
+    assert "--env user_envs:broken: int is not an env (no reset nor step method)" in done.stderr

@@ -159,6 +159,32 @@ class OldApiChain(Chain):
         return obs, np.array([reward], np.float32), terminated or cut, {"TimeLimit.truncated": cut} if cut else info
 
 
+class LegacyChain:
+    """The chain as a class of one's own for gym 0.21, not a `gymnasium.Env` (as a class of the old
+    `gym` package is not): `reset()` returns the observation alone, `step` a 4-tuple with the reward
+    as `np.array([r])`; Gymnasium's spaces."""
+
+    observation_space = gym.spaces.Box(0.0, 1.0, (N_STATES,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self) -> None:
+        self.position = 0
+
+    def reset(self):
+        self.position = 0
+        return np.eye(N_STATES, dtype=np.float32)[0]
+
+    def step(self, action):
+        self.position = min(max(self.position + (1 if action == 1 else -1), 0), N_STATES - 1)
+        done = self.position == N_STATES - 1
+        return np.eye(N_STATES, dtype=np.float32)[self.position], np.array([float(done)]), done, {}
+
+
+def legacy_chain() -> LegacyChain:
+    """A factory of it, as `--env toy_envs:legacy_chain` takes one."""
+    return LegacyChain()
+
+
 class VectorReward(Chain):
     """The chain paying a reward of two values: no loop can know which one is the reward."""
 

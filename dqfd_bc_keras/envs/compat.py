@@ -6,6 +6,9 @@ Gymnasium's `gym.make` adds (its env checker included):
   seed; `step` returns (obs, reward, done, info)) is adapted: `done` is `terminated`, unless its
   `info["TimeLimit.truncated"]` says the episode was cut, which is `truncated` (that API's own
   convention); a seed goes to its `seed(s)` method when its `reset` takes none;
+* a `gymnasium.Env`: an env object of another library or of one's own that is not one (a class
+  written for the old `gym` package) but has `reset`, `step` and Gymnasium's spaces is held by
+  one (`as_gymnasium`), so that Gymnasium's wrappers take it;
 * a reward that is a number: a numpy scalar or an array of one value (`np.array([r])`) becomes a
   float; a reward of any other shape is one `ConfigError` line (which value would be the reward?).
 
@@ -91,3 +94,33 @@ def adapted(env: gym.Env) -> gym.Env:
         return GymnasiumApi(inner)
     outer.env = GymnasiumApi(inner)
     return env
+
+
+class ForeignEnv(gym.Env):
+    """A `gymnasium.Env` holding an env object that is not one: its own `reset`, `step`, `seed`,
+    `render` and `close` are called (the `GymnasiumApi` above adapts what they return)."""
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self.observation_space, self.action_space = env.observation_space, env.action_space
+        self.metadata = dict(getattr(env, "metadata", None) or {})
+        self.render_mode = getattr(env, "render_mode", None)
+        for method in ("reset", "step", "seed", "render", "close"):  # its own, signatures and all
+            if callable(getattr(env, method, None)):
+                setattr(self, method, getattr(env, method))
+
+
+def as_gymnasium(env: Any, what: str) -> gym.Env:
+    """`env` as a `gymnasium.Env`: itself, or held by a `ForeignEnv` when it has `reset`, `step` and
+    Gymnasium's spaces; else a one-line `ConfigError` saying what `what` (the argument) takes."""
+    if isinstance(env, gym.Env):
+        return env
+    missing = [name for name in ("reset", "step") if not callable(getattr(env, name, None))]
+    spaces = [getattr(env, name, None) for name in ("observation_space", "action_space")]
+    if missing or not all(isinstance(space, gym.spaces.Space) for space in spaces):
+        lacks = f"no {' nor '.join(missing)} method" if missing else "no gymnasium.spaces as its spaces"
+        raise ConfigError(
+            f"{what}: {type(env).__name__} is not an env ({lacks}): give a gymnasium.Env, or an object "
+            "with reset, step, observation_space and action_space (gymnasium.spaces)"
+        )
+    return ForeignEnv(env)

@@ -10,7 +10,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.envs.compat import as_gymnasium
 from dqfd_bc_keras.tasks import ENV_DEFAULTS, ID_NAMESPACE, TaskSpec
 
 FACTORY_PREFIX = f"{ID_NAMESPACE}/factory-"
@@ -25,10 +25,7 @@ def factory_task(name: str, factory: Callable[..., gym.Env]) -> TaskSpec:
 
     @functools.wraps(factory)  # its signature: the env kwargs are checked against it
     def made(**kwargs: Any) -> gym.Env:
-        env = factory(**kwargs)
-        if not isinstance(env, gym.Env):
-            raise ConfigError(f"--env {name}: returned {type(env).__name__}, not a gymnasium.Env")
-        return env
+        return as_gymnasium(factory(**kwargs), f"--env {name}")
 
     gym.registry.pop(gym_id, None)
     gym.register(id=gym_id, entry_point=made, max_episode_steps=None, disable_env_checker=True)

@@ -19,6 +19,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from dqfd_bc_keras.envs.compat import as_gymnasium
 from dqfd_bc_keras.envs.kwargs import as_json
 from dqfd_bc_keras.envs.make import TASKS, forget_spaces, get_task
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
@@ -88,11 +89,12 @@ def stand_in(task: str, env_id: str) -> None:
 def _registered(env: gym.Env | Callable[[], gym.Env], env_id: str | None) -> str:
     """The id `env` is registered under in this process (`env_id`, or a new one from its class's
     name), whose every `gym.make` calls the factory or copies the instance."""
-    if isinstance(env, gym.Env):
-        name, instance = type(env.unwrapped).__name__, env
-        make: Callable[[], gym.Env] = lambda: _copy_or_same(instance)
-    elif callable(env):
-        name, make = getattr(env, "__qualname__", type(env).__name__).replace(".<locals>.", "."), env
+    if callable(env) and not _is_env(env):
+        name, factory = getattr(env, "__qualname__", type(env).__name__).replace(".<locals>.", "."), env
+        make: Callable[[], gym.Env] = lambda: as_gymnasium(factory(), f"env={name}()")
+    elif _is_env(env):
+        name, instance = type(getattr(env, "unwrapped", env)).__name__, env
+        make = lambda: as_gymnasium(_copy_or_same(instance), "env")
     else:
         raise ConfigError(
             f"env must be a Gymnasium id, a preset name, a gymnasium.Env or a factory of one, got {type(env).__name__}"
@@ -106,6 +108,13 @@ def _registered(env: gym.Env | Callable[[], gym.Env], env_id: str | None) -> str
         forget_spaces()
     gym.register(id=env_id, entry_point=make, max_episode_steps=None, disable_env_checker=True)
     return env_id
+
+
+def _is_env(env: object) -> bool:
+    """A `gymnasium.Env`, or an object with `reset` and `step` that `compat.as_gymnasium` may hold."""
+    if isinstance(env, type):  # a class: a factory of its instances
+        return False
+    return isinstance(env, gym.Env) or all(callable(getattr(env, name, None)) for name in ("reset", "step"))
 
 
 def _importable_id(spec: gym.envs.registration.EnvSpec) -> str:
