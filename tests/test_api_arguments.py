@@ -8,22 +8,11 @@ import re
 import gymnasium as gym
 import numpy as np
 import pytest
+from test_python_api import TINY
 from toy_envs import Chain, pole_rule
 
 from dqfd_bc_keras import DQfD, demos
 from dqfd_bc_keras.errors import ConfigError
-
-TINY = {
-    "pretrain_steps": 10,
-    "bc_epochs": 2,
-    "bc_refit_epochs": 1,
-    "demo_episodes": 2,
-    "eval_every": 100,
-    "eval_episodes": 2,
-    "final_eval_episodes": 2,
-    "replay_capacity": 2000,
-    "demo_capacity": 5000,
-}
 
 
 def my_rule(obs):

@@ -7,6 +7,7 @@ import re
 import gymnasium as gym
 import numpy as np
 import pytest
+from test_python_api import TINY
 
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.errors import ConfigError
@@ -17,18 +18,6 @@ sb3 = pytest.importorskip("stable_baselines3")
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 from stable_baselines3.common.evaluation import evaluate_policy  # noqa: E402
 from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
-
-TINY = {
-    "pretrain_steps": 10,
-    "bc_epochs": 2,
-    "bc_refit_epochs": 1,
-    "demo_episodes": 2,
-    "eval_every": 100,
-    "eval_episodes": 2,
-    "final_eval_episodes": 2,
-    "replay_capacity": 2000,
-    "demo_capacity": 5000,
-}
 
 
 @pytest.fixture(scope="module")

@@ -8,22 +8,12 @@ import json
 import numpy as np
 import pytest
 from helpers import call
+from test_python_api import TINY
 
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
 
-TINY = {
-    "pretrain_steps": 10,
-    "bc_epochs": 2,
-    "bc_refit_epochs": 1,
-    "demo_episodes": 2,
-    "eval_every": 100,
-    "eval_episodes": 2,
-    "final_eval_episodes": 2,
-    "replay_capacity": 2000,
-    "demo_capacity": 5000,
-    "checkpoint_every": 100,
-}
+TINY = {**TINY, "checkpoint_every": 100}
 BUDGET = 400
 
 
