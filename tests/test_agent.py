@@ -9,9 +9,10 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+from dqfd_bc_keras.core import expert_terms, reference
 from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.core.methods import METHODS
+from dqfd_bc_keras.core.methods import METHODS, Method, register
 from dqfd_bc_keras.errors import ConfigError
 
 EXPERT_LOSSES = tuple(name for name, method in METHODS.items() if method.term is not None)
@@ -21,9 +22,12 @@ Q_LEARNING = tuple(name for name, method in METHODS.items() if method.q_learning
 
 
 def agent_for(loss, demos, bc_models, **overrides):
+    """An agent of method `loss` with the shared BC model of its kind of fit (a method registered
+    after the `bc_models` fixture was made included)."""
     keras.utils.set_random_seed(0)
     config = Config.for_task("cartpole", expert_loss=loss, **overrides)
-    return make_agent(config, demos, bc_models.get(loss))
+    by_fit = {METHODS[name].bc_fit: model for name, model in bc_models.items()}
+    return make_agent(config, demos, by_fit.get(config.method.bc_fit))
 
 
 def agreement(agent, data):
@@ -51,13 +55,31 @@ def batch_of(agent, size=8):
     return agent.replay.sample(size, agent.beta())
 
 
-@pytest.mark.parametrize("loss", Q_LEARNING)
-@pytest.mark.parametrize("target", ["dqn", "double"])
-def test_train_step_assembles_the_total_loss_as_written(loss, target, demos, bc_models):
-    """J = J_DQ + λ1 J_n + λ2 J_E + λ3 J_L2, recomputed in numpy from the networks' outputs, for
-    every registered method: J_E by hand for the built-in terms, 0 without a term, and for a term
-    with no numpy twin here the term itself on the same batch (each term has its hand-worked test in
-    test_losses.py; what this checks is the assembly)."""
+def expert_loss_by_hand(loss, q, b, theta, prior, n) -> float | None:
+    """J_E of a built-in method on batch `b` worked out in numpy from Q(s, ·) `q` (the cartpole
+    defaults: margin 0.8, T = 1, s_p = 1; N = n); None for a method of another name."""
+    w, a, rows = b.weights.numpy(), b.actions.numpy(), np.arange(len(q))
+    pi, sigma_sq = b.pi_bc.numpy(), b.sigma_sq.numpy()
+    p_q = np.exp(q) / np.exp(q).sum(1, keepdims=True)
+    if loss == "margin":
+        return np.mean(w * b.is_demo.numpy() * ((q + 0.8 * (np.arange(2) != a[:, None])).max(1) - q[rows, a]))
+    if loss == "bc_margin":
+        a_e = pi.argmax(1)
+        return np.mean(w * ((q + 0.8 * (np.arange(2) != a_e[:, None])).max(1) - q[rows, a_e]))
+    if loss == "ce":
+        return np.mean(w * -(pi * np.log(p_q)).sum(1))
+    if loss == "bayes":
+        return np.mean(w * ((p_q - pi) ** 2).sum(1) / (2 * sigma_sq)) + sum(
+            ((t - p) ** 2).sum() for t, p in zip(theta, prior, strict=True)
+        ) / (2 * 1.0**2 * n)
+    return None
+
+
+def assert_assembles_the_total_loss(loss, target, demos, bc_models):
+    """J = J_DQ + λ1 J_n + λ2 J_E + λ3 J_L2, recomputed from the networks' outputs: J_E is the
+    method's declared reference formula on the same batch (reference.py refuses a method that
+    declares none), which for a built-in is also J_E worked out here in numpy; 0 without a term
+    (each term has its hand-worked test in test_losses.py)."""
     agent = agent_for(loss, demos, bc_models, target=target, lambda_n=0.5, lambda_expert=2.0, lambda_l2=1e-3)
     agent.pretrain(5, steps_per_call=5)  # some non-trivial weights; θ_prior captured
     for w in agent.target_network.weights:  # a target network different from the online one
@@ -78,36 +100,48 @@ def test_train_step_assembles_the_total_loss_as_written(loss, target, demos, bc_
     y_n = b.n_returns.numpy() + b.n_discount.numpy() * value(q_n_t, q_n_o)
     j_dq = np.mean(w * (y - q[rows, a]) ** 2)
     j_n = np.mean(w * (y_n - q[rows, a]) ** 2)
-    pi, sigma_sq = b.pi_bc.numpy(), b.sigma_sq.numpy()
-    p_q = np.exp(q) / np.exp(q).sum(1, keepdims=True)
-    if loss == "margin":
-        j_e = np.mean(w * b.is_demo.numpy() * ((q + 0.8 * (np.arange(2) != a[:, None])).max(1) - q[rows, a]))
-    elif loss == "bc_margin":
-        a_e = pi.argmax(1)
-        j_e = np.mean(w * ((q + 0.8 * (np.arange(2) != a_e[:, None])).max(1) - q[rows, a_e]))
-    elif loss == "ce":
-        j_e = np.mean(w * -(pi * np.log(p_q)).sum(1))
-    elif loss == "bayes":
-        n = len(demos)
-        j_e = np.mean(w * ((p_q - pi) ** 2).sum(1) / (2 * sigma_sq)) + sum(
-            ((t - p) ** 2).sum() for t, p in zip(theta, prior, strict=True)
-        ) / (2 * 1.0**2 * n)
-    elif METHODS[loss].term is None:
-        j_e = 0.0
-    else:
-        j_e = float(METHODS[loss].expert_term()(agent, tf.constant(q), b))
+    formula = reference.expert_reference(METHODS[loss])
+    j_e = 0.0 if formula is None else float(formula(agent, tf.constant(q), b))
+    by_hand = expert_loss_by_hand(loss, q, b, theta, prior, len(demos))
+    if by_hand is not None:
+        np.testing.assert_allclose(j_e, by_hand, rtol=1e-4, atol=1e-6, err_msg="the reference formula")
     j_l2 = sum((k**2).sum() for k in kernels)
     expected = j_dq + 0.5 * j_n + 2.0 * j_e + 1e-3 * j_l2
 
     agent.reset_metrics()
     delta = agent.train_step(b)
     result = {name: float(value) for name, value in agent.losses_so_far().items()}
-    np.testing.assert_allclose(result["td"], j_dq, rtol=1e-4)
-    np.testing.assert_allclose(result["n_step"], j_n, rtol=1e-4)
-    np.testing.assert_allclose(result["expert"], j_e, rtol=1e-4, atol=1e-6)
-    np.testing.assert_allclose(result["l2"], j_l2, rtol=1e-4)
-    np.testing.assert_allclose(result["loss"], expected, rtol=1e-4)
+    np.testing.assert_allclose(result["td"], j_dq, rtol=1e-4, err_msg="td")
+    np.testing.assert_allclose(result["n_step"], j_n, rtol=1e-4, err_msg="n_step")
+    np.testing.assert_allclose(result["expert"], j_e, rtol=1e-4, atol=1e-6, err_msg="expert")
+    np.testing.assert_allclose(result["l2"], j_l2, rtol=1e-4, err_msg="l2")
+    np.testing.assert_allclose(result["loss"], expected, rtol=1e-4, err_msg="loss")
     np.testing.assert_allclose(delta, y - q[rows, a], rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("loss", Q_LEARNING)
+@pytest.mark.parametrize("target", ["dqn", "double"])
+def test_train_step_assembles_the_total_loss_as_written(loss, target, demos, bc_models):
+    """Every registered method that trains a Q-network, a new one included."""
+    assert_assembles_the_total_loss(loss, target, demos, bc_models)
+
+
+def half_ce(agent, q, batch):
+    return 0.5 * expert_terms.ce(agent, q, batch)
+
+
+def test_a_method_whose_term_is_not_its_reference_fails_the_assembly_check(demos, bc_models):
+    """The check cannot pass a term that computes something else than its method declares: half of
+    ce's cross-entropy declared as the whole of it."""
+    register(Method("half_ce", "half of ce's J_E", bc_fit="mle", term=half_ce, reference=reference.ce))
+    with pytest.raises(AssertionError, match="expert"):
+        assert_assembles_the_total_loss("half_ce", "dqn", demos, bc_models)
+
+
+def test_a_method_that_declares_no_reference_is_refused_by_the_check(demos, bc_models):
+    register(Method("half_ce", "half of ce's J_E", bc_fit="mle", term=half_ce))
+    with pytest.raises(ConfigError, match="method 'half_ce' declares no reference formula of its J_E"):
+        assert_assembles_the_total_loss("half_ce", "dqn", demos, bc_models)
 
 
 def test_target_network_is_refreshed_every_period(demos, bc_models):

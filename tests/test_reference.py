@@ -35,10 +35,12 @@ import pytest
 import tensorflow as tf
 
 import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
-from dqfd_bc_keras.core import reference
+from dqfd_bc_keras.core import expert_terms, reference
 from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import Method, register
 from dqfd_bc_keras.demos import DemoDataset, record
+from dqfd_bc_keras.errors import ConfigError
 
 PRETRAIN, ROUNDS, STORE, LEARN = 100, 3, 100, 50
 """Pre-training steps, then rounds of (store STORE agent transitions, LEARN steps)."""
@@ -181,8 +183,33 @@ def test_reference_learns_what_the_graph_loop_learns(loss, demos, agent_data, bc
         assert_same_terms(graph, steps)
     assert_same_weights(agent.q_network.weights, ref.theta)
     assert_same_weights(agent.target_network.weights, ref.target)
-    assert_same_weights(agent.prior_weights, ref.prior)
+    assert_same_weights(agent.prior_weights, ref.prior_weights)
     graph_p = agent.replay.tree.leaves(agent.replay.stored_indices()).numpy()
     # p = (|δ| + ε)^α is steep near δ = 0 (slope ≤ α·ε_a^(α−1) ≈ 25): atol 3e-4 is |δ| within 1.2e-5 there.
     np.testing.assert_allclose(ref.replay.p[: len(graph_p)], graph_p, rtol=1e-4, atol=3e-4)
     assert rows.mismatches <= 1e-3 * rows.draws
+
+
+def learner_for(config: Config) -> reference.ReferenceLearner:
+    """A reference learner of `config` on made-up weights and two demonstrated transitions."""
+    two = reference.Transitions(
+        np.zeros((2, 4), np.float32), np.zeros(2, np.int64), np.ones(2, np.float32), np.zeros((2, 4), np.float32),
+        np.zeros(2, bool), np.zeros(2, bool), np.full((2, 2), 0.5, np.float32), np.ones(2, np.float32),
+    )  # fmt: skip
+    theta = [np.zeros((4, 2), np.float32), np.zeros(2, np.float32)]
+    return reference.ReferenceLearner(config, theta, (np.zeros(4), np.ones(4)), two)
+
+
+def test_a_method_without_a_reference_formula_is_refused():
+    """Its J_E would otherwise be checked against nothing (or against another method's)."""
+    register(Method("unchecked", "the margin with nothing to check it against", term=expert_terms.margin))
+    with pytest.raises(ConfigError, match="method 'unchecked' declares no reference formula of its J_E"):
+        learner_for(config_for("unchecked"))
+    register(Method("checked", "the margin", term=expert_terms.margin, reference=reference.margin))
+    assert learner_for(config_for("checked")).j_e is reference.margin
+
+
+@pytest.mark.parametrize("change", [{"expert_loss": "sqil"}, {"td_loss": "huber"}])
+def test_what_the_reference_does_not_state_is_refused(change):
+    with pytest.raises(ConfigError, match="the reference has neither SQIL nor the Huber TD loss"):
+        learner_for(Config.for_task("cartpole", **change))

@@ -94,6 +94,8 @@ def test_an_unknown_method_and_behavioural_cloning_alone_are_refused_by_validati
         Config.for_task("cartpole", expert_loss="bc-alone")
     with pytest.raises(ConfigError, match="bc_fit='exact' is not one of"):
         Method("x", "x", bc_fit="exact")
+    with pytest.raises(ConfigError, match="method 'x': a reference without a term"):
+        Method("x", "x", reference="dqfd_bc_keras.core.reference:margin")
 
 
 def package(table: dict) -> dict:

@@ -120,6 +120,16 @@ class DQfDAgent(keras.Model):
             self.reset_metrics()
         return losses
 
+    @property
+    def theta(self) -> list[keras.Variable]:
+        """θ, the Q-network's trainable weights (methods.TermAgent: what a method's term may read)."""
+        return self.q_network.trainable_weights
+
+    @property
+    def demo_size(self) -> tf.Variable:
+        """N = |D_demo| (methods.TermAgent)."""
+        return self.replay.demo_size
+
     def refresh_target(self) -> None:
         """θ' ← θ."""
         for target, online in zip(self.target_network.weights, self.q_network.weights, strict=True):

@@ -9,6 +9,8 @@ are wrapped in `stop_gradient`: the gradient only flows through Q(s, ·; θ).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import tensorflow as tf
 
 
@@ -100,7 +102,10 @@ def bayes_likelihood_loss(q: tf.Tensor, pi_bar: tf.Tensor, sigma_sq: tf.Tensor, 
 
 
 def bayes_prior_loss(
-    weights: list[tf.Variable], prior_weights: list[tf.Variable], prior_scale: float, n_data: tf.Tensor
+    weights: Sequence[tf.Variable | tf.Tensor],
+    prior_weights: Sequence[tf.Variable | tf.Tensor],
+    prior_scale: float,
+    n_data: int | tf.Tensor | tf.Variable,
 ) -> tf.Tensor:
     """The Gaussian prior part, a scalar:  ‖θ − θ_prior‖² / (2·s_p²·N).
 

@@ -1,16 +1,20 @@
 """The registry of methods: what `expert_loss` may name, and everything that follows from it.
 
 A method declares its name, whether it learns from demonstrations, how its BC model π_bc is
-fitted (none, MLE or MAP with dropout, ALGORITHM.md §3), its expert-loss term J_E (§2) and the
-Config fields only it reads. Validation, the agent, the BC builder and the lab's pairing rules
-all read these declarations, so a new method is one `Method(...)` and its term:
+fitted (none, MLE or MAP with dropout, ALGORITHM.md §3), its expert-loss term J_E (§2), the eager
+formula J_E is checked against (reference.py) and the Config fields only it reads. Validation, the
+agent, the BC builder, the reference and the lab's pairing rules all read these declarations, so a
+new method is one `Method(...)`, its term and its reference (each a `Term`):
 
     from dqfd_bc_keras.core.methods import Method, register
 
     def j_e(agent, q, batch):                      # J_E, a scalar tensor (see expert_terms.py)
         return ...
 
-    SOFT_MARGIN = register(Method("soft_margin", "a softer margin", bc_fit="mle", term=j_e))
+    def j_e_by_hand(agent, q, batch):              # the same J_E, written independently of `j_e`
+        return ...
+
+    SOFT_MARGIN = register(Method("soft_margin", "a softer margin", bc_fit="mle", term=j_e, reference=j_e_by_hand))
 
 and `train.py --expert-loss my_module:SOFT_MARGIN` trains with it (the module is imported, and
 the `Method` it names is registered under its own name; config.json records `my_module:SOFT_MARGIN`
@@ -20,14 +24,19 @@ TensorFlow: reading a config.json does not load it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Protocol, cast
 
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.plugins import PluginError, WrongKind, load, parse
+
+if TYPE_CHECKING:
+    import tensorflow as tf
+
+    from dqfd_bc_keras.core.config import Config
 
 BC_FITS = ("none", "mle", "map")
 """How a method fits π_bc: not at all, by maximum likelihood (ce, bc_margin), or MAP with dropout (bayes)."""
@@ -50,8 +59,59 @@ BAYES_FIELDS = (
 )
 """Config fields of the Bayesian expert loss and its MAP BC model (§3)."""
 
-Term = Callable[..., Any]
-"""J_E as the agent calls it: term(agent, q, batch) → a scalar tensor."""
+
+class TermAgent(Protocol):
+    """What a term may read of the agent: all that the built-in terms read. `DQfDAgent` (agent.py)
+    gives it in the learning graph, `ReferenceLearner` (reference.py) eagerly."""
+
+    @property
+    def config(self) -> Config:
+        """The run's Config: the method's settings (margin, temperature, prior_scale, …)."""
+
+    @property
+    def theta(self) -> Sequence[tf.Variable | tf.Tensor]:
+        """θ, the Q-network's trainable weights (the Bayesian prior's ‖θ − θ_prior‖²)."""
+
+    @property
+    def prior_weights(self) -> Sequence[tf.Variable | tf.Tensor]:
+        """θ_prior, one tensor per weight of θ: zero while pre-training, then (by default) θ after it."""
+
+    @property
+    def demo_size(self) -> int | tf.Tensor | tf.Variable:
+        """N = |D_demo|, the demonstrated transitions (the prior's 1/N)."""
+
+
+class TermBatch(Protocol):
+    """What a term may read of the batch, each a tensor of B rows: `replay.Batch` has these and
+    the transitions themselves."""
+
+    @property
+    def actions(self) -> tf.Tensor:
+        """(B,) int32 a_t: on D_demo's rows the demonstrated action a_E."""
+
+    @property
+    def is_demo(self) -> tf.Tensor:
+        """(B,) 1.0 on D_demo's rows, 0.0 on the agent's own."""
+
+    @property
+    def weights(self) -> tf.Tensor:
+        """(B,) the prioritized replay's importance weights w_i (max 1): weight each row's loss by them."""
+
+    @property
+    def pi_bc(self) -> tf.Tensor:
+        """(B, A) π̄_bc(·|s_t), the BC model's (mean) policy (uniform for a method without one)."""
+
+    @property
+    def sigma_sq(self) -> tf.Tensor:
+        """(B,) σ²(s_t), the BC model's predictive variance (σ0² for an MLE model or none)."""
+
+
+class Term(Protocol):
+    """J_E: term(agent, q, batch) → a scalar tensor, `q` = Q(s, ·; θ) of the batch, (B, A). A
+    method's term runs inside the learning graph (TensorFlow ops on `q` and the batch; J_E's
+    gradient flows through `q` and `agent.theta`); its reference runs eagerly (reference.py)."""
+
+    def __call__(self, agent: TermAgent, q: tf.Tensor, batch: TermBatch, /) -> tf.Tensor: ...
 
 
 @dataclass(frozen=True)
@@ -67,6 +127,10 @@ class Method:
     term: Term | str | None = None
     """J_E: a callable term(agent, q, batch), or "module:function" naming one (imported when the
     agent is built, so declaring a method loads no TensorFlow); None: no expert loss."""
+    reference: Term | str | None = None
+    """The same J_E as an eager formula written independently of `term` (a `Term` or "module:function"),
+    which tests and reference.py check `term` against; reference.py refuses a method with a term
+    and no reference. The built-ins' are in reference.py."""
     reads: tuple[str, ...] = ()
     """The Config fields only this method (among the registered ones) reads besides the shared ones."""
     sqil_rewards: bool = False
@@ -78,6 +142,8 @@ class Method:
     def __post_init__(self) -> None:
         if self.bc_fit not in BC_FITS:
             raise ConfigError(f"method {self.name!r}: bc_fit={self.bc_fit!r} is not one of {BC_FITS}")
+        if self.reference is not None and self.term is None:
+            raise ConfigError(f"method {self.name!r}: a reference without a term (J_E = 0) checks nothing")
 
     @property
     def uses_bc(self) -> bool:
@@ -85,12 +151,20 @@ class Method:
 
     def expert_term(self) -> Term | None:
         """The callable J_E (a "module:function" term imported now)."""
-        if not isinstance(self.term, str):
-            return self.term
-        return load(self.term, f"method {self.name!r}: term {self.term}", callable, "function")
+        return self._imported(self.term, "term")
+
+    def reference_term(self) -> Term | None:
+        """The callable reference formula of J_E (a "module:function" imported now)."""
+        return self._imported(self.reference, "reference")
+
+    def _imported(self, term: Term | str | None, field: str) -> Term | None:
+        if not isinstance(term, str):
+            return term
+        return cast("Term", load(term, f"method {self.name!r}: {field} {term}", callable, "function"))
 
 
 _TERMS = "dqfd_bc_keras.core.expert_terms"
+_REFERENCE = "dqfd_bc_keras.core.reference"
 _METHOD = "dqfd_bc_keras.core.methods.Method"
 METHODS: dict[str, Method] = {}
 """Every registered method by name; `get_method` also imports a user's `module:NAME`."""
@@ -109,6 +183,7 @@ for _method in (
         "margin",
         "DQfD's large-margin loss on the demonstrated actions (§2)",
         term=f"{_TERMS}:margin",
+        reference=f"{_REFERENCE}:margin",
         reads=("margin",),
     ),
     Method(
@@ -116,6 +191,7 @@ for _method in (
         "DQfD-BC: the large margin around the BC model's action argmax π_bc",
         bc_fit="mle",
         term=f"{_TERMS}:bc_margin",
+        reference=f"{_REFERENCE}:bc_margin",
         reads=("margin", *BC_FIELDS, *DYNAMIC_FIELDS),
     ),
     Method(
@@ -123,6 +199,7 @@ for _method in (
         "DQfD-BC: the cross-entropy H(π_bc, softmax(Q/T)) on every row",
         bc_fit="mle",
         term=f"{_TERMS}:ce",
+        reference=f"{_REFERENCE}:ce",
         reads=("temperature", *BC_FIELDS, *DYNAMIC_FIELDS),
     ),
     Method(
@@ -130,6 +207,7 @@ for _method in (
         "the paper's Bayesian loss: Gaussian likelihood weighted by 1/σ²(s), and a prior around θ_prior",
         bc_fit="map",
         term=f"{_TERMS}:bayes",
+        reference=f"{_REFERENCE}:bayes",
         reads=("temperature", *BAYES_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
     ),
     Method("none", "plain DQN: no demonstrations, no expert loss", needs_demos=False),
@@ -197,7 +275,7 @@ def get_method(name: str) -> Method:
             "again with dqfd_bc_keras.core.methods.register)"
         )
     try:
-        return load(name, f"expert_loss={name!r}", lambda value: isinstance(value, Method), _METHOD)
+        return cast(Method, load(name, f"expert_loss={name!r}", lambda value: isinstance(value, Method), _METHOD))
     except PluginError as error:
         if _SAVED.get() and not isinstance(error, WrongKind):
             return Method(name, f"a method of your own that cannot be imported here ({error})")

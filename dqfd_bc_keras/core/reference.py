@@ -11,17 +11,40 @@ compute the same loss terms and end with the same weights: documentation that ca
                  p_i ← (|δ_i| + ε)^α, ε = ε_d on D_demo, ε_a on D_replay;  θ' ← θ every τ steps
 
 Left to the caller: acting (§4 step 3), whose transitions it `store`s, and dynamic demonstrations (§5).
+
+J_E is each method's declared reference formula (`Method.reference`; the built-ins' are the functions
+at the end of this module, written without losses.py), never a stand-in: a method with a term and
+no reference is refused, so a new method cannot pass as another one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import tensorflow as tf
 
+from dqfd_bc_keras.errors import ConfigError
+
+if TYPE_CHECKING:
+    from dqfd_bc_keras.core.config import Config
+    from dqfd_bc_keras.core.methods import Method, Term, TermAgent, TermBatch
+
 Draw = Callable[[np.ndarray, int], np.ndarray]  # (p^α of every row, batch size) → the batch's rows
+
+
+def expert_reference(method: Method) -> Term | None:
+    """The eager formula `method`'s J_E is checked against: its declared reference; None for a
+    method without a term (J_E = 0). A method with a term and no reference is a `ConfigError`."""
+    if method.term is None:
+        return None
+    if method.reference is None:
+        raise ConfigError(
+            f"method {method.name!r} declares no reference formula of its J_E: give Method(..., "
+            "reference=...) the same loss written eagerly and independently of its term, to be checked against it"
+        )
+    return method.reference_term()
 
 
 class Transitions(NamedTuple):
@@ -91,29 +114,46 @@ class Replay:
         self.max_p = max(self.max_p, self.p[rows].max())
 
 
+class ExpertRows(NamedTuple):
+    """A batch as J_E reads it (methods.TermBatch)."""
+
+    actions: tf.Tensor
+    is_demo: tf.Tensor
+    weights: tf.Tensor
+    pi_bc: tf.Tensor
+    sigma_sq: tf.Tensor
+
+
 class ReferenceLearner:
-    """θ, θ', θ_prior, Adam's state and the replay; `config` is a Config (squared TD loss; no SQIL).
+    """θ, θ', θ_prior, Adam's state and the replay; `config` is a Config (squared TD loss; no SQIL);
+    J_E is its method's reference (`expert_reference`). A `methods.TermAgent`.
     θ = [W_1, b_1, …, W_L, b_L] (`build_q_network(…).get_weights()`'s layout), `obs_scale` = (μ, σ):
     Q(s, ·; θ) = W_L·relu(… relu(W_1·(s − μ)/σ + b_1) …) + b_L. `draw` picks each batch's rows."""
 
     def __init__(
         self,
-        config,
+        config: Config,
         theta: list[np.ndarray],
         obs_scale: tuple[np.ndarray, np.ndarray],
         demos: Transitions,
         draw: Draw | None = None,
     ) -> None:
-        if config.expert_loss == "sqil" or config.td_loss != "squared":
-            raise ValueError("the reference has neither SQIL nor the Huber TD loss")
-        self.c, self.mu, self.sigma = config, *(np.float32(x) for x in obs_scale)
+        if config.method.sqil_rewards or config.td_loss != "squared":
+            raise ConfigError("the reference has neither SQIL nor the Huber TD loss")
+        self.j_e = expert_reference(config.method)
+        self.config, self.mu, self.sigma = config, *(np.float32(x) for x in obs_scale)
         self.theta = [tf.Variable(np.float32(w)) for w in theta]
         self.target = [tf.identity(w) for w in self.theta]  # θ'
-        self.prior = [tf.zeros_like(w) for w in self.theta]  # θ_prior is 0 while pre-training
+        self.prior_weights = [tf.zeros_like(w) for w in self.theta]  # θ_prior is 0 while pre-training
         self.m, self.v = [np.zeros(w.shape, np.float32) for w in theta], [np.zeros(w.shape, np.float32) for w in theta]
         self.steps, self.replay = 0, Replay(demos, config)
         rng = np.random.default_rng(config.seed)
         self.draw = draw or (lambda p, size: proportional(p, rng.random(size)))
+
+    @property
+    def demo_size(self) -> int:
+        """N = |D_demo|."""
+        return self.replay.n_demo
 
     def q(self, s: np.ndarray, theta: list[tf.Tensor]) -> tf.Tensor:
         x = (s - self.mu) / self.sigma
@@ -126,33 +166,35 @@ class ReferenceLearner:
         if self.replay.stored:
             raise ValueError("pre-training samples D_demo alone, but the replay holds agent data")
         terms = self.learn(k)
-        if self.c.prior_center == "pretrained":
-            self.prior = [tf.identity(w) for w in self.theta]
+        if self.config.prior_center == "pretrained":
+            self.prior_weights = [tf.identity(w) for w in self.theta]
         return terms
 
     def learn(self, steps: int) -> list[dict[str, float]]:  # the loss terms of each step
         return [self.learn_step() for _ in range(steps)]
 
     def beta(self) -> float:  # linear from β0 to 1 over `beta_anneal_steps` steps, then 1
-        c = self.c
+        c = self.config
         return c.priority_beta0 + (1 - c.priority_beta0) * min(1.0, self.steps / max(c.beta_anneal_steps, 1))
 
     def next_values(self, s: np.ndarray) -> np.ndarray:
         """V'(s) = max_a Q(s, a; θ') (dqn) or Q(s, argmax_a Q(s, a; θ); θ') (double)."""
         q_target = self.q(s, self.target).numpy()
-        a = q_target.argmax(1) if self.c.target == "dqn" else self.q(s, self.theta).numpy().argmax(1)
+        a = q_target.argmax(1) if self.config.target == "dqn" else self.q(s, self.theta).numpy().argmax(1)
         return q_target[np.arange(len(s)), a]
 
     def learn_step(self) -> dict[str, float]:
         """One Adam step on J for a prioritized batch; returns J's terms."""
-        c, replay = self.c, self.replay
+        c, replay = self.config, self.replay
         rows, w = replay.sample(c.batch_size, self.beta(), self.draw)
-        b, w = Transitions(*(x[rows] for x in replay.data)), np.float32(w)
+        b, w = Transitions(*(x[rows] for x in replay.data)), w.astype(np.float32)
         ret_n, s_n, discount_n = (np.array(x) for x in zip(*(replay.n_step(i) for i in rows), strict=True))
         # Constant targets: y = r + γ(1 − terminated)·V'(s'),
         #                   y_n = Σ_{k<m} γ^k r_{t+k} + γ^m(1 − terminated)·V'(s_{t+m})
         v, v_n = np.split(self.next_values(np.concatenate([b.next_obs, s_n])), 2)
         y, y_n = b.rewards + np.float32(c.gamma) * (1 - np.float32(b.terminated)) * v, ret_n + discount_n * v_n
+        demo = np.float32(rows < replay.n_demo)
+        expert_rows = ExpertRows(*(tf.constant(x) for x in (b.actions, demo, w, b.pi_bc, b.sigma_sq)))
         with tf.GradientTape() as tape:
             q = self.q(b.obs, self.theta)
             q_sa = tf.gather_nd(q, np.stack([np.arange(len(rows)), b.actions], 1))
@@ -160,7 +202,7 @@ class ReferenceLearner:
             terms = {
                 "td": tf.reduce_mean(w * tf.square(delta)),
                 "n_step": tf.reduce_mean(w * tf.square(y_n - q_sa)),
-                "expert": self.expert_loss(q, b, w, rows < replay.n_demo),
+                "expert": tf.constant(0.0) if self.j_e is None else self.j_e(self, q, expert_rows),
                 "l2": tf.add_n([tf.reduce_sum(tf.square(W)) for W in self.theta[::2]]),
             }  # kernels, not biases
             loss = (
@@ -180,29 +222,47 @@ class ReferenceLearner:
         """Keras's Adam in float32: m ← β1·m + (1 − β1)·g, v ← β2·v + (1 − β2)·g²,
         θ ← θ − lr·√(1 − β2^t)/(1 − β1^t) · m/(√v + ε), t = this step's number."""
         t = self.steps + 1
-        size = np.float32(self.c.learning_rate) * np.sqrt(1 - b2**t) / (1 - b1**t)
+        size = np.float32(self.config.learning_rate) * np.sqrt(1 - b2**t) / (1 - b1**t)
         for i, (g, w) in enumerate(zip((g.numpy() for g in grads), self.theta, strict=True)):
             self.m[i], self.v[i] = b1 * self.m[i] + (1 - b1) * g, b2 * self.v[i] + (1 - b2) * g**2
             w.assign(w.numpy() - size * self.m[i] / (np.sqrt(self.v[i]) + eps))
 
-    def expert_loss(self, q: tf.Tensor, b: Transitions, w: np.ndarray, demo: np.ndarray) -> tf.Tensor:
-        """J_E (§2–§3), importance-weighted; `demo` marks the batch's rows from D_demo."""
-        c, kind = self.c, self.c.expert_loss
-        if kind == "none":
-            return tf.constant(0.0)
-        if kind in ("margin", "bc_margin"):
-            # max_a [Q(s, a) + l(a_E, a)] − Q(s, a_E), l = margin where a ≠ a_E: a_E is the
-            # demonstrated action, on D_demo only (DQfD), or argmax π̄_bc, on every row (DQfD-BC).
-            a_e = b.actions if kind == "margin" else b.pi_bc.argmax(1)
-            l = np.float32(c.margin * (np.arange(q.shape[1]) != a_e[:, None]))  # noqa: E741 (the paper's l)
-            q_e = tf.gather_nd(q, np.stack([np.arange(len(a_e)), a_e], 1))
-            return tf.reduce_mean((w * demo if kind == "margin" else w) * (tf.reduce_max(q + l, 1) - q_e))
-        if kind == "ce":  # H(π_bc, p_Q) = −Σ_a π_bc(a|s) log p_Q(a|s),  p_Q = softmax(Q/T)
-            return tf.reduce_mean(w * -tf.reduce_sum(b.pi_bc * tf.nn.log_softmax(q / c.temperature), 1))
-        # bayes: mean_s Σ_a (p_Q(a|s) − π̄_bc(a|s))² / (2σ²(s))  +  ‖θ − θ_prior‖² / (2·s_p²·N)
-        p_q = tf.nn.softmax(q / c.temperature)
-        likelihood = tf.reduce_mean(w * tf.reduce_sum(tf.square(p_q - b.pi_bc), 1) / (2 * b.sigma_sq))
-        if not c.bayes_prior:
-            return likelihood
-        squared = tf.add_n([tf.reduce_sum(tf.square(t - p)) for t, p in zip(self.theta, self.prior, strict=True)])
-        return likelihood + squared / (2 * c.prior_scale**2 * self.replay.n_demo)
+
+# J_E of the built-in methods (their `Method.reference`), importance-weighted, in plain TensorFlow and numpy.
+
+
+def margin(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
+    """DQfD: the large margin around the demonstrated action a_E, on D_demo's rows only."""
+    w = np.asarray(batch.weights) * np.asarray(batch.is_demo)
+    return _large_margin(q, np.asarray(batch.actions), agent.config.margin, w)
+
+
+def bc_margin(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
+    """DQfD-BC: the large margin around a_E = argmax_a π̄_bc(a|s), on every row."""
+    return _large_margin(q, np.asarray(batch.pi_bc).argmax(1), agent.config.margin, np.asarray(batch.weights))
+
+
+def _large_margin(q: tf.Tensor, a_e: np.ndarray, margin: float, w: np.ndarray) -> tf.Tensor:
+    """mean_i w_i·(max_a [Q(s_i, a) + l(a_E, a)] − Q(s_i, a_E)), l = margin where a ≠ a_E, else 0."""
+    l = np.float32(margin * (np.arange(q.shape[1]) != a_e[:, None]))  # noqa: E741 (the paper's l)
+    q_e = tf.gather_nd(q, np.stack([np.arange(len(a_e)), a_e], 1))
+    return tf.reduce_mean(w * (tf.reduce_max(q + l, 1) - q_e))
+
+
+def ce(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
+    """H(π_bc, p_Q) = −Σ_a π_bc(a|s) log p_Q(a|s),  p_Q = softmax(Q/T), on every row."""
+    log_p_q = tf.nn.log_softmax(q / agent.config.temperature)
+    return tf.reduce_mean(batch.weights * -tf.reduce_sum(batch.pi_bc * log_p_q, 1))
+
+
+def bayes(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
+    """mean_s Σ_a (p_Q(a|s) − π̄_bc(a|s))² / (2σ²(s))  +  ‖θ − θ_prior‖² / (2·s_p²·N) (no prior
+    with `bayes_prior=False`)."""
+    c = agent.config
+    p_q = tf.nn.softmax(q / c.temperature)
+    likelihood = tf.reduce_mean(batch.weights * tf.reduce_sum(tf.square(p_q - batch.pi_bc), 1) / (2 * batch.sigma_sq))
+    if not c.bayes_prior:
+        return likelihood
+    theta, prior = agent.theta, agent.prior_weights
+    squared = tf.add_n([tf.reduce_sum(tf.square(t - p)) for t, p in zip(theta, prior, strict=True)])
+    return likelihood + squared / (2 * c.prior_scale**2 * float(agent.demo_size))
