@@ -23,11 +23,12 @@ from dqfd_bc_keras.core.methods import METHODS, Method, register
 from dqfd_bc_keras.demos.recording import callable_name
 from dqfd_bc_keras.envs.given import a_kind
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.tasks import Rule
 from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
 
 Callback = Callable[[EpisodeRow | EvalRow], object]
 Callbacks = Callback | Sequence[Callback] | None
-DemosLike = demo_io.DemoDataset | str | Path | Callable[[np.ndarray], int] | None
+DemosLike = demo_io.DemoDataset | str | Path | Rule | None
 DEMONSTRATORS = "a preset expert's name, module:function, a .keras model or a function obs → action"
 
 
@@ -87,7 +88,7 @@ def _is_demo_source(demos: object) -> bool:
 
 def demonstrations(
     demos: DemosLike, task: str, settings: dict[str, Any]
-) -> tuple[demo_io.DemoDataset | None, str | None, Callable | None, str | None]:
+) -> tuple[demo_io.DemoDataset | None, str | None, Rule | None, str | None]:
     """What `demos` gives: (a dataset given or loaded, its source, a Python rule to record, the
     config's `expert`), None where it gives nothing; `settings` make the task's preset."""
     if isinstance(demos, demo_io.DemoDataset):

@@ -23,7 +23,7 @@ from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.methods import BUILT_IN, playing_saved_run
 from dqfd_bc_keras.core.uncertainty import EnsembleDense
-from dqfd_bc_keras.envs.episodes import EvalResult, check_video, play, video_env
+from dqfd_bc_keras.envs.episodes import EvalResult, Policy, check_video, play, video_env
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_slug, task_spaces
 from dqfd_bc_keras.envs.objects import unmade_env
 from dqfd_bc_keras.errors import ConfigError, ModelFileError
@@ -131,7 +131,7 @@ def model_kind(model: keras.Model) -> str:
 
 
 def evaluate(
-    policy: Callable[[np.ndarray], int],
+    policy: Policy,
     task: str,
     episodes: int,
     seed: int,
@@ -171,7 +171,7 @@ def evaluate(
 
 
 def record_video(
-    policy: Callable[[np.ndarray], int],
+    policy: Policy,
     task: str,
     directory: str | Path,
     episodes: int,

@@ -11,15 +11,15 @@ before TensorFlow loads.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from dqfd_bc_keras.choices import EXPERT_NAMES
 from dqfd_bc_keras.demos.dataset import ARRAYS, DemoDataset, DemoMeta
-from dqfd_bc_keras.envs.episodes import play
+from dqfd_bc_keras.envs.episodes import Policy, play
 from dqfd_bc_keras.envs.make import get_task, make_plain_env, make_task, task_spaces
 from dqfd_bc_keras.errors import ConfigError, DqfdError, one_line
 from dqfd_bc_keras.plugins import bare_id, load, raised_at, where
@@ -133,7 +133,7 @@ def make_demonstrator(
 
         rule: Rule = load_policy(name, None, task, env_kwargs=env_kwargs or {})[0]
     else:
-        rule = load(name, f"demonstrator {name}", callable, "function")
+        rule = cast(Rule, load(name, f"demonstrator {name}", callable, "function"))
     return Demonstrator(name, rule, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed))
 
 
@@ -168,7 +168,8 @@ def expert_returns(family: str, name: str, episodes: int = 100, seed: int = 0, e
     uint8, the preset's limit where the env has none); episode i is reset with seed + i."""
     expert = make_expert(family, name, epsilon, seed)
     with make_plain_env(family_preset(family).name) as env:
-        return np.asarray(play(env, expert, range(seed, seed + episodes)).returns, dtype=np.float64)
+        returns = play(env, expert, range(seed, seed + episodes)).returns
+    return np.asarray(returns, dtype=np.float64)
 
 
 def callable_name(rule: Rule) -> str:
@@ -193,22 +194,18 @@ def record(
     resets with seed + i."""
     if episodes < 1:
         raise ConfigError(f"episodes must be ≥ 1, got {episodes}")
-    if callable(expert) and not isinstance(expert, Demonstrator):
-        expert = Demonstrator(
-            callable_name(expert),
-            expert,
-            task_spaces(task, env_kwargs).n_actions,
-            _check_epsilon(epsilon),
-            np.random.default_rng(seed),
+    if isinstance(expert, Demonstrator):
+        policy = expert
+    elif callable(expert):
+        n_actions = task_spaces(task, env_kwargs).n_actions
+        policy = Demonstrator(
+            callable_name(expert), expert, n_actions, _check_epsilon(epsilon), np.random.default_rng(seed)
         )
-    policy = (
-        expert
-        if isinstance(expert, Demonstrator)
-        else make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
-    )
-    source = policy.name if policy is expert else expert
+    else:
+        policy = make_demonstrator(expert, task, epsilon=epsilon, seed=seed, env_kwargs=env_kwargs)
+    source = policy.name if callable(expert) else expert
     with make_task(task, timeout=timeout, max_steps=max_steps, env_kwargs=env_kwargs) as env:
-        return rollout(
+        dataset = rollout(
             env,
             policy,
             range(seed, seed + episodes),
@@ -218,6 +215,7 @@ def record(
             seed=seed,
             env_kwargs=env_kwargs,
         )
+    return dataset
 
 
 class EpisodeRecorder:
@@ -311,13 +309,15 @@ class EpisodeRecorder:
             "obs": meta.obs_dtype,
             "next_obs": meta.obs_dtype,
         }
-        arrays = {name: np.asarray(self.columns[name][:end], dtype=dtypes[name]) for name in ARRAYS}
+        arrays: dict[str, np.ndarray] = {
+            name: np.asarray(self.columns[name][:end], dtype=dtypes[name]) for name in ARRAYS
+        }
         return DemoDataset(**arrays, meta=meta)
 
 
 def rollout(
     env,
-    policy: Callable[[np.ndarray], int],
+    policy: Policy,
     seeds: Sequence[int],
     *,
     task: str,

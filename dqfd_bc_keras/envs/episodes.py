@@ -20,6 +20,12 @@ from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.errors import ConfigError
 
 
+class Policy(Protocol):
+    """What plays an episode: obs → an int action (a checked `recording.Demonstrator`, a greedy network)."""
+
+    def __call__(self, obs: np.ndarray, /) -> int: ...
+
+
 class Watcher(Protocol):
     """Sees every episode as it is played (`recording.EpisodeRecorder`): its first observation and
     the seed the env was reset with (to play it again), then each step."""
@@ -41,7 +47,7 @@ class Played(NamedTuple):
 
 def play(
     env: gym.Env,
-    policy: Callable[[np.ndarray], int],
+    policy: Policy,
     seeds: Iterable[int],
     watcher: Watcher | None = None,
     progress: Callable[[int], None] | None = None,

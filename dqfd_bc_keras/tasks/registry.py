@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Protocol, SupportsIndex
 
 import numpy as np
 
@@ -13,8 +14,15 @@ from dqfd_bc_keras.choices import EXPERT_NAMES
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.plugins import PluginError, import_module, parse
 
-Rule = Callable[[np.ndarray], int]
-"""A scripted demonstrator: observation (as the networks see it) → action."""
+
+class Rule(Protocol):
+    """A demonstrator's rule: a preset's scripted expert, or a user's own (`--expert module:function`,
+    a function given to `record` or `DQfD`). It takes the observation as the networks see it
+    (flattened; frames as they are) and answers an action in [0, n): an int, a numpy integer or a
+    0-d integer array (not a bool); `demos.recording.Demonstrator` checks the answer."""
+
+    def __call__(self, obs: np.ndarray, /) -> SupportsIndex: ...
+
 
 NOT_REMADE = ("python callable ", "demonstrations from ")
 """How a config names demonstrations that no later process can make again (a Python function
