@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
+from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.core.methods import BAYES_FIELDS, METHODS, Method, get_method
+from dqfd_bc_keras.core.methods import BAYES_FIELDS, METHODS, Method, get_method, register
 from dqfd_bc_keras.demos import record
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arms import BAYES_ONLY
@@ -96,6 +97,17 @@ def test_an_unknown_method_and_behavioural_cloning_alone_are_refused_by_validati
         Method("x", "x", bc_fit="exact")
     with pytest.raises(ConfigError, match="method 'x': a reference without a term"):
         Method("x", "x", reference="dqfd_bc_keras.core.reference:margin")
+
+
+def test_a_method_of_a_scripts_own_under_a_built_in_name_is_refused():
+    """config.json records the name: a run of another loss called `bayes` would be read as bayes'."""
+    impostor = dataclasses.replace(METHODS["bayes"], doc="another loss under bayes' name")
+    match = r"register\(\): 'bayes' is the name of a built-in method \(margin, bc_margin, ce, bayes"
+    with pytest.raises(ConfigError, match=match):
+        register(impostor)
+    with pytest.raises(ConfigError, match=match):
+        DQfD("cartpole", expert_loss=impostor)  # a script's Method is registered under its name
+    assert register(METHODS["bayes"]) is METHODS["bayes"] and get_method("bayes").doc != impostor.doc
 
 
 def package(table: dict) -> dict:

@@ -166,67 +166,73 @@ class Method:
 _TERMS = "dqfd_bc_keras.core.expert_terms"
 _REFERENCE = "dqfd_bc_keras.core.reference"
 _METHOD = "dqfd_bc_keras.core.methods.Method"
-METHODS: dict[str, Method] = {}
+METHODS: dict[str, Method] = {
+    method.name: method
+    for method in (
+        Method(
+            "margin",
+            "DQfD's large-margin loss on the demonstrated actions (§2)",
+            term=f"{_TERMS}:margin",
+            reference=f"{_REFERENCE}:margin",
+            reads=("margin",),
+        ),
+        Method(
+            "bc_margin",
+            "DQfD-BC: the large margin around the BC model's action argmax π_bc",
+            bc_fit="mle",
+            term=f"{_TERMS}:bc_margin",
+            reference=f"{_REFERENCE}:bc_margin",
+            reads=("margin", *BC_FIELDS, *DYNAMIC_FIELDS),
+        ),
+        Method(
+            "ce",
+            "DQfD-BC: the cross-entropy H(π_bc, softmax(Q/T)) on every row",
+            bc_fit="mle",
+            term=f"{_TERMS}:ce",
+            reference=f"{_REFERENCE}:ce",
+            reads=("temperature", *BC_FIELDS, *DYNAMIC_FIELDS),
+        ),
+        Method(
+            "bayes",
+            "the paper's Bayesian loss: Gaussian likelihood weighted by 1/σ²(s), and a prior around θ_prior",
+            bc_fit="map",
+            term=f"{_TERMS}:bayes",
+            reference=f"{_REFERENCE}:bayes",
+            reads=("temperature", *BAYES_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
+        ),
+        Method("none", "plain DQN: no demonstrations, no expert loss", needs_demos=False),
+        Method(
+            "sqil",
+            "SQIL on our DQN: no J_E; rewards 1 on demonstrations, 0 on the agent's, half of each batch from D_demo",
+            sqil_rewards=True,
+        ),
+        Method(
+            "bc-alone",
+            "behavioural cloning alone: the MLE BC model is the policy; no Q-learning",
+            bc_fit="mle",
+            reads=BC_FIELDS,
+            q_learning=False,
+        ),
+    )
+}
 """Every registered method by name; `get_method` also imports a user's `module:NAME`."""
+BUILT_IN = tuple(METHODS)
+"""The package's own methods: any other name in METHODS was registered by a user's code."""
 
 
 def register(method: Method) -> Method:
-    """Add `method` to the registry (a user's own, from their module); returns it."""
+    """Add `method` to the registry (a user's own, from their module; it replaces one of its name
+    registered before); returns it. A built-in's name is refused: a run's config.json records the
+    name, and every later reader (evaluate.py, the lab) would take the run for the built-in's."""
     if not isinstance(method, Method):
         raise ConfigError(f"register() takes a Method, got {type(method).__name__}")
+    if method.name in BUILT_IN and METHODS[method.name] is not method:
+        raise ConfigError(
+            f"register(): {method.name!r} is the name of a built-in method ({', '.join(BUILT_IN)}); "
+            "give yours a name of its own"
+        )
     METHODS[method.name] = method
     return method
-
-
-for _method in (
-    Method(
-        "margin",
-        "DQfD's large-margin loss on the demonstrated actions (§2)",
-        term=f"{_TERMS}:margin",
-        reference=f"{_REFERENCE}:margin",
-        reads=("margin",),
-    ),
-    Method(
-        "bc_margin",
-        "DQfD-BC: the large margin around the BC model's action argmax π_bc",
-        bc_fit="mle",
-        term=f"{_TERMS}:bc_margin",
-        reference=f"{_REFERENCE}:bc_margin",
-        reads=("margin", *BC_FIELDS, *DYNAMIC_FIELDS),
-    ),
-    Method(
-        "ce",
-        "DQfD-BC: the cross-entropy H(π_bc, softmax(Q/T)) on every row",
-        bc_fit="mle",
-        term=f"{_TERMS}:ce",
-        reference=f"{_REFERENCE}:ce",
-        reads=("temperature", *BC_FIELDS, *DYNAMIC_FIELDS),
-    ),
-    Method(
-        "bayes",
-        "the paper's Bayesian loss: Gaussian likelihood weighted by 1/σ²(s), and a prior around θ_prior",
-        bc_fit="map",
-        term=f"{_TERMS}:bayes",
-        reference=f"{_REFERENCE}:bayes",
-        reads=("temperature", *BAYES_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
-    ),
-    Method("none", "plain DQN: no demonstrations, no expert loss", needs_demos=False),
-    Method(
-        "sqil",
-        "SQIL on our DQN: no J_E; rewards 1 on demonstrations, 0 on the agent's, half of each batch from D_demo",
-        sqil_rewards=True,
-    ),
-    Method(
-        "bc-alone",
-        "behavioural cloning alone: the MLE BC model is the policy; no Q-learning",
-        bc_fit="mle",
-        reads=BC_FIELDS,
-        q_learning=False,
-    ),
-):
-    register(_method)
-BUILT_IN = tuple(METHODS)
-"""The package's own methods: any other name in METHODS was registered by a user's code."""
 
 
 _SAVED = ContextVar("reading_saved_config", default=False)
