@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import call
 
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.core.config import Config
@@ -137,6 +138,20 @@ def test_a_users_preset_is_a_config_and_a_family_in_process(user_code, monkeypat
     with pytest.raises(ConfigError, match="unknown expert name 'strong'; valid choices: lean"):
         record("my_tasks:short-pole", "strong", episodes=1)
     assert record("my_tasks:short-pole", "lean", episodes=1).meta.expert == "lean"
+
+
+def test_a_preset_whose_defaults_name_no_config_field_is_one_line_on_the_command_line(tmp_path):
+    (tmp_path / "my_typo_tasks.py").write_text(
+        "from dqfd_bc_keras.tasks import TaskSpec, register_task\n\n"
+        "register_task(TaskSpec('typo-pole', 'CartPole-v1', defaults={'total_step': 1000}))\n"
+    )
+    answer = call("train.py", "--task", "my_typo_tasks:typo-pole", "--out", tmp_path / "run", path=[tmp_path])
+    assert (answer.returncode, answer.stderr) == (
+        2,
+        "error: task 'my_typo_tasks:typo-pole': its defaults hold an unknown Config field 'total_step'; "
+        "did you mean total_steps?\n",
+    )
+    assert not (tmp_path / "run").exists()
 
 
 def test_lab_settings_registered_later_reach_the_lab_tables(user_code, monkeypatch):

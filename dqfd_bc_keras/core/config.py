@@ -211,7 +211,9 @@ class Config:
         unknown = [key for key in overrides if key not in cls.__dataclass_fields__]
         if unknown:
             raise ConfigError(unknown_field(unknown[0]))
-        get_task(task)
+        wrong = [key for key in get_task(task).defaults if key not in cls.__dataclass_fields__]
+        if wrong:  # a user's preset (tasks.TaskSpec.defaults)
+            raise ConfigError(f"task {task!r}: its defaults hold an {unknown_field(wrong[0])}")
         return cls(**{**preset_defaults(task), **overrides})
 
     @classmethod
