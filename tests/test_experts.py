@@ -10,6 +10,7 @@ from dqfd_bc_keras.envs.make import task_spaces
 from dqfd_bc_keras.tasks import TASKS, families, family_preset
 
 FAMILIES = families()
+"""The package's families (read when the module is imported, before a test registers one of its own)."""
 EXPERTS = {family: family_preset(family).experts for family in FAMILIES}
 """Each family's scripted experts by name, as its first preset declares them."""
 
@@ -67,7 +68,9 @@ OBS_DIM = {
 (MinAtar's) are tested in test_minatar_tasks.py."""
 
 
-def test_every_family_has_the_package_experts() -> None:
+def test_every_family_of_the_package_has_a_strong_and_an_imperfect_expert() -> None:
+    """Config's default `expert`, the command lines' help and the lab's suites name them (docs/EXTENDING.md's
+    rules); a user's family needs neither (test_registries.py: a preset whose only expert is `lean`)."""
     assert all(set(EXPERT_NAMES) <= set(experts) for experts in EXPERTS.values())
 
 

@@ -8,7 +8,10 @@ adds tmp_path. Each command runs in a process of its own, as the user types it: 
 
 Budgets: the method's commands are the doc's as written (`--quick`, and evaluate's 100 episodes of a
 quick run); the preset's training gets `--quick` (the doc's preset trains 20,000 steps); the suite's
-run gets `--seeds 1` and a run of seconds (the doc's suite is 3 arms × 5 seeds of full runs)."""
+run gets `--seeds 1` and a run of seconds (the doc's suite is 3 arms × 5 seeds of full runs).
+
+The doc also shows the plug-in contract's Protocols, as excerpts of the package (`# from PATH`): each
+is checked against the module it quotes."""
 
 import csv
 import json
@@ -25,9 +28,10 @@ import pytest
 import tensorflow as tf
 from helpers import TINY_SWEEP
 
-from dqfd_bc_keras.core import expert_terms
+from dqfd_bc_keras.core import expert_terms, reference
 from dqfd_bc_keras.core.agent import make_agent
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.methods import TermAgent, TermBatch
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "EXTENDING.md"
@@ -40,13 +44,18 @@ PROGRAMS = {
 """A run of seconds: what the suite recipe needs is its runs, not learning."""
 
 
+def blocks(text: str) -> list[tuple[str, str]]:
+    """(language, code) of each fenced python or bash block of `text`."""
+    return re.findall(r"^```(python|bash)\n(.*?)^```", text, re.DOTALL | re.MULTILINE)
+
+
 def recipe(heading: str) -> tuple[dict[str, str], list[str]]:
     """The `## heading` section of the doc: its python blocks by the file each names on its first line
-    (`# my_methods.py`), and the lines of its bash blocks."""
+    (`# my_methods.py`; an excerpt of the package, `# from PATH`, is none), and the lines of its bash blocks."""
     section = re.search(rf"^## {re.escape(heading)}\n(.*?)(?=^## |\Z)", DOC.read_text(), re.DOTALL | re.MULTILINE)[1]
-    blocks = re.findall(r"^```(python|bash)\n(.*?)^```", section, re.DOTALL | re.MULTILINE)
-    modules = {re.match(r"# (\S+\.py)\n", code)[1]: code for kind, code in blocks if kind == "python"}
-    commands = [line for kind, code in blocks if kind == "bash" for line in code.splitlines() if line.strip()]
+    named = [(kind, re.match(r"# (\w+\.py)\n", code), code) for kind, code in blocks(section)]
+    modules = {name[1]: code for kind, name, code in named if kind == "python" and name}
+    commands = [line for kind, _, code in named if kind == "bash" for line in code.splitlines() if line.strip()]
     assert modules and commands, f"no module or no command in the doc's section {heading!r}"
     return modules, commands
 
@@ -92,15 +101,32 @@ def users_method(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path))
 
 
-def test_the_recipes_method_is_the_j_e_the_agent_learns_with(users_method, demos, bc_models):
-    """The agent's J_E on a batch is the user's term, half of ce's, not a built-in one."""
+def test_the_recipes_method_is_the_agents_j_e_and_agrees_with_its_reference(users_method, demos, bc_models):
+    """The agent's J_E on a batch is the user's term, half of ce's, not a built-in one; the
+    recipe's reference formula, as reference.py gives it, computes the same."""
     agent = make_agent(Config.for_task("cartpole", expert_loss="my_methods:HALF_CE"), demos, bc_models["ce"])
     b = agent.replay.sample(8, agent.beta())
-    expected = 0.5 * float(expert_terms.ce(agent, tf.constant(agent.q_network(b.obs)), b))
+    q = tf.constant(agent.q_network(b.obs))
+    expected = 0.5 * float(expert_terms.ce(agent, q, b))
+    np.testing.assert_allclose(float(reference.expert_reference(agent.config.method)(agent, q, b)), expected, rtol=1e-5)
     agent.reset_metrics()
     agent.train_step(b)
     np.testing.assert_allclose(float(agent.losses_so_far()["expert"]), expected, rtol=1e-5)
     assert expected > 0.0
+
+
+def test_the_doc_quotes_the_plug_in_protocols_as_the_package_declares_them():
+    """Each `# from PATH` excerpt is in PATH line for line, and the doc names every member of the
+    agent and of the batch that a term may read."""
+    excerpts = [code for _, code in blocks(DOC.read_text()) if code.startswith("# from ")]
+    assert len(excerpts) == 2  # the Term, the Rule
+    for code in excerpts:
+        path, *lines = code.splitlines()
+        source = (REPO / path.removeprefix("# from ")).read_text().splitlines()
+        assert all(line in source for line in lines), code
+    for prefix, protocol in (("agent", TermAgent), ("batch", TermBatch)):
+        members = [name for name, value in vars(protocol).items() if isinstance(value, property)]
+        assert members and all(f"`{prefix}.{name}`" in DOC.read_text() for name in members), members
 
 
 def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_path):
