@@ -30,13 +30,14 @@ if __name__ == "__main__":
     # is loaded, and a blocked TensorFlow is a name in sys.modules.
     import dqfd_bc_keras  # noqa: F401
 
-    sys.modules.setdefault("tensorflow", None)
+    sys.modules.setdefault("tensorflow", None)  # type: ignore[arg-type]  # a None entry blocks the import
 
 import json
 import time
 from collections.abc import Sequence
 from importlib.metadata import version
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -107,7 +108,7 @@ class MinAtarCNN(BaseFeaturesExtractor):
 #     # If True, you need to deactivate handle_timeout_termination
 #     # in the replay_buffer_kwargs
 #     optimize_memory_usage: False
-ZOO_ATARI = {
+ZOO_ATARI: dict[str, Any] = {
     "policy": "CnnPolicy",
     "n_timesteps": 10_000_000,
     "kwargs": dict(
@@ -158,7 +159,7 @@ MINATAR_DQN = {
 """MinAtar's published DQN settings (Young & Tian 2019), the second anchor's; not this baseline's
 schedule (it runs the zoo's, as the comparison asks)."""
 
-MINATAR_DQN_RETURNS = {
+MINATAR_DQN_RETURNS: dict[str, dict[int, float]] = {
     "MinAtar/Breakout": {100_000: 5, 500_000: 8.5, 1_000_000: 9.5, 5_000_000: 10},
     "MinAtar/Seaquest": {1_000_000: 1, 5_000_000: 20},
     "MinAtar/Asterix": {1_000_000: 9, 5_000_000: 17},
@@ -321,9 +322,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     fallback = QUICK if args.quick else DEFAULTS
-    budget, every, eval_episodes, max_steps = (
-        getattr(args, name) if getattr(args, name) is not None else fallback.get(name)
-        for name in ("budget", "every", "eval_episodes", "max_steps")
+    budget = args.budget if args.budget is not None else fallback.get("budget")
+    every, eval_episodes, max_steps = (
+        getattr(args, name) if getattr(args, name) is not None else fallback[name]
+        for name in ("every", "eval_episodes", "max_steps")
     )
     if budget is None:
         raise ConfigError("--budget is required (env steps of each learn()), unless --quick")

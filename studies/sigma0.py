@@ -70,6 +70,7 @@ class Result:
         if self.higher_is_better:
             comparison = compare(self.metric, self.bayes, self.ce)
             margin = RETURN_MARGIN * self.bayes.runs[0].config.limit
+            assert comparison.tost is not None  # `compare` always gives the TOST interval
             low, high = comparison.tost
             verdict = (
                 "equivalent"
