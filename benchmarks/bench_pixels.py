@@ -8,7 +8,7 @@ prioritized update every `train_freq` env steps, episode bookkeeping and dynamic
 updates, timed from a warm-up of `--warmup` env steps to the end of `--steps` more; and
 pre-training (`agent.pretrain`) on its demonstrations, timed after `build`'s own warm-up
 pre-training. SB3 (when installed, `pip install -r benchmarks/requirements.txt`): the pixels
-baseline exactly (`experiments/sb3_pixels.py`: MinAtar's network, rl-zoo3's Atari schedule, one
+baseline exactly (`studies/sb3_pixels.py`: MinAtar's network, rl-zoo3's Atari schedule, one
 update of batch 32 every 4 env steps) on MinAtar/Breakout-v1, `learn()` timed over the same
 `--steps` after the same warm-up (learning has started: learning_starts is 1% of the schedule);
 then its `train()` alone, the counterpart of our pre-training updates. Both on one thread.
@@ -89,7 +89,7 @@ def sb3_figures(steps: int, updates: int, warmup: int) -> dict[str, float] | Non
     its `train()` updates/s; None if SB3 is absent."""
     if not interleave.sb3_installed():
         return None
-    from dqfd_bc_keras.experiments.sb3_pixels import hyperparameters, sb3_model
+    from studies.sb3_pixels import hyperparameters, sb3_model
 
     budget = warmup + steps
     model = sb3_model(ENV_ID, seed=0, budget=budget, max_steps=10_000)
@@ -193,8 +193,7 @@ def main(argv=None) -> int:
                 + ("numpy_loop_probe.run" if args.design == "numpy-probe" else "training.train_episodes")
                 + f", one prioritized update of batch 32 every {args.train_freq} env steps"
             ),
-            "sb3": "DQN as experiments/sb3_pixels.py: MinAtarCNN, uniform replay, "
-            "train_freq=4, gradient_steps=1, batch 32",
+            "sb3": "DQN as studies/sb3_pixels.py: MinAtarCNN, uniform replay, train_freq=4, gradient_steps=1, batch 32",
         },
         describe=lambda _: not_run,
     )

@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.experiments.data import load_runs, open_suite
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals
-from dqfd_bc_keras.experiments.minatar_study import ANCHORS, BUDGET, GAMES, SEEDS, collect
+from studies.minatar_study import ANCHORS, BUDGET, GAMES, SEEDS, collect
 
 DATA = Path(__file__).resolve().parent / "data"
 SB3_SCHEDULE = {"learning_rate": 1e-4, "train_freq": 4, "epsilon_end": 0.01, "td_loss": "huber"}

@@ -23,10 +23,10 @@ from dqfd_bc_keras.core.methods import METHODS
 from dqfd_bc_keras.envs import make
 from dqfd_bc_keras.experiments.__main__ import main as lab_main
 from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS
-from dqfd_bc_keras.experiments.minatar_study import main as minatar_study_main
-from dqfd_bc_keras.experiments.pixels import main as pixels_main
 from dqfd_bc_keras.experiments.suites import SUITES
 from dqfd_bc_keras.tasks import TASKS
+from studies.minatar_study import main as minatar_study_main
+from studies.pixels import main as pixels_main
 
 REPO = Path(__file__).resolve().parents[1]
 PROGRAMS: dict[str, Callable[[Sequence[str] | None], int]] = {
@@ -36,8 +36,8 @@ PROGRAMS: dict[str, Callable[[Sequence[str] | None], int]] = {
     "dqfd-evaluate": evaluate_main,
     "dqfd_bc_keras.demos": demos_main,
     "dqfd_bc_keras.experiments": lab_main,
-    "dqfd_bc_keras.experiments.pixels": pixels_main,
-    "dqfd_bc_keras.experiments.minatar_study": minatar_study_main,
+    "studies.pixels": pixels_main,
+    "studies.minatar_study": minatar_study_main,
 }
 """Each command by the names a user types it (a script, a console script, a `python -m` module)."""
 PROCESS_CACHES = (make.env_task, make._task_spaces, make._own_limit)

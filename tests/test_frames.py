@@ -339,16 +339,16 @@ def test_what_frames_do_not_support_yet_is_refused_in_one_line(tmp_path):
 
 def test_the_pixels_study_runs_both_sides_and_reports_from_its_archive(tmp_path):
     out = tmp_path / "pixels"
-    done = run("-m", "dqfd_bc_keras.experiments.pixels", "--out", out, "--quick")
+    done = run("-m", "studies.pixels", "--out", out, "--quick")
     assert done.returncode == 0, done.stderr
     assert (out / "sb3-dqn" / "seed0-quick.json").is_file() and (out / "pixels.json").is_file()
     archive = tmp_path / "pixels.tar.xz"
     assert run("-m", "dqfd_bc_keras.experiments", "export", out, "--out", archive).returncode == 0
     report = tmp_path / "PIXELS.md"
-    done = run("-m", "dqfd_bc_keras.experiments.pixels", "--out", archive, "--quick", "--no-run", "--report", report)
+    done = run("-m", "studies.pixels", "--out", archive, "--quick", "--no-run", "--report", report)
     assert done.returncode == 0, done.stderr
     text = report.read_text()
     assert "| minatar-breakout bayes |" in text and "| minatar-breakout SB3 DQN (rl-zoo3) |" in text
     assert "threshold 10" in text and "5,000,000 frames ≈ 10" in text
-    done = run("-m", "dqfd_bc_keras.experiments.pixels", "--out", archive)
+    done = run("-m", "studies.pixels", "--out", archive)
     assert done.returncode == 2 and "an archive is read, never run into: add --no-run" in done.stderr

@@ -1,6 +1,7 @@
 """The package's layers and the one rule between them: a module imports only from its own layer
 or the layers below it (docs/LAYOUT.md). Imports that only annotate (`if TYPE_CHECKING:`) and the
-entry points (`__main__.py`, `if __name__ == "__main__":`) may look up: they run nothing at import."""
+entry points (`__main__.py`, `if __name__ == "__main__":`) may look up: they run nothing at import.
+The studies (`studies/`) stand above the lab, outside the package, which never imports them."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / "dqfd_bc_keras"
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE = REPO / "dqfd_bc_keras"
+STUDIES = REPO / "studies"
 
 LAYERS = [
     ("base", ["errors", "choices", "seeds", "runtime", "files", "plugins"]),
@@ -23,7 +26,8 @@ LAYERS = [
     ("interfaces", ["model", "arguments", "commands", "__init__"]),
     ("lab", ["experiments"]),
 ]
-"""Lowest first; each entry names the top-level modules and folders of `dqfd_bc_keras/` in it."""
+"""Lowest first; each entry names the top-level modules and folders of `dqfd_bc_keras/` in it. Above
+them all, outside the package, `studies/`: it may import any layer, and no layer may import it."""
 RANK = {name: rank for rank, (_, names) in enumerate(LAYERS) for name in names}
 
 
@@ -75,6 +79,45 @@ def test_imports_point_down(path: Path):
         f"line {line}: {name} ({LAYERS[RANK[name]][0]})" for line, name in runtime_imports(path) if RANK[name] > rank
     ]
     assert upward == [], f"{path.relative_to(PACKAGE)} ({LAYERS[rank][0]}) imports from above: {upward}"
+
+
+def imported_anywhere(source: str) -> set[str]:
+    """Every module name an import statement of `source` names, wherever it stands (in a function,
+    under TYPE_CHECKING, in an entry point)."""
+    names = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names.add(node.module or "")
+    return names
+
+
+def test_imports_anywhere_are_found_lazy_annotating_and_entry_point_ones_included():
+    source = """
+import os, studies.pixels
+from typing import TYPE_CHECKING
+if TYPE_CHECKING:
+    from studies import sigma0
+def report():
+    from studies.minatar_study import ANCHORS
+if __name__ == "__main__":
+    import studies
+"""
+    assert imported_anywhere(source) == {"os", "studies.pixels", "typing", "studies", "studies.minatar_study"}
+
+
+def test_nothing_in_the_package_imports_the_studies():
+    """The wheel holds `dqfd_bc_keras` alone: an import of `studies` anywhere in it, even one that
+    runs late, fails in every installed copy."""
+    assert (STUDIES / "__init__.py").is_file() and not (PACKAGE / "studies").exists()
+    found = [
+        f"{path.relative_to(REPO)}: {name}"
+        for path in sorted(PACKAGE.rglob("*.py"))
+        for name in imported_anywhere(path.read_text())
+        if name.split(".")[0] == "studies"
+    ]
+    assert found == []
 
 
 def test_the_flat_paths_of_before_the_layers_import_the_same_modules():

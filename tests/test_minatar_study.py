@@ -10,9 +10,9 @@ from helpers import REPO
 from helpers import python as run
 
 from dqfd_bc_keras.demos.recording import expert_returns
-from dqfd_bc_keras.experiments import minatar_study as study
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD
-from dqfd_bc_keras.experiments.minatar_study import ANCHORS, GAMES, METHODS, Study, normalised, report
+from studies import minatar_study as study
+from studies.minatar_study import ANCHORS, GAMES, METHODS, Study, normalised, report
 
 
 @pytest.mark.parametrize("game", GAMES)
@@ -105,7 +105,7 @@ def test_the_score_matrix_takes_only_seeds_finished_on_every_game():
 
 def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_byte_for_byte(tmp_path):
     out, archive = tmp_path / "minatar", tmp_path / "minatar.tar.xz"
-    done = run("-m", "dqfd_bc_keras.experiments.minatar_study", "--out", out, "--archive", archive, "--quick")
+    done = run("-m", "studies.minatar_study", "--out", out, "--archive", archive, "--quick")
     assert done.returncode == 0, done.stderr
     assert "minatar: 15 runs, 0 already complete, 15 to run" in done.stdout
     assert "SB3 DQN: 5 runs, 0 current, 5 to run" in done.stdout
@@ -114,9 +114,7 @@ def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_b
     assert sum(name.endswith("/eval.json") for name in names) == 15  # every run of ours, no checkpoint
     assert sum(name.startswith("sb3-dqn/") for name in names) == 5 and not any("checkpoints" in n for n in names)
     # A new machine: only the archive. Nothing runs twice.
-    again = run(
-        "-m", "dqfd_bc_keras.experiments.minatar_study", "--out", tmp_path / "new", "--archive", archive, "--quick"
-    )
+    again = run("-m", "studies.minatar_study", "--out", tmp_path / "new", "--archive", archive, "--quick")
     assert again.returncode == 0, again.stderr
     assert "15 already complete, 0 to run" in again.stdout and "5 current, 0 to run" in again.stdout
     reports = []
@@ -124,7 +122,7 @@ def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_b
         figures = tmp_path / name / "figures"
         figures.mkdir(parents=True)
         done = run(
-            "-m", "dqfd_bc_keras.experiments.minatar_study", "--out", archive, "--no-run", "--quick",
+            "-m", "studies.minatar_study", "--out", archive, "--no-run", "--quick",
             "--report", tmp_path / name / "MINATAR.md", "--figures", figures,
         )  # fmt: skip
         assert done.returncode == 0, done.stderr
@@ -141,11 +139,9 @@ def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_b
 
 
 def test_an_archive_is_read_never_run_into(tmp_path):
-    done = run("-m", "dqfd_bc_keras.experiments.minatar_study", "--out", tmp_path / "x.tar.xz")
+    done = run("-m", "studies.minatar_study", "--out", tmp_path / "x.tar.xz")
     assert done.returncode == 2 and "an archive is read, never run into: add --no-run" in done.stderr
-    done = run(
-        "-m", "dqfd_bc_keras.experiments.minatar_study", "--out", tmp_path / "x", "--archive", tmp_path / "a.zip"
-    )
+    done = run("-m", "studies.minatar_study", "--out", tmp_path / "x", "--archive", tmp_path / "a.zip")
     assert done.returncode == 2 and "--archive" in done.stderr and "expected a .tar.xz file" in done.stderr
 
 
@@ -154,7 +150,7 @@ def test_the_committed_report_is_what_the_committed_archive_gives(tmp_path):
     exports its runs elsewhere while it runs; the archive and the report are committed together)."""
     docs = REPO / "docs"
     done = run(
-        "-m", "dqfd_bc_keras.experiments.minatar_study", "--out", docs / "data" / "minatar.tar.xz", "--no-run",
+        "-m", "studies.minatar_study", "--out", docs / "data" / "minatar.tar.xz", "--no-run",
         "--report", tmp_path / "MINATAR.md", "--figures", tmp_path,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr

@@ -83,7 +83,7 @@ def test_the_expert_loss_tables_in_models_readme_are_what_the_committed_runs_giv
     import subprocess
     import sys
 
-    from dqfd_bc_keras.experiments.minatar_study import ANCHORS
+    from studies.minatar_study import ANCHORS
 
     script = Path(__file__).resolve().parents[1] / "docs" / "expert_losses.py"
     done = subprocess.run([sys.executable, script], capture_output=True, text=True, timeout=300)

@@ -23,14 +23,17 @@ def build_debris() -> set[Path]:
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
-    """A wheel built offline from a copy of the sources (the build writes nothing into the
-    checkout), installed with --target; the environment runs it without the checkout."""
+    """A wheel built offline from a copy of the sources as a checkout holds them (the package, the
+    studies, tests, benchmarks, scripts; the build writes nothing into the checkout), installed with
+    --target; the environment runs it without the checkout."""
     root = tmp_path_factory.mktemp("package")
     built_before = build_debris()
     source = root / "source"
-    shutil.copytree(PACKAGE, source / PACKAGE.name, ignore=shutil.ignore_patterns("__pycache__"))
-    for name in ("pyproject.toml", "requirements.txt"):
-        shutil.copy(REPO / name, source / name)
+    for name in ("dqfd_bc_keras", "studies", "tests", "benchmarks"):
+        shutil.copytree(REPO / name, source / name, ignore=shutil.ignore_patterns("__pycache__", "results"))
+    for path in [*REPO.glob("*.py"), *REPO.glob("docs/*.py"), REPO / "pyproject.toml", REPO / "requirements.txt"]:
+        (source / path.relative_to(REPO)).parent.mkdir(exist_ok=True)
+        shutil.copy(path, source / path.relative_to(REPO))
     pip = [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check"]
     subprocess.run(
         [*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", root / "dist", source],
@@ -59,6 +62,16 @@ def test_the_wheel_holds_every_module_of_every_subpackage(installed):
     scripts = zipfile.ZipFile(wheel).read(entry_points).decode()
     assert "dqfd-train = dqfd_bc_keras.commands.train:cli" in scripts
     assert "dqfd-evaluate = dqfd_bc_keras.commands.evaluate:cli" in scripts
+
+
+def test_the_wheel_holds_the_library_and_the_labs_engine_only(installed):
+    """Built from a tree that also holds studies/, tests/, benchmarks/ and scripts, the wheel holds
+    `dqfd_bc_keras/**` and its metadata: no study (docs/EXPERIMENTS.md's studies run from a checkout)."""
+    names = zipfile.ZipFile(installed[0]).namelist()
+    outside = [n for n in names if n.split("/")[0] != "dqfd_bc_keras" and ".dist-info/" not in n]
+    assert outside == []
+    assert not [n for n in names if any(s in n for s in ("studies", "minatar_study", "sb3_pixels", "sigma0.py"))]
+    assert "dqfd_bc_keras/experiments/sweep.py" in names and "dqfd_bc_keras/experiments/report.py" in names
 
 
 def test_installed_commands_train_and_evaluate_outside_the_repository(installed):

@@ -14,7 +14,7 @@ DOCS = sorted((REPO / "docs").glob("*.md"))
 CODE = [
     REPO / "train.py",
     REPO / "evaluate.py",
-    *sorted(p for d in ("dqfd_bc_keras", "benchmarks", "tests") for p in (REPO / d).rglob("*.py")),
+    *sorted(p for d in ("dqfd_bc_keras", "studies", "benchmarks", "tests") for p in (REPO / d).rglob("*.py")),
 ]
 NOTES = ("<!-- notes: hand-written, kept when the report is regenerated -->", "<!-- /notes -->")
 

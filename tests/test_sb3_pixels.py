@@ -22,11 +22,11 @@ from stable_baselines3.dqn.policies import CnnPolicy  # noqa: E402  (after the i
 from torch.nn import functional as F  # noqa: E402  (after the importorskip guards)
 
 from dqfd_bc_keras.errors import ConfigError  # noqa: E402  (after the importorskip guards)
-from dqfd_bc_keras.experiments.sb3_pixels import MinAtarCNN, hyperparameters, minatar_env_id, policy_kwargs  # noqa: E402  (after the importorskip guards)
 from dqfd_bc_keras.seeds import eval_seed  # noqa: E402  (after the importorskip guards)
+from studies.sb3_pixels import MinAtarCNN, hyperparameters, minatar_env_id, policy_kwargs  # noqa: E402  (after the importorskip guards)
 
 ROOT = Path(__file__).resolve().parents[1]
-MODULE = "dqfd_bc_keras.experiments.sb3_pixels"
+MODULE = "studies.sb3_pixels"
 
 
 def minatar_space(env_id: str = "MinAtar/Breakout-v1") -> spaces.Box:

@@ -6,10 +6,10 @@ import pytest
 from scipy import stats as sps
 from test_claims import cartpole_rows, make_run
 
-from dqfd_bc_keras.experiments import sigma0
 from dqfd_bc_keras.experiments.arms import group_arms
 from dqfd_bc_keras.experiments.stats import holm
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, claim_seeds
+from studies import sigma0
 
 
 def test_holm_by_hand_and_a_family_larger_than_what_ran():
@@ -118,7 +118,7 @@ def test_the_study_report_command_writes_its_markdown_and_refuses_a_bad_source(t
     ):
         write_run(run)
     repo = Path(__file__).resolve().parents[1]
-    command = [sys.executable, "-m", "dqfd_bc_keras.experiments.sigma0"]
+    command = [sys.executable, "-m", "studies.sigma0"]
     done = subprocess.run(
         [*command, suite, "--report", tmp_path / "SIGMA0.md"], capture_output=True, text=True, cwd=repo, timeout=300
     )

@@ -1,18 +1,18 @@
 """The SB3 baseline on MinAtar: Stable-Baselines3's DQN with MinAtar's own network and rl-zoo3's
 tuned Atari schedule, through one `learn()` per seed, evaluated greedily on a fixed grid.
 
-It is the pixels counterpart of `baselines.py`'s CartPole baseline and is run the same way: one
-`learn()` of the whole budget per seed (so ε decays over the schedule it was tuned with), a
-callback that plays `eval_episodes` greedy episodes at step 0 and at every multiple of `every`
-env steps of SB3's own counter, on a separate env whose episode i resets with seed
-`eval_seed(seed) + i`, one json per seed. The network is Young & Tian's (2019) MinAtar DQN
+It is the pixels counterpart of the lab's CartPole baseline (`dqfd_bc_keras/experiments/baselines.py`)
+and is run the same way: one `learn()` of the whole budget per seed (so ε decays over the schedule it
+was tuned with), a callback that plays `eval_episodes` greedy episodes at step 0 and at every
+multiple of `every` env steps of SB3's own counter, on a separate env whose episode i resets with
+seed `eval_seed(seed) + i`, one json per seed. The network is Young & Tian's (2019) MinAtar DQN
 network (`MinAtarCNN` + a linear head); the hyperparameters are rl-zoo3's `atari:` entry with the
 changes MinAtar's setup forces (`CHANGES`). MinAtar's own DQN settings (`MINATAR_DQN`) and its
 published DQN curves (`MINATAR_DQN_RETURNS`) are the second anchor: they are not what this
 baseline runs, but where its returns should land.
 
-    python -m dqfd_bc_keras.experiments.sb3_pixels --env MinAtar/Breakout-v1 --seeds 3 --budget 500000 --out results
-    python -m dqfd_bc_keras.experiments.sb3_pixels --env MinAtar/Breakout-v1 --out /tmp/x --quick   # seconds
+    python -m studies.sb3_pixels --env MinAtar/Breakout-v1 --seeds 3 --budget 500000 --out results
+    python -m studies.sb3_pixels --env MinAtar/Breakout-v1 --out /tmp/x --quick   # seconds
 
 Writes DIR/<env, '/' as '-'>/seed<k>.json (seed<k>-quick.json with --quick); a file that records
 the same settings is kept, not rerun. SB3 is optional: pip install -r benchmarks/requirements.txt.
@@ -25,14 +25,19 @@ import sys
 if __name__ == "__main__":
     # SB3's logger imports tensorboard, which imports TensorFlow when it is installed (seconds,
     # and a second framework's threads): keep it out of this process, as benchmarks/interleave.py
-    # does. Only here: a process that imports this module may well want TensorFlow.
-    sys.modules.setdefault("tensorflow", None)
+    # does. Only here: a process that imports this module may well want TensorFlow. The package
+    # is imported first, as benchmarks/bench_pixels.py does: its import checks whether TensorFlow
+    # is loaded, and a blocked TensorFlow is a name in sys.modules.
+    import dqfd_bc_keras  # noqa: F401
+
+    sys.modules.setdefault("tensorflow", None)  # type: ignore[arg-type]  # a None entry blocks the import
 
 import json
 import time
 from collections.abc import Sequence
 from importlib.metadata import version
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -103,7 +108,7 @@ class MinAtarCNN(BaseFeaturesExtractor):
 #     # If True, you need to deactivate handle_timeout_termination
 #     # in the replay_buffer_kwargs
 #     optimize_memory_usage: False
-ZOO_ATARI = {
+ZOO_ATARI: dict[str, Any] = {
     "policy": "CnnPolicy",
     "n_timesteps": 10_000_000,
     "kwargs": dict(
@@ -154,7 +159,7 @@ MINATAR_DQN = {
 """MinAtar's published DQN settings (Young & Tian 2019), the second anchor's; not this baseline's
 schedule (it runs the zoo's, as the comparison asks)."""
 
-MINATAR_DQN_RETURNS = {
+MINATAR_DQN_RETURNS: dict[str, dict[int, float]] = {
     "MinAtar/Breakout": {100_000: 5, 500_000: 8.5, 1_000_000: 9.5, 5_000_000: 10},
     "MinAtar/Seaquest": {1_000_000: 1, 5_000_000: 20},
     "MinAtar/Asterix": {1_000_000: 9, 5_000_000: 17},
@@ -292,7 +297,7 @@ def current(path: Path, wanted: dict) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m dqfd_bc_keras.experiments.sb3_pixels", description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog="python -m studies.sb3_pixels", description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", required=True, help="a MinAtar env id, e.g. MinAtar/Breakout-v1")
     parser.add_argument("--seeds", type=positive_int, default=1, help="seeds 0 … N-1 (default %(default)s)")
     parser.add_argument("--budget", type=positive_int, help=f"env steps of each learn() (--quick: {QUICK['budget']})")
@@ -317,9 +322,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     fallback = QUICK if args.quick else DEFAULTS
-    budget, every, eval_episodes, max_steps = (
-        getattr(args, name) if getattr(args, name) is not None else fallback.get(name)
-        for name in ("budget", "every", "eval_episodes", "max_steps")
+    budget = args.budget if args.budget is not None else fallback.get("budget")
+    every, eval_episodes, max_steps = (
+        getattr(args, name) if getattr(args, name) is not None else fallback[name]
+        for name in ("every", "eval_episodes", "max_steps")
     )
     if budget is None:
         raise ConfigError("--budget is required (env steps of each learn()), unless --quick")
