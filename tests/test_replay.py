@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from dqfd_bc_keras.core.replay import PrioritizedReplay
+from dqfd_bc_keras.core.replay import PrioritizedReplay, ReplaySettings
 from dqfd_bc_keras.core.sum_tree import SumTree
 from dqfd_bc_keras.errors import ConfigError
 
@@ -24,10 +24,8 @@ def close(actual, expected, atol=ATOL) -> None:
     )
 
 
-def make_replay(**kwargs) -> PrioritizedReplay:
+def make_replay(n_actions: int = 2, **kwargs) -> PrioritizedReplay:
     options = dict(
-        net_input=2,
-        n_actions=2,
         capacity=8,
         demo_capacity=10,
         n_step=3,
@@ -38,7 +36,7 @@ def make_replay(**kwargs) -> PrioritizedReplay:
         seed=0,
     )
     options.update(kwargs)
-    return PrioritizedReplay(**options)
+    return PrioritizedReplay(2, n_actions, ReplaySettings(**options))
 
 
 def make_rows(replay, tags, rewards=None, terminated=(), truncated=(), actions=None, pi_bc=None, sigma_sq=None):
@@ -543,7 +541,7 @@ def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
 
 
 def test_one_step_fields_round_trip():
-    replay = make_replay(net_input=2, n_actions=3, capacity=4, demo_capacity=4, n_step=2)
+    replay = make_replay(n_actions=3, capacity=4, demo_capacity=4, n_step=2)
     # flags per row (terminated, truncated): (0,0), (1,0), (0,1), (1,1)
     pi = [[0.1, 0.2, 0.7], [0.5, 0.25, 0.25], [0.0, 1.0, 0.0], [0.6, 0.3, 0.1]]
     replay.set_demos(
