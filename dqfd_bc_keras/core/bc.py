@@ -73,7 +73,8 @@ class BCModel(keras.Model):
         super().__init__(**kwargs)
         self.net_input, self.n_actions = as_input(net_input), int(n_actions)
         self.network, self.estimator = network, estimator
-        self.obs_scale = None if obs_scale is None else tuple([float(x) for x in np.ravel(part)] for part in obs_scale)
+        scale = None if obs_scale is None else [[float(x) for x in np.ravel(part)] for part in obs_scale]
+        self.obs_scale = None if scale is None else (scale[0], scale[1])
         """(mean, std) as lists of floats, as saved; frames read none of it (they are scaled to [0, 1])."""
         self.body = torso_layers(self.net_input, None if self.net_input.image else self.obs_scale)
         """Standardisation (vectors) or the convolutional torso (frames): what the dense layers read."""
