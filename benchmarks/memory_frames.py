@@ -34,7 +34,7 @@ def measure(shape: list[int], stack: int, transitions: int) -> dict:
     import numpy as np
 
     from dqfd_bc_keras.core.networks import NetworkInput
-    from dqfd_bc_keras.core.replay import PrioritizedReplay
+    from dqfd_bc_keras.core.replay import PrioritizedReplay, ReplaySettings
     from dqfd_bc_keras.envs.observations import Frames
 
     def rss() -> int:
@@ -46,11 +46,13 @@ def measure(shape: list[int], stack: int, transitions: int) -> dict:
     frames = None if len(shape) == 1 else Frames(tuple(shape), 1 / 255, stack)
     spec = NetworkInput(int(np.prod(shape)), frames)
     before = rss()
-    replay = PrioritizedReplay(spec, 4, capacity=transitions, demo_capacity=max(1, transitions // 100), n_step=10)
+    replay = PrioritizedReplay(
+        spec, 4, ReplaySettings(capacity=transitions, demo_capacity=max(1, transitions // 100), n_step=10)
+    )
     grown = rss() - before
     parts = {"table": replay.table, "n_step_view": replay.n_step_view, "sum tree": replay.tree.leaf}
     if frames is not None:
-        parts["frame pool"] = replay.pool
+        parts["frame pool"] = replay.frame_pool.pool
     sizes = {name: int(np.prod(v.shape)) * v.dtype.size for name, v in parts.items()}
     rows = replay.demo_capacity + replay.capacity
     values = int(np.prod(shape))

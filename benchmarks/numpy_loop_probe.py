@@ -184,7 +184,7 @@ def bc_view(bc, scale: float, rng: np.random.Generator):
     """The BC model's π̄_bc and σ² in numpy: its features once, K dropout passes of its head."""
     kernel, bias = (w.numpy() for w in next(layer for layer in bc.body if layer.weights).weights)
     head = [w.numpy() for layer in bc.stack for w in layer.weights]
-    rate, passes, sigma0_sq = bc.dropout, bc.mc_passes, bc.sigma0_sq
+    rate, passes, sigma0_sq = bc.network.dropout, bc.estimator.mc_passes, bc.estimator.sigma0_sq
 
     def view(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         x = conv_features(kernel, bias, frames, scale)

@@ -33,7 +33,7 @@ from dqfd_bc_keras.envs.make import get_task, task_spaces
 from dqfd_bc_keras.evaluation import GreedyPolicy
 from dqfd_bc_keras.experiments.estimators import HELD_OUT_SEED  # seeds no run demonstrates
 from dqfd_bc_keras.seeds import demo_seed
-from dqfd_bc_keras.training.loop import record_demos
+from dqfd_bc_keras.training.demonstrations import record_demos
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 KINDS = {"q_network": "Q-network", "bc_model": "BC model"}

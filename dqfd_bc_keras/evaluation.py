@@ -65,7 +65,7 @@ class GreedyPolicy:
         layers = model.body + model.stack if kind == "bc" else model.layers
         if any(isinstance(layer, FRAME_LAYERS) for layer in layers):
             call = tf.function(lambda x: model(x, training=False), autograph=False)
-            rank = len(model.input_spec_.shape) if kind == "bc" else len(model.inputs[0].shape) - 1
+            rank = len(model.net_input.shape) if kind == "bc" else len(model.inputs[0].shape) - 1
 
             def forward(obs: np.ndarray) -> np.ndarray:
                 batch = obs.ndim > rank
@@ -215,7 +215,7 @@ def check_model_fits(
     """`ModelFileError` unless `model` maps observations of `obs_shape` (a vector's features, or
     the frames' shape) to `n_actions` outputs."""
     if model_kind(model) == "bc":
-        inputs, outputs = model.input_spec_.shape, model.n_actions
+        inputs, outputs = model.net_input.shape, model.n_actions
     else:
         inputs, outputs = tuple(model.inputs[0].shape[1:]), model.outputs[0].shape[-1]
     expected = (obs_shape,) if isinstance(obs_shape, int) else tuple(obs_shape)

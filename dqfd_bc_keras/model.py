@@ -59,10 +59,12 @@ from dqfd_bc_keras.errors import (
 )
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy
 from dqfd_bc_keras.files import DirectoryLock
-from dqfd_bc_keras.runs.directory import RunDirectory, continue_run, save_run, saved_config, train
+from dqfd_bc_keras.runs.directory import RunDirectory, continue_run, save_run, train
+from dqfd_bc_keras.runs.resume import saved_config
 from dqfd_bc_keras.runs.writers import COMPLETE, is_run
 from dqfd_bc_keras.seeds import EVAL_SEED, MAX_SEED
-from dqfd_bc_keras.training.loop import Learner, build, evaluate_at, record_demos, run_evaluation, train_with_callback
+from dqfd_bc_keras.training.demonstrations import record_demos
+from dqfd_bc_keras.training.loop import Learner, build, evaluate_at, run_evaluation, train_with_callback
 from dqfd_bc_keras.training.state import TrainingState
 
 EnvLike = str | gym.Env | Callable[[], gym.Env]

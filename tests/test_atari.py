@@ -10,16 +10,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from dqfd_bc_keras.envs.atari import (
-    ATARI_OPTIONS,
-    AtariFrames,
-    AtariOptions,
-    area_weights,
-    is_atari,
-    make_atari,
-    split_kwargs,
-    wrap_atari,
-)
+from dqfd_bc_keras.envs.atari import ATARI_OPTIONS, AtariOptions, is_atari, make_atari, split_kwargs, wrap_atari
+from dqfd_bc_keras.envs.atari_wrappers import AtariFrames, area_weights
 from dqfd_bc_keras.errors import ConfigError
 
 BREAKOUT = "ale_py:ALE/Breakout-v5"

@@ -12,8 +12,8 @@ from dqfd_bc_keras.core.config import Config
 
 def test_map_model_has_dropout_and_prior_mle_has_neither(bc_models):
     bayes, ce = bc_models["bayes"], bc_models["ce"]
-    assert bayes.map_fit and bayes.dropout == Config.for_task("cartpole").bc_dropout > 0
-    assert not ce.map_fit and ce.dropout == 0.0
+    assert bayes.network.map_fit and bayes.network.dropout == Config.for_task("cartpole").bc_dropout > 0
+    assert not ce.network.map_fit and ce.network.dropout == 0.0
     assert float(ce.prior_loss()) == 0.0
     # ‖w‖²/(2 s² N) by hand, N = 2,500 demonstration transitions
     squared = sum(float(np.sum(np.square(w))) for w in bayes.trainable_weights)

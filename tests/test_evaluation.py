@@ -11,7 +11,7 @@ import pytest
 from helpers import Answer, call
 
 import dqfd_bc_keras  # noqa: F401  (first: TF settings, BCModel registered)
-from dqfd_bc_keras.core.bc import BCModel
+from dqfd_bc_keras.core.bc import BCModel, BCNetwork
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.networks import build_q_network
 from dqfd_bc_keras.envs.episodes import play
@@ -51,7 +51,7 @@ def make_run(path: Path, expert_loss: str = "bayes", bc: bool = True) -> Path:
     keras.utils.set_random_seed(0)
     build_q_network(4, 2, (16, 16), obs_scale=(MEAN, STD)).save(path / "q_network.keras")
     if bc:
-        BCModel(4, 2, hidden=(16,), dropout=0.2, obs_mean=MEAN, obs_std=STD).save(path / "bc_model.keras")
+        BCModel(4, 2, BCNetwork(hidden=(16,), dropout=0.2), obs_scale=(MEAN, STD)).save(path / "bc_model.keras")
     config = Config.for_task("cartpole", expert_loss=expert_loss)
     (path / "config.json").write_text(json.dumps(config.to_dict()))
     return path

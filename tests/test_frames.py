@@ -10,10 +10,11 @@ import pytest
 import tensorflow as tf
 from helpers import python as run
 
-from dqfd_bc_keras.core.bc import BCModel
+from dqfd_bc_keras.core.bc import BCModel, BCNetwork
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.networks import NetworkInput, build_q_network, resolve_torso
-from dqfd_bc_keras.core.replay import PrioritizedReplay
+from dqfd_bc_keras.core.replay import PrioritizedReplay, ReplaySettings
+from dqfd_bc_keras.core.uncertainty import VarianceEstimator
 from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.envs.observations import Frames
 from dqfd_bc_keras.errors import ConfigError
@@ -40,7 +41,7 @@ def episodes_of_frames(rng, lengths, shape, stack):
 
 def store(replay, transitions):
     for obs, nxt, terminated in transitions:
-        obs_index, next_index = replay.store_frames(tf.constant(obs), tf.constant(nxt))
+        obs_index, next_index = replay.frame_pool.store(tf.constant(obs), tf.constant(nxt))
         replay.store(
             replay.rows(
                 obs_index[None],
@@ -59,7 +60,7 @@ def set_demos(replay, transitions):
     obs = np.stack([t[0] for t in transitions])
     nxt = np.stack([t[1] for t in transitions])
     ends = np.array([t[2] for t in transitions])
-    obs_index, next_index = replay.demo_frames(obs, nxt, ends)
+    obs_index, next_index = replay.frame_pool.store_demos(obs, nxt, ends)
     n = len(transitions)
     replay.set_demos(
         replay.rows(
@@ -79,7 +80,7 @@ def set_demos(replay, transitions):
 def test_frames_read_back_exactly_from_the_pool_after_the_buffer_wraps(shape, stack):
     frames = Frames((*shape, stack) if stack > 1 else shape, 1 / 255, stack)
     replay = PrioritizedReplay(
-        NetworkInput(int(np.prod(frames.shape)), frames), 3, capacity=8, demo_capacity=20, n_step=3
+        NetworkInput(int(np.prod(frames.shape)), frames), 3, ReplaySettings(capacity=8, demo_capacity=20, n_step=3)
     )
     rng = np.random.default_rng(0)
     demos = episodes_of_frames(rng, [4, 3], shape, stack)
@@ -109,18 +110,20 @@ def test_frames_read_back_exactly_from_the_pool_after_the_buffer_wraps(shape, st
 
 def test_a_stack_that_does_not_shift_is_refused():
     frames = Frames((4, 4, 4), 1 / 255, 4)
-    replay = PrioritizedReplay(NetworkInput(64, frames), 2, capacity=8, demo_capacity=8, n_step=2)
+    replay = PrioritizedReplay(NetworkInput(64, frames), 2, ReplaySettings(capacity=8, demo_capacity=8, n_step=2))
     obs = np.zeros((4, 4, 4), np.uint8)
     with pytest.raises(tf.errors.InvalidArgumentError, match="shifted by one frame"):
-        replay.store_frames(tf.constant(obs), tf.constant(np.full((4, 4, 4), 7, np.uint8)))
+        replay.frame_pool.store(tf.constant(obs), tf.constant(np.full((4, 4, 4), 7, np.uint8)))
     with pytest.raises(ConfigError, match="must shift by one frame per step and start as copies"):
-        replay.demo_frames(np.arange(64, dtype=np.uint8).reshape(1, 4, 4, 4), obs[None], np.array([True]))
+        replay.frame_pool.store_demos(np.arange(64, dtype=np.uint8).reshape(1, 4, 4, 4), obs[None], np.array([True]))
 
 
 def test_a_frame_is_stored_once_not_once_per_stack():
     # An Atari replay of 100k transitions: 2 slots of 84×84 bytes per row, not 2 stacks of 4 floats.
     frames = Frames((84, 84, 4), 1 / 255, 4)
-    replay = PrioritizedReplay(NetworkInput(84 * 84 * 4, frames), 4, capacity=1000, demo_capacity=10, n_step=3)
+    replay = PrioritizedReplay(
+        NetworkInput(84 * 84 * 4, frames), 4, ReplaySettings(capacity=1000, demo_capacity=10, n_step=3)
+    )
     assert replay.table.shape[1] == 2 * 4 + 5 + 4  # s and s' are 4 pool indices each
     assert replay.pool_bytes == 2 * (10 + 1000 + 4) * 84 * 84
 
@@ -157,15 +160,10 @@ def test_bc_models_on_frames_fit_predict_and_round_trip(tmp_path, uncertainty):
     obs = rng.integers(0, 2, (40, 10, 10, 4), np.uint8)
     actions = (obs[:, 0, 0, 0] + obs[:, 1, 1, 1]).astype(np.int64) % 3
     model = BCModel(
-        400,
+        MINATAR,
         3,
-        hidden=(32,),
-        dropout=0.0 if uncertainty == "ensemble" else 0.2,
-        prior_scale=1.0,
-        uncertainty=uncertainty,
-        members=3,
-        frames={"shape": [10, 10, 4], "scale": 1.0},
-        torso="minatar",
+        BCNetwork(hidden=(32,), dropout=0.0 if uncertainty == "ensemble" else 0.2, prior_scale=1.0),
+        VarianceEstimator(uncertainty, members=3 if uncertainty == "ensemble" else 1),
     )
     model.compile(optimizer=keras.optimizers.Adam(1e-3))
     model.fit_demos(obs, actions, epochs=2, batch_size=8)
@@ -179,7 +177,7 @@ def test_bc_models_on_frames_fit_predict_and_round_trip(tmp_path, uncertainty):
     model.save(tmp_path / "bc.keras")
     loaded = keras.saving.load_model(tmp_path / "bc.keras", safe_mode=True)
     np.testing.assert_allclose(model(obs[:6]).numpy(), loaded(obs[:6]).numpy(), rtol=1e-6)
-    assert loaded.frames == model.frames and loaded.torso == "minatar"
+    assert loaded.net_input == model.net_input and loaded.net_input.torso == "minatar"
 
 
 def test_the_torso_is_chosen_by_the_observation_and_refused_where_it_cannot_read_it():

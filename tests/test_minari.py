@@ -16,12 +16,8 @@ from helpers import python as run
 minari = pytest.importorskip("minari")
 
 from dqfd_bc_keras.demos import ARRAYS, DemoDataset, concatenate, record, rollout  # noqa: E402  (after the importorskip guards)
-from dqfd_bc_keras.demos.minari import (  # noqa: E402  (after the importorskip guards)
-    _check_spaces,
-    check_exportable,
-    from_minari,
-    to_minari,
-)
+from dqfd_bc_keras.demos.minari import _check_spaces, from_minari  # noqa: E402  (after the importorskip guards)
+from dqfd_bc_keras.demos.minari_export import check_exportable, to_minari  # noqa: E402  (after the importorskip guards)
 from dqfd_bc_keras.envs import make as envs  # noqa: E402  (after the importorskip guards)
 from dqfd_bc_keras.errors import ConfigError, DemoFileError  # noqa: E402  (after the importorskip guards)
 

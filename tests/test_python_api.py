@@ -152,7 +152,7 @@ def test_demonstrations_as_a_dataset_a_file_and_a_minari_id(tmp_path, monkeypatc
     """A DemoDataset, its .npz and its Minari copy give the same D_demo; config.json names where it
     came from, as train.py --demos writes it, and demonstrations.json says which kind of source."""
     pytest.importorskip("minari")
-    from dqfd_bc_keras.demos.minari import to_minari
+    from dqfd_bc_keras.demos.minari_export import to_minari
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     dataset = demos.record("CartPole-v1", "toy_envs:pole_rule", 2, seed=0)

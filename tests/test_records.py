@@ -12,7 +12,7 @@ import pytest
 from dqfd_bc_keras import demos
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.errors import BrokenRunError, DemoFileError
-from dqfd_bc_keras.runs import directory
+from dqfd_bc_keras.runs import directory, resume
 from dqfd_bc_keras.runs.writers import write_config
 from dqfd_bc_keras.training.records import EpisodeRow, EvalRow, Losses
 
@@ -71,7 +71,7 @@ def stopped_run(root: Path, config: Config) -> Path:
 
 def test_a_run_of_today_resumes_with_its_own_config(tmp_path):
     config = Config.for_task("cartpole", expert_loss="ce", seed=4)
-    assert directory.saved_config(stopped_run(tmp_path, config)) == config
+    assert resume.saved_config(stopped_run(tmp_path, config)) == config
 
 
 def test_a_config_json_without_todays_fields_is_not_resumed(tmp_path):
@@ -84,7 +84,7 @@ def test_a_config_json_without_todays_fields_is_not_resumed(tmp_path):
         "older version? Read the run with that version, or train it again); start the run over with --force"
     )
     with pytest.raises(BrokenRunError, match=f"^{re.escape(message)}$"):
-        directory.saved_config(out)
+        resume.saved_config(out)
 
 
 def test_a_checkpoint_without_its_config_copy_is_not_resumed(tmp_path):
@@ -93,7 +93,7 @@ def test_a_checkpoint_without_its_config_copy_is_not_resumed(tmp_path):
     with pytest.raises(
         BrokenRunError, match=r"ckpt-100/config.json: cannot be resumed \(FileNotFoundError: .*--force$"
     ):
-        directory.saved_config(out)
+        resume.saved_config(out)
 
 
 def test_a_run_with_demonstrations_but_no_kept_d_demo_is_not_resumed(tmp_path):

@@ -25,6 +25,7 @@ from dqfd_bc_keras.errors import ConfigError, DemoFileError, RunDirectoryError
 from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.experiments.sweep import run_suite
 from dqfd_bc_keras.files import DirectoryLock, temporary_of
+from dqfd_bc_keras.runs import checkpoints
 from dqfd_bc_keras.runs import directory as runs
 from dqfd_bc_keras.training.loop import TrainingState
 
@@ -99,9 +100,9 @@ def test_a_kill_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(tmp_pat
         return operation
 
     for module, name in [
-        (runs, "write_text"),
-        (runs, "sync_tree"),
-        (runs.demo_io, "save"),
+        (checkpoints, "write_text"),
+        (checkpoints, "sync_tree"),
+        (checkpoints.demo_io, "save"),
         (shutil, "rmtree"),
         (tf.train.Checkpoint, "write"),
     ]:
@@ -129,7 +130,12 @@ def test_an_interrupt_at_any_point_of_a_checkpoint_save_leaves_a_resumable_run(t
     out = tmp_path / "run"
     out.mkdir()
     run = runs._start(config, out, None, resume=False, quiet=True)
-    operations = [(runs, "write_text"), (runs, "sync_tree"), (shutil, "rmtree"), (tf.train.Checkpoint, "write")]
+    operations = [
+        (checkpoints, "write_text"),
+        (checkpoints, "sync_tree"),
+        (shutil, "rmtree"),
+        (tf.train.Checkpoint, "write"),
+    ]
     calls, interrupt_after = [0], [None]
 
     def watched(function):

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from dqfd_bc_keras.core.replay import PrioritizedReplay
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.replay import PrioritizedReplay, ReplaySettings
 from dqfd_bc_keras.core.sum_tree import SumTree
 from dqfd_bc_keras.errors import ConfigError
 
@@ -24,10 +25,8 @@ def close(actual, expected, atol=ATOL) -> None:
     )
 
 
-def make_replay(**kwargs) -> PrioritizedReplay:
+def make_replay(n_actions: int = 2, **kwargs) -> PrioritizedReplay:
     options = dict(
-        net_input=2,
-        n_actions=2,
         capacity=8,
         demo_capacity=10,
         n_step=3,
@@ -38,7 +37,7 @@ def make_replay(**kwargs) -> PrioritizedReplay:
         seed=0,
     )
     options.update(kwargs)
-    return PrioritizedReplay(**options)
+    return PrioritizedReplay(2, n_actions, ReplaySettings(**options))
 
 
 def make_rows(replay, tags, rewards=None, terminated=(), truncated=(), actions=None, pi_bc=None, sigma_sq=None):
@@ -543,7 +542,7 @@ def test_n_step_view_equals_the_windows_recomputed_on_a_random_stream():
 
 
 def test_one_step_fields_round_trip():
-    replay = make_replay(net_input=2, n_actions=3, capacity=4, demo_capacity=4, n_step=2)
+    replay = make_replay(n_actions=3, capacity=4, demo_capacity=4, n_step=2)
     # flags per row (terminated, truncated): (0,0), (1,0), (0,1), (1,1)
     pi = [[0.1, 0.2, 0.7], [0.5, 0.25, 0.25], [0.0, 1.0, 0.0], [0.6, 0.3, 0.1]]
     replay.set_demos(
@@ -636,6 +635,24 @@ def test_capacity_below_n_step_is_a_config_error():
     with pytest.raises(ConfigError, match=r"n_step=10.*got 5"):
         make_replay(capacity=5, n_step=10)
     make_replay(capacity=3, n_step=3)  # equal is fine
+
+
+def test_a_runs_replay_has_its_configs_sizes_returns_and_priorities():
+    config = Config.for_task(
+        "cartpole",
+        replay_capacity=3000,
+        demo_capacity=600,
+        n_step=4,
+        gamma=0.9,
+        priority_alpha=0.6,
+        priority_eps_agent=0.01,
+        priority_eps_demo=0.5,
+        seed=3,
+    )
+    replay = PrioritizedReplay(4, 2, ReplaySettings.from_config(config))
+    got = (replay.capacity, replay.demo_capacity, replay.n_step, replay.gamma, replay.alpha)
+    assert got == (3000, 600, 4, 0.9, 0.6) and (replay.eps_agent, replay.eps_demo) == (0.01, 0.5)
+    assert replay.table.shape == (3600, 2 * 4 + 5 + 2) and ReplaySettings.from_config(config).seed == 3
 
 
 @pytest.mark.parametrize("n", [0, 11])

@@ -25,6 +25,7 @@ from dqfd_bc_keras.evaluation import GreedyPolicy, load_model
 from dqfd_bc_keras.runs import directory as runs
 from dqfd_bc_keras.seeds import ROLLOUT, episode_seed
 from dqfd_bc_keras.training import loop as training
+from dqfd_bc_keras.training.dynamic import DynamicDemos
 from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, Losses
 from dqfd_bc_keras.training.state import TrainingState
 
@@ -317,7 +318,7 @@ def test_an_episode_cut_by_the_time_limit_stores_the_timeout_modes_flags(built, 
 def test_dynamic_demos_are_due_at_a_new_best_moving_average_at_least_the_demos(demos):
     assert demos.meta.episode_returns == [500.0] * 5
     config = tiny(dynamic_window=3)
-    dynamic = training.DynamicDemos(config, demos, env=None)
+    dynamic = DynamicDemos(config, demos, env=None)
     assert dynamic.demo_average == 500.0
     state = training.TrainingState()
     for r in (500.0, 500.0):

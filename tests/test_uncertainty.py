@@ -59,8 +59,8 @@ def test_ensemble_variance_is_zero_when_the_members_agree(demos, fitted):
     model = BCModel.from_config(fitted["ensemble"].get_config())
     model.set_weights(fitted["ensemble"].get_weights())
     for layer in model.stack:  # every member becomes a copy of member 0
-        layer.kernel.assign(tf.repeat(layer.kernel[:1], model.members, axis=0))
-        layer.bias.assign(tf.repeat(layer.bias[:1], model.members, axis=0))
+        layer.kernel.assign(tf.repeat(layer.kernel[:1], model.estimator.members, axis=0))
+        layer.bias.assign(tf.repeat(layer.bias[:1], model.estimator.members, axis=0))
     obs = tf.constant(demos.obs[:100])
     pi_bar, sigma_sq = model.predictive(obs)
     np.testing.assert_allclose(sigma_sq, np.full(100, 0.5), atol=1e-7)
@@ -69,7 +69,7 @@ def test_ensemble_variance_is_zero_when_the_members_agree(demos, fitted):
 
 def test_ensemble_members_differ_and_their_mean_imitates(demos, held_out, fitted):
     model = fitted["ensemble"]
-    assert model.members == 5 and model.dropout == 0.0 and model.map_fit
+    assert model.estimator.members == 5 and model.network.dropout == 0.0 and model.network.map_fit
     logits = model.member_logits(tf.constant(held_out.obs)).numpy()
     assert logits.shape == (5, len(held_out.obs), 2) and not np.allclose(logits[0], logits[1])
     pi_bar, sigma_sq = model.predictive(tf.constant(held_out.obs))
@@ -118,7 +118,7 @@ def test_distance_on_frames_takes_the_median_nearest_neighbour_distance_as_its_l
 
 def test_distance_estimator_is_standardised_by_the_demonstrations(demos, held_out, fitted):
     model = fitted["distance"]
-    assert model.dropout > 0 and model.uncertainty == "distance"
+    assert model.network.dropout > 0 and model.estimator.uncertainty == "distance"
     pi_bar, sigma_sq = model.predictive(tf.constant(demos.obs[:200]))
     # Demonstrated states are references (2,500 > 2,048 of them are kept, so most are exactly 0).
     assert np.median(sigma_sq - 0.5) == 0.0
@@ -137,7 +137,7 @@ def test_estimators_save_and_load_with_the_bc_model(tmp_path, fitted, held_out, 
     obs = tf.constant(held_out.obs[:64])
     for original, restored in zip(model.predictive(obs), loaded.predictive(obs), strict=True):
         np.testing.assert_allclose(restored, original, rtol=1e-6)
-    assert loaded.uncertainty == uncertainty
+    assert loaded.estimator == model.estimator and loaded.estimator.uncertainty == uncertainty
     policy = GreedyPolicy.from_model(loaded)  # what evaluate.py --policy bc plays
     np.testing.assert_allclose(policy.values(held_out.obs[:64]), loaded(obs), rtol=1e-4, atol=1e-5)
     assert policy(held_out.obs[0]) == int(np.argmax(loaded(obs[:1])[0]))
@@ -177,7 +177,7 @@ def test_bad_estimator_settings_are_refused(change, match):
 
 def test_only_the_bayes_loss_uses_the_estimator(demos):
     ce = build_bc_model(Config.for_task("cartpole", expert_loss="ce", uncertainty="ensemble"), 4, 2, demos.obs_scale())
-    assert ce.uncertainty == "mc_dropout" and ce.members == 1 and not ce.map_fit
+    assert ce.estimator.uncertainty == "mc_dropout" and ce.estimator.members == 1 and not ce.network.map_fit
 
 
 @pytest.mark.parametrize("uncertainty", ["ensemble", "distance"])

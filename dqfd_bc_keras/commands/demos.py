@@ -28,7 +28,7 @@ from dqfd_bc_keras.commands.cli import (
     run,
     seed,
 )
-from dqfd_bc_keras.demos.minari import to_minari
+from dqfd_bc_keras.demos.minari_export import to_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import record
 from dqfd_bc_keras.errors import ConfigError

@@ -166,10 +166,8 @@ def train_into(args: argparse.Namespace, task: str | None, quick: dict, given: d
             )
         elif config.uses_demos:
             try_demonstrator(config)  # a user's rule answers (or fails) once, in a second
-    from dqfd_bc_keras.runs.directory import (  # TensorFlow from here on: every argument has been checked
-        saved_config,
-        train,
-    )
+    from dqfd_bc_keras.runs.directory import train  # TensorFlow from here on: every argument has been checked
+    from dqfd_bc_keras.runs.resume import saved_config
 
     if args.resume:
         object_run = args.env is not None and gives_env_again(out, args.env)

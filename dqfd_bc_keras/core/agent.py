@@ -23,7 +23,7 @@ from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.networks import NetworkInput, as_input, build_q_network
 from dqfd_bc_keras.core.optimizers import FusedAdam
-from dqfd_bc_keras.core.replay import Batch, PrioritizedReplay
+from dqfd_bc_keras.core.replay import Batch, PrioritizedReplay, ReplaySettings
 from dqfd_bc_keras.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -187,7 +187,7 @@ class DQfDAgent(keras.Model):
         rewards = np.ones_like(rewards) if self.sqil else rewards
         pi_bc, sigma_sq = self.expert_view(tf.constant(obs, self.net_input.dtype))
         if self.net_input.image:  # the table holds the frames' pool indices
-            obs, next_obs = self.replay.demo_frames(obs, next_obs, np.logical_or(terminated, truncated))
+            obs, next_obs = self.replay.frame_pool.store_demos(obs, next_obs, np.logical_or(terminated, truncated))
         self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated, pi_bc, sigma_sq))
 
     def store(self, obs, action, reward, next_obs, terminated, truncated) -> None:
@@ -200,7 +200,7 @@ class DQfDAgent(keras.Model):
             pi_bc, sigma_sq = tf.fill([1, self.n_actions], np.nan), tf.fill([1], np.nan)
         reward = 0.0 * tf.cast(reward, tf.float32) if self.sqil else reward
         if self.net_input.image:
-            obs, next_obs = self.replay.store_frames(obs, next_obs)
+            obs, next_obs = self.replay.frame_pool.store(obs, next_obs)
         self.replay.store(
             self.replay.rows(obs[None], action, reward, next_obs[None], terminated, truncated, pi_bc, sigma_sq)[0]
         )
@@ -327,18 +327,7 @@ def make_agent(
         obs_scale = obs_scale or demos.obs_scale()
     if spaces is None or (obs_scale is None and not image):
         raise ConfigError("an agent without demonstrations needs obs_scale and spaces")
-    c = config
-    replay = PrioritizedReplay(
-        *spaces,
-        capacity=c.replay_capacity,
-        demo_capacity=c.demo_capacity,
-        n_step=c.n_step,
-        gamma=c.gamma,
-        alpha=c.priority_alpha,
-        eps_agent=c.priority_eps_agent,
-        eps_demo=c.priority_eps_demo,
-        seed=c.seed,
-    )
+    replay = PrioritizedReplay(*spaces, ReplaySettings.from_config(config))
     agent = DQfDAgent(config, *spaces, replay, bc_model, obs_scale=obs_scale)
     if demos is not None:
         agent.set_demos(demos.obs, demos.actions, demos.rewards, demos.next_obs, demos.terminated, demos.truncated)

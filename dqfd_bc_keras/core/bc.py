@@ -10,28 +10,44 @@ Two ways to fit it, one `train_step`:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+from dataclasses import dataclass
 
 import keras
 import numpy as np
+import numpy.typing as npt
 import tensorflow as tf
 
-from dqfd_bc_keras.choices import UNCERTAINTIES
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.networks import dense_stack, torso_layers
 from dqfd_bc_keras.core.optimizers import FusedAdam
 from dqfd_bc_keras.core.uncertainty import (
+    MC_DROPOUT,
     NearestDemoVariance,
+    VarianceEstimator,
     bootstrap_counts,
     ensemble_stack,
     policy_variance,
+    pooled_frames,
     reference_rows,
 )
+from dqfd_bc_keras.envs.frames import Frames
 from dqfd_bc_keras.envs.network_input import NetworkInput, as_input
-from dqfd_bc_keras.envs.observations import Frames
 
-DISTANCE_SIDE = 21
-"""Frames are average-pooled to about this side before the distance estimator reads them (84 → 21)."""
+
+@dataclass(frozen=True)
+class BCNetwork:
+    """The classifier's dense layers and how they are fitted: by MLE (`prior_scale` None) or by MAP
+    with the prior N(0, s²I), s = `prior_scale`; `dropout` acts in the dense layers. The default:
+    two ReLU layers of 64, no dropout, MLE."""
+
+    hidden: tuple[int, ...] = (64, 64)
+    dropout: float = 0.0
+    prior_scale: float | None = None
+
+    @property
+    def map_fit(self) -> bool:
+        return self.prior_scale is not None
 
 
 @keras.saving.register_keras_serializable(package="dqfd_bc_keras")
@@ -41,65 +57,40 @@ class BCModel(keras.Model):
 
     def __init__(
         self,
-        obs_dim: int,
+        net_input: int | NetworkInput,
         n_actions: int,
-        hidden: Sequence[int] = (64, 64),
-        dropout: float = 0.0,
-        prior_scale: float | None = None,
-        mc_passes: int = 10,
-        sigma0_sq: float = 0.5,
-        mc_dropout: bool = True,
-        obs_mean: Sequence[float] | None = None,
-        obs_std: Sequence[float] | None = None,
-        uncertainty: str = "mc_dropout",
-        members: int = 5,
-        frames: dict | None = None,
-        torso: str = "mlp",
+        network: BCNetwork = BCNetwork(),
+        estimator: VarianceEstimator = MC_DROPOUT,
+        obs_scale: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
         **kwargs,
     ) -> None:
-        """`prior_scale=None` fits by MLE; a number s fits by MAP with the prior N(0, s²I).
-
-        `obs_mean`/`obs_std` standardise the input (the demonstrations' statistics).
-        `uncertainty` picks σ²'s estimator; `members` is K of the ensemble (one network otherwise).
-        `mc_dropout=False` predicts with one deterministic pass even when trained with dropout
-        (the ablation "σ² fixed at σ0²"). `frames` ({shape, scale, stack} of `observations.Frames`)
-        makes the input uint8 frames read by `torso` (networks.py); dropout and the ensemble's
-        members are in the dense layers after it, which is where they act on frames too (an
-        ensemble's members then share the torso, as Bootstrapped DQN's heads do: Osband et al. 2016).
+        """`net_input` is what it reads (vectors of that width, or frames and their torso);
+        `obs_scale` (mean, std) standardises vectors (the demonstrations' statistics). `estimator`
+        is σ²'s: an ensemble's members, and dropout, are in the dense layers after the
+        torso, which is where they act on frames too (an ensemble's members then share the torso,
+        as Bootstrapped DQN's heads do: Osband et al. 2016). `build_bc_model` makes it from a Config.
         """
         super().__init__(**kwargs)
-        if uncertainty not in UNCERTAINTIES:
-            raise ValueError(f"uncertainty={uncertainty!r} is not one of {UNCERTAINTIES}")
-        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
-        self.hidden, self.dropout = tuple(int(h) for h in hidden), float(dropout)
-        self.prior_scale = None if prior_scale is None else float(prior_scale)
-        self.mc_passes, self.sigma0_sq, self.mc_dropout = int(mc_passes), float(sigma0_sq), bool(mc_dropout)
-        self.obs_mean = None if obs_mean is None else [float(x) for x in obs_mean]
-        self.obs_std = None if obs_std is None else [float(x) for x in obs_std]
-        self.uncertainty, self.members = uncertainty, int(members) if uncertainty == "ensemble" else 1
-        self.frames = (
-            None
-            if frames is None
-            else Frames(tuple(int(n) for n in frames["shape"]), float(frames["scale"]), int(frames.get("stack", 1)))
-        )
-        self.torso = torso if self.frames is not None else "mlp"
-        self.input_spec_ = NetworkInput(self.obs_dim, self.frames, self.torso)
-        scale = None if obs_mean is None or self.frames is not None else (self.obs_mean, self.obs_std)
-        self.body = torso_layers(self.input_spec_, scale)
+        self.net_input, self.n_actions = as_input(net_input), int(n_actions)
+        self.network, self.estimator = network, estimator
+        scale = None if obs_scale is None else [[float(x) for x in np.ravel(part)] for part in obs_scale]
+        self.obs_scale = None if scale is None else (scale[0], scale[1])
+        """(mean, std) as lists of floats, as saved; frames read none of it (they are scaled to [0, 1])."""
+        self.body = torso_layers(self.net_input, None if self.net_input.image else self.obs_scale)
         """Standardisation (vectors) or the convolutional torso (frames): what the dense layers read."""
         self.stack = (
-            ensemble_stack(self.members, self.hidden, self.n_actions)
-            if self.ensemble
-            else dense_stack(self.hidden, self.n_actions, self.dropout)
+            ensemble_stack(estimator.members, network.hidden, self.n_actions)
+            if estimator.ensemble
+            else dense_stack(network.hidden, self.n_actions, network.dropout)
         )
         self.distance = (
             NearestDemoVariance(
                 self._distance_width(),
                 self.n_actions,
                 name="nearest_demo_variance",
-                length=None if self.frames is not None else 1.0,
+                length=None if self.net_input.image else 1.0,
             )
-            if uncertainty == "distance"
+            if estimator.uncertainty == "distance"
             else None
         )
         # N of the prior's 1/N scaling: the size of the dataset being fitted (set by `fit_demos`).
@@ -111,21 +102,21 @@ class BCModel(keras.Model):
             self._fit_graph,
             autograph=False,
             input_signature=[
-                tf.TensorSpec([None, *self.input_spec_.shape], self.input_spec_.dtype),
+                tf.TensorSpec([None, *self.net_input.shape], self.net_input.dtype),
                 tf.TensorSpec([None], tf.int32),
                 tf.TensorSpec([], tf.int32),
                 tf.TensorSpec([], tf.int32),
                 tf.TensorSpec([], tf.int64),
             ],
         )
-        self.build((None, *self.input_spec_.shape))
+        self.build((None, *self.net_input.shape))
 
     def build(self, input_shape) -> None:
         shape = tuple(input_shape)
         for layer in self.body:
             layer.build(shape)
             shape = layer.compute_output_shape(shape)
-        shape = (self.members, *shape) if self.ensemble else shape
+        shape = (self.estimator.members, *shape) if self.ensemble else shape
         for layer in self.stack:
             layer.build(shape)
             shape = layer.compute_output_shape(shape)
@@ -148,7 +139,7 @@ class BCModel(keras.Model):
     def head_logits(self, x: tf.Tensor, training: bool = False) -> tf.Tensor:
         """The dense layers (dropout, or the ensemble's members) on features `x` (B, f)."""
         if self.ensemble:
-            x = tf.broadcast_to(x[None], [self.members, tf.shape(x)[0], x.shape[-1]])
+            x = tf.broadcast_to(x[None], [self.estimator.members, tf.shape(x)[0], x.shape[-1]])
         for layer in self.stack:
             x = layer(x, training=training)
         return x
@@ -156,39 +147,26 @@ class BCModel(keras.Model):
     def features(self, obs: tf.Tensor) -> tf.Tensor:
         """What the dense layers read: vectors in the demonstrations' standard units (as given
         without statistics), or the torso's features of frames."""
-        x = obs if self.frames is not None else tf.cast(obs, tf.float32)
+        x = obs if self.net_input.image else tf.cast(obs, tf.float32)
         for layer in self.body:
             x = layer(x)
         return x
 
     def distance_view(self, obs: tf.Tensor) -> tf.Tensor:
-        """The space the distance estimator measures in: standardised vectors, or the frames in
-        [0, 1] average-pooled to about `DISTANCE_SIDE` a side and flattened. Frames, not the
-        torso's features: those change at every refit and are trained to tell actions apart, not
-        to say how far a state is from the demonstrations; a MinAtar distance is then
-        √(cells that differ)."""
-        if self.frames is None:
-            return self.features(obs)
-        x = tf.cast(obs, tf.float32) * self.frames.scale
-        x = x[..., None] if len(self.frames.shape) == 2 else x
-        pool = max(1, min(self.frames.shape[:2]) // DISTANCE_SIDE)
-        if pool > 1:
-            x = tf.nn.avg_pool2d(x, pool, pool, "VALID")
-        return tf.reshape(x, [tf.shape(x)[0], -1])
+        """The space the distance estimator measures in: standardised vectors, or the frames pooled
+        (`uncertainty.pooled_frames`)."""
+        frames = self.net_input.frames
+        return self.features(obs) if frames is None else pooled_frames(obs, frames)
 
     def _distance_width(self) -> int:
         """Features of `distance_view`: the observation's width, or what pooling leaves of the frames."""
-        if self.frames is None:
-            return self.obs_dim
-        return int(self.distance_view(tf.zeros([1, *self.frames.shape], tf.uint8)).shape[1])
-
-    @property
-    def map_fit(self) -> bool:
-        return self.prior_scale is not None
+        if not self.net_input.image:
+            return self.net_input.dim
+        return int(self.distance_view(tf.zeros([1, *self.net_input.shape], tf.uint8)).shape[1])
 
     @property
     def ensemble(self) -> bool:
-        return self.uncertainty == "ensemble"
+        return self.estimator.ensemble
 
     @property
     def metrics(self) -> list[keras.metrics.Metric]:
@@ -197,10 +175,11 @@ class BCModel(keras.Model):
     def prior_loss(self) -> tf.Tensor:
         """‖w‖²/(2·s²·N) over every weight (MAP), or 0 (MLE); an ensemble's members each have
         their own prior, so this is their sum."""
-        if not self.map_fit:
+        scale = self.network.prior_scale
+        if scale is None:
             return tf.constant(0.0)
         squared = tf.add_n([tf.reduce_sum(tf.square(w)) for w in self.trainable_weights])
-        return squared / (2.0 * self.prior_scale**2 * self.n_data)
+        return squared / (2.0 * scale**2 * self.n_data)
 
     def train_step(self, data):
         """One step on mean cross entropy + prior; an ensemble's data carries (K, B) bootstrap
@@ -241,19 +220,20 @@ class BCModel(keras.Model):
         Without dropout (the MLE model) every MC pass is the same: π̄_bc = π_bc and σ² = σ0²; so
         it is with `mc_dropout=False`.
         """
+        sigma0_sq, passes = self.estimator.sigma0_sq, self.estimator.mc_passes
         if self.ensemble:
             probs = tf.nn.softmax(self.member_logits(obs))
-            return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
+            return tf.reduce_mean(probs, axis=0), sigma0_sq + policy_variance(probs)
         if self.distance is not None:
-            return tf.nn.softmax(self(obs)), self.sigma0_sq + self.distance(self.distance_view(obs))
-        if self.dropout == 0.0 or not self.mc_dropout:
+            return tf.nn.softmax(self(obs)), sigma0_sq + self.distance(self.distance_view(obs))
+        if self.network.dropout == 0.0 or not self.estimator.mc_dropout:
             probs = tf.nn.softmax(self(obs, training=False))
-            return probs, tf.fill(tf.shape(probs)[:1], tf.constant(self.sigma0_sq, probs.dtype))
+            return probs, tf.fill(tf.shape(probs)[:1], tf.constant(sigma0_sq, probs.dtype))
         batch = tf.shape(obs)[0]
         # The body has no dropout: its features are computed once and the K passes share them.
-        logits = self.head_logits(tf.tile(self.features(obs), [self.mc_passes, 1]), training=True)
-        probs = tf.reshape(tf.nn.softmax(logits), [self.mc_passes, batch, self.n_actions])
-        return tf.reduce_mean(probs, axis=0), self.sigma0_sq + policy_variance(probs)
+        logits = self.head_logits(tf.tile(self.features(obs), [passes, 1]), training=True)
+        probs = tf.reshape(tf.nn.softmax(logits), [passes, batch, self.n_actions])
+        return tf.reduce_mean(probs, axis=0), sigma0_sq + policy_variance(probs)
 
     def fit_demos(
         self, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int = 64, seed: int = 0
@@ -273,7 +253,7 @@ class BCModel(keras.Model):
             self.distance.set_references(self.distance_view(tf.constant(obs[rows])).numpy())
         if epochs > 0:
             self._fit(
-                tf.constant(obs, self.input_spec_.dtype),
+                tf.constant(obs, self.net_input.dtype),
                 tf.constant(actions, tf.int32),
                 tf.constant(epochs),
                 tf.constant(min(batch_size, len(obs))),
@@ -284,7 +264,7 @@ class BCModel(keras.Model):
     def _fit_graph(self, obs, actions, epochs, batch_size, seed) -> None:
         n = tf.shape(obs)[0]
         batches = (n + batch_size - 1) // batch_size
-        counts = bootstrap_counts(self.members, n, seed) if self.ensemble else None
+        counts = bootstrap_counts(self.estimator.members, n, seed) if self.ensemble else None
 
         def epoch(e):
             for metric in self.metrics:
@@ -304,25 +284,47 @@ class BCModel(keras.Model):
         tf.while_loop(lambda e: e < epochs, epoch, [tf.constant(0)])
 
     def get_config(self) -> dict:
+        """The settings flat, under the keys every saved BC model has (`from_config` groups them)."""
+        frames, (mean, std) = self.net_input.frames, self.obs_scale or (None, None)
         return {
             **super().get_config(),
-            "obs_dim": self.obs_dim,
+            "obs_dim": self.net_input.dim,
             "n_actions": self.n_actions,
-            "hidden": list(self.hidden),
-            "dropout": self.dropout,
-            "prior_scale": self.prior_scale,
-            "mc_passes": self.mc_passes,
-            "sigma0_sq": self.sigma0_sq,
-            "mc_dropout": self.mc_dropout,
-            "obs_mean": self.obs_mean,
-            "obs_std": self.obs_std,
-            "uncertainty": self.uncertainty,
-            "members": self.members,
+            "hidden": list(self.network.hidden),
+            "dropout": self.network.dropout,
+            "prior_scale": self.network.prior_scale,
+            **dataclasses.asdict(self.estimator),
+            "obs_mean": mean,
+            "obs_std": std,
             "frames": None
-            if self.frames is None
-            else {"shape": list(self.frames.shape), "scale": self.frames.scale, "stack": self.frames.stack},
-            "torso": self.torso,
+            if frames is None
+            else {"shape": list(frames.shape), "scale": frames.scale, "stack": frames.stack},
+            "torso": self.net_input.torso,
         }
+
+    @classmethod
+    def from_config(cls, config: dict) -> BCModel:
+        """The model of `get_config`'s settings; a model saved before a setting existed (no
+        `frames`, `torso`, nor the estimator's newer fields) gets its default."""
+        config = dict(config)
+        frames = config.pop("frames", None)
+        frames = (
+            None
+            if frames is None
+            else Frames(tuple(int(n) for n in frames["shape"]), float(frames["scale"]), int(frames.get("stack", 1)))
+        )
+        torso = config.pop("torso", "mlp")
+        net_input = NetworkInput(int(config.pop("obs_dim")), frames, torso if frames is not None else "mlp")
+        prior_scale = config.pop("prior_scale")
+        network = BCNetwork(
+            tuple(int(h) for h in config.pop("hidden")),
+            float(config.pop("dropout")),
+            None if prior_scale is None else float(prior_scale),
+        )
+        estimator = VarianceEstimator.from_saved(config)
+        mean, std = config.pop("obs_mean", None), config.pop("obs_std", None)
+        scale = None if mean is None else (mean, std)
+        return cls(net_input, config.pop("n_actions"), network, estimator, scale, **config)
 
 
 def build_bc_model(
@@ -334,31 +336,13 @@ def build_bc_model(
     """The BC model `config.expert_loss` calls for: MLE for ce and bc_margin; MAP for bayes,
     with `config.uncertainty`'s estimator (dropout for mc_dropout and distance, whose π̄_bc is
     then the paper's MAP network's; none in an ensemble's members)."""
+    estimator = VarianceEstimator.from_config(config)
     bayesian = config.bayesian_bc
-    uncertainty = config.uncertainty if bayesian else "mc_dropout"
-    mean, std = (None, None) if obs_scale is None else obs_scale
-    net_input = as_input(net_input)
-    frames = (
-        None
-        if net_input.frames is None
-        else {"shape": list(net_input.frames.shape), "scale": net_input.frames.scale, "stack": net_input.frames.stack}
+    network = BCNetwork(
+        hidden=tuple(int(h) for h in config.bc_hidden),
+        dropout=float(config.bc_dropout) if bayesian and not estimator.ensemble else 0.0,
+        prior_scale=float(config.bc_prior_scale) if bayesian else None,
     )
-    model = BCModel(
-        net_input.dim,
-        n_actions,
-        hidden=config.bc_hidden,
-        frames=frames,
-        torso=net_input.torso,
-        dropout=config.bc_dropout if bayesian and uncertainty != "ensemble" else 0.0,
-        prior_scale=config.bc_prior_scale if bayesian else None,
-        mc_passes=config.mc_passes,
-        sigma0_sq=config.sigma0_sq,
-        mc_dropout=config.mc_dropout,
-        obs_mean=mean,
-        obs_std=std,
-        uncertainty=uncertainty,
-        members=config.ensemble_members,
-        name="bc_model",
-    )
+    model = BCModel(net_input, n_actions, network, estimator, obs_scale, name="bc_model")
     model.compile(optimizer=FusedAdam(config.bc_learning_rate))
     return model

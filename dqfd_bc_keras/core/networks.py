@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import keras
 import numpy as np
+import numpy.typing as npt
 
 from dqfd_bc_keras.envs.network_input import CONV_TORSOS, NATURE_MIN_SIZE, NetworkInput, as_input, resolve_torso
 
@@ -34,7 +35,7 @@ __all__ = [
 
 
 def torso_layers(
-    net_input: NetworkInput, obs_scale: tuple[np.ndarray, np.ndarray] | None = None
+    net_input: NetworkInput, obs_scale: tuple[npt.ArrayLike, npt.ArrayLike] | None = None
 ) -> list[keras.layers.Layer]:
     """The layers from an observation to the dense layers' input: standardisation (vectors), or
     the [0, 1] scaling, a channel axis for 2-D frames, the convolutions and a flatten (frames)."""
@@ -71,7 +72,7 @@ def build_q_network(
     return keras.Model(obs, q, name=name)
 
 
-def normalization(mean: np.ndarray, std: np.ndarray) -> keras.layers.Normalization:
+def normalization(mean: npt.ArrayLike, std: npt.ArrayLike) -> keras.layers.Normalization:
     """A fixed (non-trainable) standardisation (s − mean)/std; std is floored at 1e-3."""
     std = np.maximum(np.asarray(std, np.float32), 1e-3)
     return keras.layers.Normalization(mean=np.asarray(mean, np.float32), variance=std**2, name="standardize")

@@ -27,23 +27,20 @@ reads is what storing and settling each row at once would have written. Settles 
 and every `SETTLE_ROWS` rows, never where a graph call ends, so the MC-dropout draws of a run do
 not depend on where its graph calls stop (its evaluation grid); the count waiting is checkpointed.
 
-Frames (`networks.NetworkInput.image`) are never stored as floats, nor once per stack: a uint8
-pool holds single frames, two slots per row (its s_t's newest frame, written only when s_t does
-not continue the previous row's s_{t+1}, and its s_{t+1}'s newest frame), and a row's s and s'
-columns hold the k pool indices of their stacked frames (k = 1 for MinAtar, 4 for Atari). Within
-an episode s_t's frames are the previous row's s_{t+1}'s, and s_{t+1}'s are s_t's shifted by one
-and a new frame; a fresh stack (a reset) is k copies of one frame. The self-generated rows' slots
-run k rows beyond the table's capacity, so the oldest rows' earlier frames outlive them.
+Frames are stored once each, as uint8, in a pool the table indexes (frame_pool.py).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 import tensorflow as tf
 
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.frame_pool import FramePool
 from dqfd_bc_keras.core.networks import NetworkInput, as_input
 from dqfd_bc_keras.core.sum_tree import SumTree
 from dqfd_bc_keras.errors import ConfigError
@@ -80,6 +77,38 @@ class Batch(NamedTuple):
     """(B,) importance-sampling weights, max 1."""
 
 
+@dataclass(frozen=True)
+class ReplaySettings:
+    """The replay's sizes, n-step return and prioritization (`from_config`: a run's)."""
+
+    capacity: int = 100_000
+    """Rows of D_replay, the circular buffer of self-generated transitions."""
+    demo_capacity: int = 50_000
+    """Rows kept for D_demo."""
+    n_step: int = 10
+    gamma: float = 0.99
+    alpha: float = 0.4
+    """The priority exponent: P(i) ∝ p_i^α."""
+    eps_agent: float = 0.001
+    eps_demo: float = 1.0
+    seed: int = 0
+    """Seeds the sampling's generator."""
+
+    @classmethod
+    def from_config(cls, config: Config) -> ReplaySettings:
+        c = config
+        return cls(
+            capacity=c.replay_capacity,
+            demo_capacity=c.demo_capacity,
+            n_step=c.n_step,
+            gamma=c.gamma,
+            alpha=c.priority_alpha,
+            eps_agent=c.priority_eps_agent,
+            eps_demo=c.priority_eps_demo,
+            seed=c.seed,
+        )
+
+
 class PrioritizedReplay(tf.Module):
     """D_demo and D_replay with proportional prioritization and n-step returns, in the graph.
 
@@ -95,30 +124,20 @@ class PrioritizedReplay(tf.Module):
     what a settle holds in memory while no sample comes (before learning starts)."""
 
     def __init__(
-        self,
-        net_input: int | NetworkInput,
-        n_actions: int,
-        capacity: int = 100_000,
-        demo_capacity: int = 50_000,
-        n_step: int = 10,
-        gamma: float = 0.99,
-        alpha: float = 0.4,
-        eps_agent: float = 0.001,
-        eps_demo: float = 1.0,
-        seed: int = 0,
+        self, net_input: int | NetworkInput, n_actions: int, settings: ReplaySettings = ReplaySettings()
     ) -> None:
         super().__init__()
-        if capacity < n_step:
-            raise ConfigError(f"replay capacity must be ≥ n_step={n_step}, got {capacity}")
+        s = settings
+        if s.capacity < s.n_step:
+            raise ConfigError(f"replay capacity must be ≥ n_step={s.n_step}, got {s.capacity}")
         net_input = as_input(net_input)
-        self.frames = net_input.frames
-        """The frames' layout when observations are frames (then s and s' columns hold pool indices)."""
-        self.obs_dim = net_input.dim if self.frames is None else self.frames.stack
+        frames = net_input.frames
+        self.obs_dim = net_input.dim if frames is None else frames.stack
         """Columns of s (and of s') in the table: features, or the pool indices of the stacked frames."""
         self.n_actions = int(n_actions)
-        self.capacity, self.demo_capacity = int(capacity), int(demo_capacity)
-        self.n_step, self.gamma, self.alpha = int(n_step), float(gamma), float(alpha)
-        self.eps_agent, self.eps_demo = float(eps_agent), float(eps_demo)
+        self.capacity, self.demo_capacity = int(s.capacity), int(s.demo_capacity)
+        self.n_step, self.gamma, self.alpha = int(s.n_step), float(s.gamma), float(s.alpha)
+        self.eps_agent, self.eps_demo = float(s.eps_agent), float(s.eps_demo)
         d, A = self.obs_dim, self.n_actions
         self.OBS, self.NEXT_OBS = slice(0, d), slice(d, 2 * d)
         self.ACTION, self.REWARD, self.TERMINATED, self.TRUNCATED = 2 * d, 2 * d + 1, 2 * d + 2, 2 * d + 3
@@ -139,113 +158,24 @@ class PrioritizedReplay(tf.Module):
         self.unsettled = tf.Variable(0, trainable=False, name="unsettled")
         """How many of the newest self-generated rows wait for `settle`."""
         self.settle_rows = min(self.SETTLE_ROWS, self.capacity)
-        self._strictly_upper = tf.constant(np.triu(np.ones((n_step, n_step), np.float32), k=1))
-        self.rng = tf.random.Generator.from_seed(seed)
-        if self.frames is not None:
-            self._init_pool()
+        self._strictly_upper = tf.constant(np.triu(np.ones((self.n_step, self.n_step), np.float32), k=1))
+        self.rng = tf.random.Generator.from_seed(s.seed)
+        self.frame_pool = None if frames is None else FramePool(frames, self.demo_capacity, self.capacity)
+        """Where frames are stored when observations are frames (then s and s' columns hold pool indices)."""
 
     @property
     def size(self) -> tf.Tensor:
         return self.demo_size + self.agent_size
 
-    # --- frames -----------------------------------------------------------------------------
-    def _init_pool(self) -> None:
-        k = self.frames.stack
-        self.slot_rows = self.demo_capacity + self.capacity + k
-        """Rows of pool slots: D_demo's, then D_replay's capacity and k more (module docstring)."""
-        self.pool = tf.Variable(
-            tf.zeros([2 * self.slot_rows, *self.frames.frame_shape], tf.uint8), trainable=False, name="frame_pool"
-        )
-        self.serial = tf.Variable(tf.constant(0, tf.int64), trainable=False, name="serial")
-        """Self-generated transitions stored so far: their slot row is D_demo's + serial mod (capacity + k)."""
-        self.last_next = tf.Variable(tf.zeros(self.frames.shape, tf.uint8), trainable=False, name="last_next_obs")
-        self.last_next_index = tf.Variable(tf.zeros([k]), trainable=False, name="last_next_index")
-        self.has_last = tf.Variable(False, trainable=False, name="has_last")
-
     @property
     def pool_bytes(self) -> int:
         """Bytes of the frame pool (0 for vector observations)."""
-        return 0 if self.frames is None else int(np.prod(self.pool.shape))
-
-    def _newest(self, obs: tf.Tensor) -> tf.Tensor:
-        """The newest frame of observations (..., *shape): the last of a stack, or all of it."""
-        return obs[..., -1] if self.frames.stack > 1 else obs
-
-    def store_frames(self, obs: tf.Tensor, next_obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
-        """Write the new frames of one self-generated transition to the pool; returns the pool
-        indices (k,) of s and of s', as float32 table columns (exact below 2^24)."""
-        k = self.frames.stack
-        slot = 2 * (self.demo_capacity + tf.cast(self.serial % (self.capacity + k), tf.int32))
-        obs, next_obs = tf.cast(obs, tf.uint8), tf.cast(next_obs, tf.uint8)
-        checks = []
-        if k > 1:  # the invariants that let a stack be stored as one new frame
-            checks.append(
-                tf.debugging.Assert(
-                    tf.reduce_all(next_obs[..., :-1] == obs[..., 1:]),
-                    ["s' is not s's frame stack shifted by one frame"],
-                )
-            )
-        continues = tf.logical_and(self.has_last, tf.reduce_all(obs == self.last_next))
-
-        def fresh() -> tf.Tensor:
-            ok = (
-                []
-                if k == 1
-                else [
-                    tf.debugging.Assert(
-                        tf.reduce_all(obs == obs[..., -1:]), ["a fresh frame stack must be copies of one frame"]
-                    )
-                ]
-            )
-            with tf.control_dependencies(ok):
-                self.pool.scatter_nd_update([[slot]], self._newest(obs)[None])
-            return tf.fill([k], tf.cast(slot, tf.float32))
-
-        with tf.control_dependencies(checks):
-            obs_index = tf.cond(continues, self.last_next_index.read_value, fresh)
-        self.pool.scatter_nd_update([[slot + 1]], self._newest(next_obs)[None])
-        next_index = tf.concat([obs_index[1:], tf.cast(slot + 1, tf.float32)[None]], axis=0)
-        self.last_next.assign(next_obs)
-        self.last_next_index.assign(next_index)
-        self.has_last.assign(True)
-        self.serial.assign_add(1)
-        return obs_index, next_index
-
-    def demo_frames(self, obs: np.ndarray, next_obs: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Write D_demo's frames (complete episodes in time order; `ends` marks each episode's last
-        transition) to its slots; returns the pool indices (n, k) of every s and s'."""
-        k, n = self.frames.stack, len(obs)
-        newest = (lambda x: x[..., -1]) if k > 1 else (lambda x: x)
-        starts = np.flatnonzero(np.concatenate([[True], ends[:-1]]))
-        if k > 1 and not (
-            np.array_equal(next_obs[..., :-1], obs[..., 1:]) and (obs[starts] == obs[starts][..., -1:]).all()
-        ):
-            raise ConfigError(
-                "demonstrated frame stacks must shift by one frame per step and start as copies "
-                "of one frame (as the Atari preprocessing makes them)"
-            )
-        frames = np.empty((2 * n, *self.frames.frame_shape), np.uint8)
-        frames[1::2] = newest(next_obs)
-        obs_index, next_index = np.empty((n, k), np.float32), np.empty((n, k), np.float32)
-        for i in range(n):
-            if i > 0 and not ends[i - 1]:  # inside an episode: s_t is s_{t-1}'s s'
-                obs_index[i] = next_index[i - 1]
-            else:
-                frames[2 * i] = newest(obs[i])
-                obs_index[i] = 2 * i
-            next_index[i] = np.append(obs_index[i][1:], 2 * i + 1)
-        self.pool.scatter_nd_update(tf.range(2 * n)[:, None], frames)
-        return obs_index, next_index
+        return 0 if self.frame_pool is None else self.frame_pool.bytes
 
     def observations(self, columns: tf.Tensor) -> tf.Tensor:
         """States from table columns (B, obs_dim): the vectors themselves, or the frames (B, *shape)
         their pool indices name, uint8."""
-        if self.frames is None:
-            return columns
-        frames = tf.gather(self.pool, tf.cast(columns, tf.int32))  # (B, k, *frame_shape)
-        if self.frames.stack > 1:
-            return tf.transpose(frames, [0, *range(2, frames.shape.rank), 1])
-        return frames[:, 0]
+        return columns if self.frame_pool is None else self.frame_pool.observations(columns)
 
     def states(self, indices: tf.Tensor) -> tf.Tensor:
         """s_t of stored rows `indices`."""

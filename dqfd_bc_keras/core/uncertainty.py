@@ -10,15 +10,77 @@
 
 All three return the same quantity, mean_a Var[π_bc(a|s)], so their σ² are on one scale. Its
 largest value is (1 − 1/A)/A (members certain of actions spread evenly): 1/4 with two actions.
+A BC model is given its estimator as a `VarianceEstimator` (`VarianceEstimator.from_config`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import keras
 import numpy as np
 import tensorflow as tf
+
+from dqfd_bc_keras.choices import UNCERTAINTIES
+from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.envs.frames import Frames
+
+
+@dataclass(frozen=True)
+class VarianceEstimator:
+    """σ²(s) = σ0² + the epistemic variance of the estimator `uncertainty`: what a BC model needs to
+    know of it. The field names are the keys a saved BC model keeps them under."""
+
+    uncertainty: str = "mc_dropout"
+    """The estimator, one of `choices.UNCERTAINTIES`."""
+    sigma0_sq: float = 0.5
+    """σ0², the floor of σ²: its value where the estimator has no doubt."""
+    mc_passes: int = 10
+    """K of MC dropout: the dropout passes averaged."""
+    mc_dropout: bool = True
+    """False: one deterministic pass even with dropout, σ² fixed at σ0² (the ablation)."""
+    members: int = 1
+    """K of the ensemble: its members; 1 for the other estimators (one network)."""
+
+    def __post_init__(self) -> None:
+        if self.uncertainty not in UNCERTAINTIES:
+            raise ValueError(f"uncertainty={self.uncertainty!r} is not one of {UNCERTAINTIES}")
+        if self.members != 1 and not self.ensemble:
+            raise ValueError(f"members={self.members} is for uncertainty='ensemble' only, not {self.uncertainty!r}")
+
+    @property
+    def ensemble(self) -> bool:
+        return self.uncertainty == "ensemble"
+
+    @classmethod
+    def from_saved(cls, saved: dict) -> VarianceEstimator:
+        """The estimator of a saved BC model's config, its keys taken out of `saved`; a model saved
+        before `uncertainty`, `mc_dropout` or `members` existed gets their defaults."""
+        return cls(
+            uncertainty=str(saved.pop("uncertainty", "mc_dropout")),
+            sigma0_sq=float(saved.pop("sigma0_sq")),
+            mc_passes=int(saved.pop("mc_passes")),
+            mc_dropout=bool(saved.pop("mc_dropout", True)),
+            members=int(saved.pop("members", 1)),
+        )
+
+    @classmethod
+    def from_config(cls, config: Config) -> VarianceEstimator:
+        """The estimator `config` asks for: `config.uncertainty` for the bayes loss; MC dropout for
+        the others, whose MLE model has no dropout, so that its passes agree and σ² is σ0²."""
+        uncertainty = config.uncertainty if config.bayesian_bc else "mc_dropout"
+        return cls(
+            uncertainty=uncertainty,
+            sigma0_sq=float(config.sigma0_sq),
+            mc_passes=int(config.mc_passes),
+            mc_dropout=bool(config.mc_dropout),
+            members=int(config.ensemble_members) if uncertainty == "ensemble" else 1,
+        )
+
+
+MC_DROPOUT = VarianceEstimator()
+"""The paper's estimator: 10 MC-dropout passes, σ0² = 0.5."""
 
 
 def max_policy_variance(n_actions: int) -> float:
@@ -99,6 +161,23 @@ def reference_rows(n: int, capacity: int, seed: int) -> np.ndarray:
     if n <= capacity:
         return np.arange(n)
     return np.sort(np.random.default_rng(seed).choice(n, capacity, replace=False))
+
+
+DISTANCE_SIDE = 21
+"""Frames are average-pooled to about this side before the distance estimator reads them (84 → 21)."""
+
+
+def pooled_frames(obs: tf.Tensor, frames: Frames) -> tf.Tensor:
+    """Frames (B, *shape) as the distance estimator reads them: in [0, 1], average-pooled to about
+    `DISTANCE_SIDE` a side and flattened. Frames, not a torso's features: those change at every
+    refit and are trained to tell actions apart, not to say how far a state is from the
+    demonstrations; a MinAtar distance is then √(cells that differ)."""
+    x = tf.cast(obs, tf.float32) * frames.scale
+    x = x[..., None] if len(frames.shape) == 2 else x
+    pool = max(1, min(frames.shape[:2]) // DISTANCE_SIDE)
+    if pool > 1:
+        x = tf.nn.avg_pool2d(x, pool, pool, "VALID")
+    return tf.reshape(x, [tf.shape(x)[0], -1])
 
 
 @keras.saving.register_keras_serializable(package="dqfd_bc_keras")

@@ -21,7 +21,8 @@ from typing import Any
 
 from dqfd_bc_keras.demos.dataset import ARRAYS, FORMAT_VERSION, DemoDataset, DemoMeta, concatenate, validate
 from dqfd_bc_keras.demos.human import controls, play
-from dqfd_bc_keras.demos.minari import check_exportable, from_minari
+from dqfd_bc_keras.demos.minari import from_minari
+from dqfd_bc_keras.demos.minari_export import check_exportable
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import EpisodeRecorder, record, rollout
 from dqfd_bc_keras.demos.replaying import show

@@ -20,7 +20,8 @@ import gymnasium as gym
 
 from dqfd_bc_keras.demos.dataset import DemoDataset, concatenate
 from dqfd_bc_keras.demos.keys import KeyMap, key_map, played_like
-from dqfd_bc_keras.demos.minari import check_exportable, dataset_dir, to_minari
+from dqfd_bc_keras.demos.minari import dataset_dir
+from dqfd_bc_keras.demos.minari_export import check_exportable, to_minari
 from dqfd_bc_keras.demos.npz import load, save
 from dqfd_bc_keras.demos.recording import EpisodeRecorder
 from dqfd_bc_keras.demos.window import Window

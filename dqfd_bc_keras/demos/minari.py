@@ -13,6 +13,7 @@ A Minari episode holds T actions and T + 1 observations with Gymnasium's flags, 
 Minari keeps the plain env's rewards, so tasks with shaped rewards (cartpole's fall penalty,
 mountaincar-goals' goal reward) are refused both ways: use the plain env id (`CartPole-v1`).
 Minari is optional (`pip install -r requirements-extras.txt`); it is imported only here, lazily.
+Writing a dataset is `demos/minari_export.py`'s.
 
     python -m dqfd_bc_keras.demos export demos.npz --minari mountaincar/imperfect-v0
     python train.py --env CartPole-v1 --demos minari:cartpole/expert-v0
@@ -20,11 +21,7 @@ Minari is optional (`pip install -r requirements-extras.txt`); it is imported on
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import os
-import shutil
-import warnings
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -42,12 +39,8 @@ from dqfd_bc_keras.plugins import bare_id
 
 _ABSENT = object()
 
-DATA_FORMAT = "hdf5"
-"""Minari's storage format for the datasets we write: its extra needs only h5py, which Keras
-already depends on (the `arrow`/`parquet` formats need pyarrow, a large extra wheel)."""
 
-
-def _minari() -> ModuleType:
+def import_minari() -> ModuleType:
     """The `minari` module, or a one-line `ConfigError` saying how to install it."""
     try:
         import minari
@@ -72,7 +65,7 @@ def dataset_dir(dataset_id: str) -> Path:
     return get_dataset_path(dataset_id)
 
 
-def _refuse_shaped(spec: TaskSpec, what: str) -> None:
+def refuse_shaped(spec: TaskSpec, what: str) -> None:
     """Minari datasets carry the plain env's rewards: a shaped task would mix two reward scales."""
     shaping = (
         "a fall penalty" if spec.fall_penalty is not None else "a goal reward" if spec.goal_reward is not None else None
@@ -107,7 +100,7 @@ def _open_checked(
     where: Path, dataset_id: str, task: str, timeout: str, env_kwargs: dict[str, Any], max_transitions: int | None
 ) -> tuple[Any, TaskSpaces]:
     """The Minari dataset, opened and checked against the task before any episode is read."""
-    minari = _minari()
+    minari = import_minari()
     if timeout not in TIMEOUT_MODES:
         raise ConfigError(f"unknown timeout mode {timeout!r}; expected one of {TIMEOUT_MODES}")
     if timeout == "time-aware":
@@ -116,7 +109,7 @@ def _open_checked(
             "dataset does not record; use --timeout bootstrap (or naive)"
         )
     spec = get_task(task)
-    _refuse_shaped(spec, str(where))
+    refuse_shaped(spec, str(where))
     directory = dataset_dir(dataset_id)
     if not (directory / "data").is_dir():
         raise DemoFileError(
@@ -261,95 +254,3 @@ def from_minari(
     )
     validate(where, dataset)
     return dataset
-
-
-def check_exportable(task: str, timeout: str, env_kwargs: dict[str, Any], dataset_id: str) -> None:
-    """Refuse, in one `ConfigError` naming `minari:dataset_id`, demonstrations of `task` (made with
-    `env_kwargs`, recorded with `timeout`) that `to_minari` cannot publish: a caller can check
-    before recording anything. Only `bootstrap` datasets of unshaped tasks with flat observations:
-    their flags and rewards mean what Gymnasium's do, which is what a Minari user assumes, and
-    they are the env's own."""
-    where = f"minari:{dataset_id}"
-    if timeout != "bootstrap":
-        raise ConfigError(
-            f"{where}: the dataset was recorded with timeout={timeout!r}, so its flags at the "
-            "time limit do not mean what Gymnasium's do; record it again with --timeout bootstrap"
-        )
-    _refuse_shaped(get_task(task), where)  # also imports the env's module (`module:Env-v0`)
-    layout = task_spaces(task, env_kwargs).layout
-    if layout.image:
-        raise ConfigError(
-            f"{where}: the dataset's observations are frames ({layout.text()}); writing Minari "
-            "datasets of frames is not supported yet (keep them as .npz)"
-        )
-    if not layout.flat:
-        raise ConfigError(
-            f"{where}: the dataset's observations were flattened from {layout.text()}; a Minari "
-            "dataset holds the env's own observations, so record it with Minari's DataCollector"
-        )
-
-
-def to_minari(dataset: DemoDataset, dataset_id: str, force: bool = False) -> Path:
-    """Publish `dataset` in the local Minari cache as `dataset_id`; returns its directory.
-
-    Only what `check_exportable` accepts. Each episode keeps its reset seed (where known). An
-    existing dataset is replaced only with `force`, and only once the new one is written. No
-    reference scores are computed (that would roll the env out again).
-    """
-    minari = _minari()
-    from minari.data_collector import EpisodeBuffer
-
-    m = dataset.meta
-    check_exportable(m.task, m.timeout, m.env_kwargs, dataset_id)
-    where = f"minari:{dataset_id}"
-    env_spec = gym.spec(bare_id(m.env_id))  # Minari cannot parse the module prefix: give it the spec
-    env_spec = dataclasses.replace(env_spec, kwargs={**env_spec.kwargs, **m.env_kwargs})
-    directory = dataset_dir(dataset_id)
-    if directory.exists() and not force:
-        raise ConfigError(f"{where}: a Minari dataset of that id exists at {directory}; pass --force to replace it")
-
-    starts = np.flatnonzero(np.diff(dataset.episode_ids, prepend=-1))
-    ends = np.append(starts[1:], len(dataset))
-    buffers = [
-        EpisodeBuffer(
-            observations=np.concatenate([dataset.obs[a:b], dataset.next_obs[b - 1 : b]]),
-            actions=dataset.actions[a:b],
-            rewards=dataset.rewards[a:b],
-            terminations=dataset.terminated[a:b],
-            truncations=dataset.truncated[a:b],
-            seed=seed,
-        )
-        for a, b, seed in zip(starts, ends, m.episode_seeds, strict=True)
-    ]
-    description = (
-        f"Demonstrations exported by dqfd_bc_keras: task {m.task} ({m.env_id}), demonstrator "
-        f"{m.expert}, epsilon={m.epsilon:g}, seed={m.seed}, {len(buffers)} episodes, "
-        f"{len(dataset)} steps, timeout=bootstrap (Gymnasium's flags)."
-    )
-
-    # Replacing: keep the old dataset under a hidden name (Minari skips dot-directories) until
-    # the new one is complete, so a failed export leaves the cache as it was.
-    backup = directory.with_name(f".{directory.name}.replaced-{os.getpid()}") if directory.exists() else None
-    if backup is not None:
-        directory.rename(backup)
-    try:
-        with warnings.catch_warnings():  # the nags about author, email, code link and eval env we do not know
-            warnings.filterwarnings("ignore", message=r".*is set to None", category=UserWarning)
-            minari.create_dataset_from_buffers(
-                dataset_id,
-                buffers,
-                env=env_spec,
-                algorithm_name=m.expert,
-                description=description,
-                data_format=DATA_FORMAT,
-            )
-    except BaseException as error:
-        shutil.rmtree(directory, ignore_errors=True)
-        if backup is not None:
-            backup.rename(directory)
-        if isinstance(error, Exception):
-            raise ConfigError(f"{where}: Minari could not write it ({one_line(error)})") from error
-        raise
-    if backup is not None:
-        shutil.rmtree(backup, ignore_errors=True)
-    return directory

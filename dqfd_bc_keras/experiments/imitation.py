@@ -27,7 +27,7 @@ from dqfd_bc_keras.experiments.suites import Arm, grid_arms, grid_tasks
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.runs.provenance import provenance
 from dqfd_bc_keras.seeds import final_eval_seed
-from dqfd_bc_keras.training.loop import demonstrations, fit_bc
+from dqfd_bc_keras.training.demonstrations import demonstrations, fit_bc
 
 IMITATION_DIR = "bc-alone"
 """The folder of the suite directory that holds BC alone's results (exported with the runs)."""

@@ -15,10 +15,10 @@
             provenance.json    the code, libraries and machine the run ran on (at the end)
             complete.json      written last: the run is complete only when it exists
 
-Every file is written atomically; a checkpoint is a new directory, fsynced, then made current
-by rewriting `checkpoints/latest.json`, then the old one is deleted, so a run killed at any
-moment resumes from a complete one. One process writes a run directory (`.lock` holds its PID).
-The files of records are written by `runs/writers.py`.
+Every file is written atomically. One process writes a run directory (`.lock` holds its PID).
+The files of records are written by `runs/writers.py`, the checkpoints by `runs/checkpoints.py`
+(a run killed at any moment resumes from a complete one), the TensorBoard events by
+`runs/events.py`; what a resume reads back first is `runs/resume.py`'s.
 
 A directory is a run directory when it holds `checkpoints/latest.json` or `complete.json`, or a
 `config.json` that train.py wrote (a JSON object with a `task` and an `expert_loss`: a run's first
@@ -31,30 +31,24 @@ or `--resume`, starts it over, with a warning.
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
-import functools
 import json
-import shutil
 import sys
-import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import tensorflow as tf
 
 from dqfd_bc_keras import demos as demo_io
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.envs.make import checked_spaces
-from dqfd_bc_keras.envs.objects import unmade_env
-from dqfd_bc_keras.errors import BrokenRunError, DemoFileError, DivergedError, DqfdWarning, RunDirectoryError, one_line
-from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, sync_tree, write_text
+from dqfd_bc_keras.errors import DivergedError
+from dqfd_bc_keras.files import DirectoryLock, atomic_path, remove_temporaries, write_text
+from dqfd_bc_keras.runs.checkpoints import restore_checkpoint, save_checkpoint
+from dqfd_bc_keras.runs.events import EventLog
 from dqfd_bc_keras.runs.provenance import provenance
+from dqfd_bc_keras.runs.resume import given_demos, read_config, restart_demos, saved_config
 from dqfd_bc_keras.runs.writers import (
-    CHECKPOINT,
     COMPLETE,
     GIVEN_DEMOS,
     METRICS,
@@ -95,10 +89,6 @@ class RunResult:
     """The run directory's learner and state, to go on training (`continue_run`)."""
 
 
-TB_SKIPS = ("episode", "interactions", "wall_time")
-"""Columns of an episode row that are not TensorBoard scalars (interactions is its x axis)."""
-
-
 class RunDirectory:
     """One run directory and the learner training into it."""
 
@@ -106,6 +96,7 @@ class RunDirectory:
         self.config, self.out, self.learner, self.state = config, out, learner, state
         self.metrics_rows = -1
         """Rows metrics.csv holds as this process wrote it (−1: not written yet by this process)."""
+        self.events = EventLog(out / "tb")
         self.progress = None
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
@@ -116,22 +107,6 @@ class RunDirectory:
                 dynamic_ncols=True,
                 initial=int(learner.interaction.env_steps.numpy()),
             )
-
-    @functools.cached_property
-    def tb(self) -> tf.summary.SummaryWriter:
-        """Opened at the first summary: a resume that fails to restore leaves no event file."""
-        return tf.summary.create_file_writer(str(self.out / "tb"))
-
-    @contextlib.contextmanager
-    def tb_errors(self) -> Iterator[None]:
-        """TensorFlow's error writing the event files (a full disk) as one line naming tb/: the run
-        stops there, resumable from its last checkpoint."""
-        try:
-            yield
-        except tf.errors.OpError as error:
-            raise RunDirectoryError(
-                f"{self.out / 'tb'}: cannot write the TensorBoard events ({one_line(error)})"
-            ) from None
 
     def write_demonstrations(self, source: str | None) -> None:
         """What the run started from before any interaction (not interactions themselves), as it
@@ -159,10 +134,7 @@ class RunDirectory:
     # --- called after every episode -------------------------------------------------------
     def on_episode(self, learner: Learner, state: TrainingState, row: EpisodeRow) -> None:
         step = row.env_step
-        with self.tb_errors(), self.tb.as_default(step=row.interactions):  # TensorBoard's x axis: interactions
-            for key, value in row.to_row().items():
-                if key not in TB_SKIPS and value is not None:
-                    tf.summary.scalar(f"train/{key}", value)
+        self.events.episode(row)
         if self.progress is not None:
             self.progress.update(step - self.progress.n)
             self.progress.set_postfix(episode=row.episode, ret=f"{row.return_:.0f}")
@@ -188,68 +160,16 @@ class RunDirectory:
     def evaluate(self, points: list[int]) -> list[EvalRow]:
         """One greedy evaluation of the current network, logged at each grid point in `points`."""
         rows = evaluate_at(self.learner, self.state, points)
-        for row in rows:
-            with self.tb_errors(), self.tb.as_default(step=row.interactions):
-                tf.summary.scalar("eval/plain_return", row.mean_return)
-                tf.summary.scalar("eval/env_step", row.env_step)
-                if row.mean_goals is not None:
-                    tf.summary.scalar("eval/goals", row.mean_goals)
+        self.events.evaluations(rows)
         write_evals(self.out, self.state.evals)
-        with self.tb_errors():
-            self.tb.flush()
         return rows
 
-    # --- checkpoints ------------------------------------------------------------------------
+    # --- checkpoints (runs/checkpoints.py) -----------------------------------------------------
     def save_checkpoint(self) -> None:
-        """Write a complete new checkpoint, fsync it, switch `latest.json` to it, then delete
-        the old one: at every moment `latest.json` names a complete checkpoint, whether the
-        save is killed or interrupted (Ctrl-C, SIGTERM) at any point of it."""
-        root = self.out / "checkpoints"
-        target = free_name(root / f"ckpt-{int(self.learner.interaction.env_steps.numpy())}")
-        try:
-            self.learner.checkpoint().write(str(target / "tf"))
-            dynamic = self.learner.dynamic
-            if dynamic is not None:
-                demo_io.save(dynamic.dataset, target / "demos.npz", force=True)
-                if dynamic.recent:
-                    demo_io.save(demo_io.concatenate(dynamic.recent, source="agent"), target / "recent.npz", force=True)
-            self.state.interactions = self.learner.interactions
-            write_text(target / "state.json", json.dumps(self.state.to_dict()))
-            write_text(target / "config.json", json.dumps(self.config.to_dict(), indent=1))  # the run's own
-            sync_tree(target)
-        except BaseException as error:
-            shutil.rmtree(target, ignore_errors=True)  # the debris of a save that did not finish
-            if isinstance(error, tf.errors.OpError):  # e.g. the disk is full
-                raise RunDirectoryError(f"{target}: cannot write the checkpoint ({one_line(error)})") from None
-            raise
-        # The switch, outside the clean-up above: once `latest.json` may name `target`, nothing
-        # deletes it (an interrupt here leaves one complete checkpoint or the other, and the
-        # next save deletes whichever is not current).
-        write_text(root / "latest.json", json.dumps({"dir": target.name}), durable=True)
-        for old in root.iterdir():  # the run's own (writers.CHECKPOINT): a folder a user put there is kept
-            if old.is_dir() and old != target and CHECKPOINT.fullmatch(old.name):
-                shutil.rmtree(old, ignore_errors=True)
+        save_checkpoint(self.out, self.learner, self.state, self.config)
 
     def restore_checkpoint(self) -> None:
-        root = self.out / "checkpoints"
-        source = root / "latest.json"
-        try:
-            checkpoint = root / json.loads(source.read_text())["dir"]
-            source = checkpoint / "state.json"  # first: the file a person may have edited is named
-            state = TrainingState.from_dict(json.loads(source.read_text()))
-            source = checkpoint
-            self.learner.checkpoint().read(str(source / "tf")).assert_existing_objects_matched()
-            dynamic = self.learner.dynamic
-            if dynamic is not None:
-                dynamic.episodes = demo_io.load(source / "demos.npz").episodes()
-                recent = source / "recent.npz"
-                dynamic.recent = demo_io.load(recent).episodes() if recent.is_file() else []
-            self.state = state
-        # AssertionError: the checkpoint lacks a variable the learner has (a checkpoint of an earlier version).
-        except (OSError, ValueError, LookupError, TypeError, AssertionError, tf.errors.OpError) as error:
-            raise BrokenRunError(
-                f"{source}: the checkpoint cannot be resumed ({one_line(error)}); start the run over with --force"
-            ) from None
+        self.state = restore_checkpoint(self.out, self.learner)
         self.learner.tally.count = self.state.interactions
 
     # --- the end ----------------------------------------------------------------------------
@@ -270,8 +190,7 @@ class RunDirectory:
         write_text(out / "eval.json", json.dumps(evaluation.to_dict(), indent=1))
         plot_learning_curve(self.state.metrics, self.state.evals, self.config, out / "learning_curve.png")
         self.save_checkpoint()
-        with self.tb_errors():
-            self.tb.close()
+        self.events.close(create=True)
         write_text(out / "provenance.json", json.dumps(provenance(), indent=1))
         write_text(
             out / COMPLETE,
@@ -319,7 +238,7 @@ def train(
     with DirectoryLock(out, check=lambda: check_dir(out, resume, force)) as lock:  # a live writer is named first
         mode = lock.checked
         if mode == RESTART:
-            dataset = _restart(out, config, dataset, resume)
+            dataset = restart_demos(out, config, dataset, resume)
         resume = mode == RESUME
         try:
             if not resume:
@@ -341,18 +260,6 @@ def train(
         return _train_into(run, callback)
 
 
-def _restart(
-    out: Path, config: Config, dataset: demo_io.DemoDataset | None, resume: bool
-) -> demo_io.DemoDataset | None:
-    """The D_demo to start over a run stopped before its first checkpoint with: its own, as a
-    resume would, if it got as far as keeping it; else `dataset`."""
-    warnings.warn(
-        f"{out}: no checkpoint yet (the run was stopped before its first); starting it over", DqfdWarning, stacklevel=3
-    )
-    given = out / "checkpoints" / GIVEN_DEMOS
-    return _given_demos(given, config) if resume and given.is_file() else dataset
-
-
 def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None = None) -> RunResult:
     """Go on training the learner of `run`, finished or stopped in this process, to a budget of
     `total_steps`: its config.json says the new budget once a checkpoint has it."""
@@ -360,9 +267,7 @@ def continue_run(run: RunDirectory, total_steps: int, callback: Callback | None 
         run.learner.extend(total_steps)
         run.config = run.learner.config
         run.progress = None
-        tb = run.__dict__.pop("tb", None)  # closed by `finish`, or left open by a stop: opened again when used
-        if tb is not None:
-            tb.close()
+        run.events.close()  # closed by `finish`, or left open by a stop: opened again when used
         (run.out / COMPLETE).unlink(missing_ok=True)
         run.save_checkpoint()
         write_config(run.config, run.out)
@@ -397,70 +302,18 @@ def save_run(out: str | Path, learner: Learner, state: TrainingState, source: st
         run.finish()
 
 
-def saved_config(out: str | Path) -> Config:
-    """The config of the run in `out`, to resume it: its task, env kwargs and step limit come from
-    there, not from the command line. A one-line error if there is no run to resume, and if its
-    `config.json` is not the one its latest checkpoint was trained with (a copy is in each)."""
-    out = Path(out)
-    check_dir(out, resume=True, force=False)
-    config = _read_config(out / "config.json")
-    try:
-        own = out / "checkpoints" / json.loads((out / "checkpoints" / "latest.json").read_text())["dir"] / "config.json"
-    except (OSError, ValueError, KeyError, TypeError):
-        return config  # an unreadable latest.json is the restore's to report
-    trained = _read_config(own)
-    if trained.total_steps > config.total_steps and trained == dataclasses.replace(
-        config, total_steps=trained.total_steps
-    ):
-        return trained  # a longer budget (continue_run) was checkpointed, then stopped before config.json said it
-    changed = differences(trained.to_dict(), config.to_dict())
-    if changed:
-        raise BrokenRunError(
-            f"{out / 'config.json'}: differs from the config the run was trained with ({own}) in "
-            f"{'; '.join(changed)}; put it back, or start the run over with --force"
-        )
-    return config
-
-
-def differences(was: dict, now: dict) -> list[str]:
-    """The fields whose values differ between two configs' dicts, as `key: now (was before)`."""
-    return [
-        f"{key}: {now.get(key)!r} (was {was.get(key)!r})"
-        for key in sorted({*was, *now})
-        if was.get(key) != now.get(key)
-    ]
-
-
-def _read_config(path: Path) -> Config:
-    """A run's config.json or its checkpoint's copy, holding every field of Config; a run of a
-    Python env object is refused as such (only Python can give it its env again), not as broken."""
-    try:
-        fields = json.loads(path.read_text())
-        env = fields.get("task") if isinstance(fields, dict) else None
-        if not unmade_env(env):
-            return Config.from_dict(fields)
-    except (OSError, ValueError) as error:
-        raise BrokenRunError(
-            f"{path}: cannot be resumed ({one_line(error)}); start the run over with --force"
-        ) from None
-    raise RunDirectoryError(
-        f"{path}: trained on a Python env object ({env}), which no other process can make; "
-        "give it again: --env ID, a registered id of the same env, or from Python DQfD.load(path, env=...)"
-    )
-
-
 def _start(
     config: Config, out: Path, dataset: demo_io.DemoDataset | None, resume: bool, quiet: bool, source: str | None = None
 ) -> RunDirectory:
     """Steps 1–2 and the first checkpoint, or a resumed run's learner and state."""
     if resume:
         config = saved_config(out)
-        if _read_config(out / "config.json") != config:  # the budget a checkpoint has and config.json lacked
+        if read_config(out / "config.json") != config:  # the budget a checkpoint has and config.json lacked
             write_config(config, out)
     else:
         write_config(config, out)
     if resume and config.uses_demos:  # the run's own D_demo, not a new recording (nor the --demos of this call)
-        dataset = _given_demos(out / "checkpoints" / GIVEN_DEMOS, config)
+        dataset = given_demos(out / "checkpoints" / GIVEN_DEMOS, config)
     learner, _ = build(config, dataset, fresh=not resume)
     run = RunDirectory(config, out, learner, TrainingState(), quiet)
     if resume:
@@ -470,20 +323,3 @@ def _start(
         run.state.next_checkpoint = config.checkpoint_every
         run.save_checkpoint()
     return run
-
-
-def _given_demos(given: Path, config: Config) -> demo_io.DemoDataset:
-    """The D_demo a run was given (checkpoints/demos_given.npz), checked against its config."""
-    try:
-        return demo_io.load(given, task=config.task, timeout=config.timeout, env_kwargs=config.env_kwargs)
-    except DemoFileError as error:
-        raise BrokenRunError(f"{error}; the run cannot be resumed: start the run over with --force") from None
-
-
-def free_name(path: Path) -> Path:
-    """`path`, or `path.1`, `path.2`, … if taken: a checkpoint never overwrites the current one."""
-    candidate, k = path, 0
-    while candidate.exists():
-        k += 1
-        candidate = path.with_name(f"{path.name}.{k}")
-    return candidate

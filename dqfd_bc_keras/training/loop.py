@@ -13,6 +13,8 @@ An episode is one TensorFlow graph call (`interaction.Interaction.play`: act, st
 store, learn, all in the graph). Per-episode work (logging, evaluation, dynamic
 demonstrations, checkpoints) stays in Python: `training/state.py` keeps its bookkeeping, each
 episode ends in a `records.EpisodeRow`, and `runs/directory.py` writes the files of a run.
+D_demo and π_bc's fits are `training/demonstrations.py`'s, dynamic demonstrations
+`training/dynamic.py`'s.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import gymnasium as gym
 import keras
@@ -32,52 +35,20 @@ import tensorflow as tf
 from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
 from dqfd_bc_keras.core.bc import BCModel, build_bc_model
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.demos.dataset import DemoDataset, concatenate
-from dqfd_bc_keras.demos.recording import Demonstrator, record, rollout
+from dqfd_bc_keras.demos.dataset import DemoDataset
 from dqfd_bc_keras.envs.make import checked_spaces, make_task
 from dqfd_bc_keras.envs.wrappers import CountInteractions, Tally
 from dqfd_bc_keras.errors import DivergedError
 from dqfd_bc_keras.evaluation import EvalResult, GreedyPolicy, evaluate
-from dqfd_bc_keras.seeds import BC_FIT, ROLLOUT, demo_seed, episode_seed, eval_seed
-from dqfd_bc_keras.tasks import Rule
+from dqfd_bc_keras.seeds import episode_seed, eval_seed
+from dqfd_bc_keras.training.demonstrations import demonstrations, fit_bc
+from dqfd_bc_keras.training.dynamic import DynamicDemos
 from dqfd_bc_keras.training.interaction import Interaction
-from dqfd_bc_keras.training.records import DemoUpdate, EpisodeRow, EvalRow, Losses
+from dqfd_bc_keras.training.records import EpisodeRow, EvalRow, Losses
 from dqfd_bc_keras.training.state import TrainingState, early_stop
 
 METRIC_FIELDS = EpisodeRow.columns()
 """metrics.csv's columns, as the record spells them."""
-
-
-def demonstrations(config: Config, dataset: DemoDataset | None) -> DemoDataset | None:
-    """Step 1: the given dataset, or `demo_episodes` recorded from the scripted `expert`."""
-    if not config.uses_demos:
-        return None
-    return dataset if dataset is not None else record_demos(config, config.expert)
-
-
-def record_demos(config: Config, expert: str | Demonstrator | Rule) -> DemoDataset:
-    """`demo_episodes` episodes of `expert` (a name `make_demonstrator` takes, a callable, or one made) on the task."""
-    return record(
-        config.task,
-        expert,
-        config.demo_episodes,
-        seed=demo_seed(config.seed),
-        epsilon=config.expert_epsilon,
-        timeout=config.timeout,
-        max_steps=config.max_steps,
-        env_kwargs=config.env_kwargs,
-    )
-
-
-def fit_bc(config: Config, bc: BCModel, data: DemoDataset, epochs: int, fit_index: int) -> float:
-    """Fit (or refit, warm-started) π_bc on D_demo; returns its training accuracy.
-
-    The global seed is set from (run seed, fit index), so a resumed run refits identically.
-    """
-    seed = episode_seed(config.seed, fit_index, BC_FIT) % 2**31
-    keras.utils.set_random_seed(seed)
-    metrics = bc.fit_demos(data.obs, data.actions, epochs=epochs, batch_size=config.batch_size, seed=seed)
-    return metrics["accuracy"] if epochs else float("nan")
 
 
 def random_obs_scale(env: gym.Env, seed: int, steps: int = 2000) -> tuple[np.ndarray, np.ndarray]:
@@ -85,11 +56,16 @@ def random_obs_scale(env: gym.Env, seed: int, steps: int = 2000) -> tuple[np.nda
     rng = np.random.default_rng(seed)
     states, (obs, _) = [], env.reset(seed=seed)
     for _ in range(steps):
-        obs, _, terminated, truncated, _ = env.step(int(rng.integers(env.action_space.n)))
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(discrete_actions(env))))
         states.append(obs)
         if terminated or truncated:
             obs, _ = env.reset(seed=int(rng.integers(2**31)))
     return np.mean(states, axis=0), np.std(states, axis=0)
+
+
+def discrete_actions(env: gym.Env) -> int:
+    """n of the env's Discrete(n) actions (`checked_spaces` refused any other action space)."""
+    return int(cast(gym.spaces.Discrete, env.action_space).n)
 
 
 def build_learner(
@@ -99,9 +75,10 @@ def build_learner(
     restores its weights), and the agent with D_demo loaded."""
     keras.utils.set_random_seed(config.seed)
     net_input = checked_spaces(config).network_input(config.torso, config.timeout)
-    n_actions = int(env.action_space.n)
+    n_actions = discrete_actions(env)
     bc = None
     if config.uses_bc:
+        assert data is not None, "a BC-based loss has demonstrations (Config checks it)"
         bc = build_bc_model(config, net_input, n_actions, None if net_input.image else data.obs_scale())
         if fit:
             fit_bc(config, bc, data, config.bc_epochs, fit_index=0)
@@ -109,95 +86,6 @@ def build_learner(
             bc.optimizer.build(bc.trainable_variables)
     scale = None if data is not None or net_input.image else random_obs_scale(env, config.seed)
     return make_agent(config, data, bc, obs_scale=scale, spaces=(net_input, n_actions)), bc
-
-
-class DynamicDemos:
-    """DQfD-BC's dynamic demonstrations (§5): D_demo grows with the agent's best episodes.
-
-    The paper: "when the final cumulative reward for each episode reaches a new high score,
-    transition samples are … inserted into the demonstration dataset". Two readings
-    (`Config.dynamic_demos`): `episodes` inserts the agent's own training episodes since the
-    last update whose return reaches the new best moving average (no extra interaction);
-    `rollouts` plays M fresh greedy episodes on a separate env (ALGORITHM.md §5; each of their
-    steps is an interaction and is counted).
-    """
-
-    def __init__(self, config: Config, data: DemoDataset, env: gym.Env) -> None:
-        self.config, self.env = config, env
-        self.episodes = data.episodes()
-        self.demo_average = float(np.mean(data.meta.episode_returns))
-        self.recent: list[DemoDataset] = []
-        """`episodes` mode: the agent's training episodes since the last update (at most W)."""
-
-    def observe(self, episode: DemoDataset) -> None:
-        """A training episode just ended (`episodes` mode)."""
-        self.recent = (self.recent + [episode])[-self.config.dynamic_window :]
-
-    @property
-    def dataset(self) -> DemoDataset:
-        return concatenate(self.episodes, source=self.episodes[0].meta.expert)
-
-    def due(self, state: TrainingState) -> bool:
-        """The moving average of the last W returns reaches a new best, at least the demos' average."""
-        W = self.config.dynamic_window
-        if len(state.returns) < W:
-            return False
-        average = float(np.mean(state.returns[-W:]))
-        if average > state.best_average and average >= self.demo_average:
-            state.best_average = average
-            return True
-        return False
-
-    def new_episodes(self, agent: DQfDAgent, state: TrainingState) -> list[DemoDataset]:
-        """The episodes this update inserts: M greedy roll-outs, or the recent training episodes
-        whose return reaches the new best average."""
-        c = self.config
-        if c.dynamic_demos == "rollouts":
-            seeds = [episode_seed(c.seed, state.episode * 100 + i, ROLLOUT) for i in range(c.dynamic_rollouts)]
-            return rollout(
-                self.env,
-                GreedyPolicy.from_model(agent.q_network),
-                seeds,
-                task=c.task,
-                source="agent",
-                seed=c.seed,
-                env_kwargs=c.env_kwargs,
-            ).episodes()
-        chosen = [e for e in self.recent if e.meta.episode_returns[0] >= state.best_average]
-        self.recent = []
-        return chosen
-
-    def update(
-        self, agent: DQfDAgent, bc: BCModel, state: TrainingState, env_step: int, interactions: int
-    ) -> DemoUpdate | None:
-        """Insert the new episodes into D_demo (lowest returns dropped past capacity) and refit
-        π_bc, at `env_step` and `interactions` (the episode's last); None when there is nothing
-        new to insert."""
-        c = self.config
-        new = self.new_episodes(agent, state)
-        if not new:
-            return None
-        self.episodes += new
-        self.episodes.sort(key=lambda e: -e.meta.episode_returns[0])  # stable: older first among ties
-        while sum(len(e) for e in self.episodes) > c.demo_capacity and len(self.episodes) > 1:
-            self.episodes.pop()
-        data = self.dataset
-        state.bc_fits += 1
-        accuracy = fit_bc(c, bc, data, c.bc_refit_epochs, fit_index=state.bc_fits)
-        agent.set_demos(data.obs, data.actions, data.rewards, data.next_obs, data.terminated, data.truncated)
-        agent.refresh_expert_targets()
-        return DemoUpdate(
-            episode=state.episode,
-            env_step=env_step,
-            interactions=interactions,
-            moving_average=state.best_average,
-            mode=c.dynamic_demos,
-            new_returns=[e.meta.episode_returns[0] for e in new],
-            new_transitions=sum(len(e) for e in new),
-            demo_transitions=len(data),
-            demo_episodes=len(self.episodes),
-            bc_accuracy=accuracy,
-        )
 
 
 def run_evaluation(config: Config, agent: DQfDAgent, episodes: int, seed: int) -> EvalResult:
@@ -281,7 +169,7 @@ def build(config: Config, dataset: DemoDataset | None = None, fresh: bool = True
     check_finite(losses, "pre-training")
     agent.reset_metrics()
     dynamic = None
-    if bc is not None and config.dynamic_demos != "off":
+    if bc is not None and data is not None and config.dynamic_demos != "off":
         rollout_env = CountInteractions(task_env(config), tally)
         dynamic = DynamicDemos(config, data, rollout_env)
     keep_episodes = dynamic is not None and config.dynamic_demos == "episodes"
@@ -402,7 +290,9 @@ def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode
                 learner.dynamic.observe(interaction.recorder.dataset())
             if learner.dynamic.due(state):
                 started = time.perf_counter()
-                update = learner.dynamic.update(agent, learner.bc, state, row.env_step, learner.interactions)
+                bc = learner.bc
+                assert bc is not None, "dynamic demonstrations refit π_bc"
+                update = learner.dynamic.update(agent, bc, state, row.env_step, learner.interactions)
                 if update is not None:
                     state.demo_updates.append(update)
                 state.wall_time += time.perf_counter() - started
