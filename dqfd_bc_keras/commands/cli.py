@@ -1,6 +1,6 @@
-"""What every command-line entry point shares: one-line errors and exit code 2, near misses
-answered with a suggestion. Light on purpose (no TensorFlow): a command parses its arguments
-before it imports anything heavy."""
+"""What every command-line entry point shares: TensorFlow's process settings (`runtime.configure`),
+one-line errors and exit code 2, near misses answered with a suggestion. Light on purpose (no
+TensorFlow): a command parses its arguments before it imports anything heavy."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import sys
 import warnings
 from collections.abc import Callable, Sequence
 
+from dqfd_bc_keras import runtime
 from dqfd_bc_keras.errors import DqfdError, DqfdWarning
 from dqfd_bc_keras.seeds import MAX_SEED
 
@@ -238,12 +239,15 @@ RESUMABLE = "a training run continues from its last checkpoint with --resume"
 def run(
     main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None, interrupted: str = RESUMABLE
 ) -> int:
-    """Call `main`, turning every failure a user can meet into one line on stderr: a user error
-    or an OS error (full disk, read-only path, a directory where a file belongs) exits 2,
-    Ctrl-C 130 and SIGTERM 143 (saying `interrupted`: what the interruption left)."""
+    """Call `main` in a process configured as every command's is (`runtime.configure`: quiet, oneDNN
+    off, `DQFD_TF_THREADS` or 1 thread, set before the command loads TensorFlow), turning every
+    failure a user can meet into one line on stderr: a user error or an OS error (full disk,
+    read-only path, a directory where a file belongs) exits 2, Ctrl-C 130 and SIGTERM 143 (saying
+    `interrupted`: what the interruption left)."""
     signal.signal(signal.SIGTERM, _terminate)
     warnings.showwarning = _show_warning
     try:
+        runtime.configure()
         return main(argv)
     except DqfdError as error:
         print(f"error: {error}", file=sys.stderr)
