@@ -70,6 +70,25 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
     parser.set_defaults(default_task=default)
 
 
+def preset_default(field: str) -> str:
+    """Config `field`'s default as the task presets set it, for a help text: its one value, or the
+    most common one, then each other with its presets (`10; 5 on cartpole, cartpole-200`). Generated,
+    so that a help text cannot state a default the presets do not have."""
+    from dqfd_bc_keras.core.config import Config
+    from dqfd_bc_keras.tasks import TASKS
+
+    presets: dict[object, list[str]] = {}
+    for name in sorted(TASKS):
+        presets.setdefault(getattr(Config.for_task(name), field), []).append(name)
+    common, *others = sorted(presets, key=lambda value: -len(presets[value]))
+    shown = [_shown(common), *(f"{_shown(value)} on {', '.join(presets[value])}" for value in others)]
+    return "; ".join(shown)
+
+
+def _shown(value: object) -> str:
+    return f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value)
+
+
 def chosen_task(args: argparse.Namespace) -> str | None:
     """The task of `add_task_arguments`' flags: --env, else --task, else the default."""
     return args.env or args.task or args.default_task
