@@ -68,7 +68,7 @@ def configure(threads: int | None = None) -> None:
     set if TensorFlow has run no op yet; once it has, a different count is a `DqfdWarning` (the
     process keeps the pools it has)."""
     settings = environment(threads)
-    loaded = "tensorflow" in sys.modules
+    loaded = sys.modules.get("tensorflow") is not None  # None: blocked (an SB3 process keeps TensorFlow out)
     running = tensorflow_threads() if loaded else (0, 0)
     os.environ.update(settings)
     logging.getLogger("tensorflow").setLevel(logging.ERROR)  # tf.get_logger(), without importing TensorFlow

@@ -139,3 +139,15 @@ def test_a_python_user_configures_the_process_first_and_is_told_when_it_is_too_l
         "call configure(threads=3) before its first op"
     ]
     assert done.stderr == ""
+
+
+def test_a_process_that_keeps_tensorflow_out_is_configured_without_it(monkeypatch):
+    """An SB3 process blocks TensorFlow (`sys.modules["tensorflow"] = None`, as experiments/sb3_pixels.py
+    does): its command line configures it all the same, without importing TensorFlow."""
+    from dqfd_bc_keras import runtime
+
+    monkeypatch.setitem(sys.modules, "tensorflow", None)
+    for name in runtime.environment():
+        monkeypatch.setenv(name, os.environ.get(name, ""))  # restored after the test, whatever configure sets
+    runtime.configure(threads=3)
+    assert sys.modules["tensorflow"] is None and os.environ[runtime.INTRA_ENV] == "3"

@@ -35,7 +35,6 @@ from dqfd_bc_keras.experiments.data import SWEEP_LOG
 from dqfd_bc_keras.experiments.names import BACKENDS, RUNS_PER_WORKER
 from dqfd_bc_keras.experiments.suites import Arm, suite_arms
 from dqfd_bc_keras.files import DirectoryLock, write_text
-from dqfd_bc_keras.runs.directory import COMPLETE
 from dqfd_bc_keras.runs.provenance import provenance
 
 
@@ -57,6 +56,8 @@ class Job:
         without checkpoints/ (`export` keeps none, and a run started here has one until it is
         done). Neither is run again, so resuming a sweep in an unpacked archive trains only what
         it lacks and never replaces an archived run."""
+        from dqfd_bc_keras.runs.directory import COMPLETE  # TensorFlow: a worker loads it after runtime.configure()
+
         d = self.directory
         return (d / COMPLETE).is_file() or ((d / "eval.json").is_file() and not (d / "checkpoints").exists())
 
