@@ -151,3 +151,32 @@ def test_a_process_that_keeps_tensorflow_out_is_configured_without_it(monkeypatc
         monkeypatch.setenv(name, os.environ.get(name, ""))  # restored after the test, whatever configure sets
     runtime.configure(threads=3)
     assert sys.modules["tensorflow"] is None and os.environ[runtime.INTRA_ENV] == "3"
+
+
+SWEEP_FROM_PYTHON = """
+import json, os, sys
+from pathlib import Path
+from dqfd_bc_keras.experiments.suites import SUITES
+from dqfd_bc_keras.experiments.sweep import Job, run_jobs
+
+out = Path(sys.argv[1])
+[outcome] = run_jobs([Job(SUITES["quick"][1], 0, out)], out, "one", 1, workers=1, progress=lambda _: None)
+tensorflow = json.loads((outcome.job.directory / "provenance.json").read_text())["tensorflow"]
+print(outcome.error or "finished", tensorflow["onednn"], tensorflow["intra_op_threads"], tensorflow["inter_op_threads"])
+print(sorted(name for name in os.environ if name.startswith(("TF_", "DQFD_", "KERAS_"))))
+"""
+
+
+def test_a_sweep_worker_configures_itself_and_leaves_its_callers_process_alone(tmp_path):
+    """The lab's engine called from Python by a process nobody configured: its worker runs as a
+    command does (oneDNN off, one thread, as its provenance.json records), the caller stays as it was."""
+    done = subprocess.run(
+        [sys.executable, "-c", SWEEP_FROM_PYTHON, str(tmp_path)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**CLEAN, "PYTHONPATH": str(REPO)},
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-2:] == ["finished 0 1 1", "[]"]
