@@ -33,7 +33,6 @@ def our_rate(steps: int, expert_loss: str) -> float:
     """Env steps per second of `Interaction.play`, episodes back to back, after one warm-up episode."""
     import tensorflow as tf
 
-    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
     from dqfd_bc_keras.core.config import Config
     from dqfd_bc_keras.training import loop as training
 

@@ -37,8 +37,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import interleave
 import numpy_loop_probe
 
-import dqfd_bc_keras  # noqa: F401  (light; before interleave's SB3 child blocks TensorFlow, which its import checks)
-
 TASK, ENV_ID = "minatar-breakout", "MinAtar/Breakout-v1"
 WARMUP = 500
 """`--warmup`'s default: env steps (and, for ours, pre-training updates) before the clock starts:

@@ -62,7 +62,9 @@ def main(argv=None) -> int:
         args.seeds, args.rounds = 1, 1
     if min(args.seeds, args.rounds, args.workers) < 1:
         parser.error("--seeds, --rounds and --workers must be ≥ 1")
-    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads)
+    from dqfd_bc_keras import runtime
+
+    runtime.configure()  # as the lab's command line does, before TensorFlow loads; its workers inherit it
     from dqfd_bc_keras.experiments.sweep import RUNS_PER_WORKER, run_jobs, sweep_jobs
 
     chosen = arms(args.quick)

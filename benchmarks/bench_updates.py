@@ -131,7 +131,6 @@ def sb3_rate(updates: int) -> float | None:
 
 def our_figures(losses: list[str], updates: int, steps_per_call: int) -> dict[str, float]:
     """Every figure of ours, in this process: per loss fused, per_call and their ratio; bayes taken apart."""
-    import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
     from dqfd_bc_keras.demos import record
 
     demos = record("cartpole", "imperfect", episodes=5, seed=0)

@@ -139,10 +139,9 @@ def in_process() -> dict:
         "torch_imported": sys.modules.get("torch") is not None,
     }
     if info["tensorflow_imported"]:
-        import tensorflow as tf
+        from dqfd_bc_keras import runtime
 
-        info["tf_intra_op_threads"] = tf.config.threading.get_intra_op_parallelism_threads()
-        info["tf_inter_op_threads"] = tf.config.threading.get_inter_op_parallelism_threads()
+        info["tf_intra_op_threads"], info["tf_inter_op_threads"] = runtime.tensorflow_threads()
     if info["torch_imported"]:
         import torch
 
@@ -196,6 +195,10 @@ def run_child(side: str, sides: dict[str, Callable[[], dict | None]]) -> int:
         # SB3's logger imports tensorboard, which imports TensorFlow when it is installed: keep it
         # out (tensorboard falls back to its stub), so TensorFlow and torch never share a process.
         sys.modules.setdefault("tensorflow", None)
+    else:
+        from dqfd_bc_keras import runtime
+
+        runtime.configure()  # as the command lines do, before the side loads TensorFlow
     print(json.dumps({"figures": sides[side](), "process": in_process()}))
     return 0
 

@@ -11,6 +11,7 @@ its own colours at 48 pixels a cell by `envs/minatar_pixels.py`, at 24), and wri
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -18,7 +19,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from PIL import Image
 
-import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads and log level)
+from dqfd_bc_keras import runtime
+
+os.environ.update(runtime.environment())  # runtime.configure()'s settings, before TensorFlow loads
+
 from dqfd_bc_keras.envs.make import make_plain_env
 from dqfd_bc_keras.evaluation import load_policy
 from dqfd_bc_keras.files import atomic_path

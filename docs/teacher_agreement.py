@@ -23,10 +23,15 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import json
+import os
 
 import numpy as np
 
 import dqfd_bc_keras
+from dqfd_bc_keras import runtime
+
+os.environ.update(runtime.environment())  # runtime.configure()'s settings, before TensorFlow loads
+
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.demos.recording import expert_returns, make_demonstrator, record
 from dqfd_bc_keras.envs.make import get_task, task_spaces

@@ -1,6 +1,12 @@
 """Fixtures shared by the tests: the strong CartPole expert's demonstrations, one fitted BC model per
 kind of fit and one finished `--quick` run per expert loss (each made once per session, as the first
-test asks for it), and the process-wide state every test leaves as it found it."""
+test asks for it), and the process-wide state every test leaves as it found it. First of all, the
+process is configured as the command lines configure theirs (`runtime.configure`), before anything
+imports TensorFlow: the tests run in-process what the commands run, with the commands' numbers."""
+
+from dqfd_bc_keras import runtime
+
+runtime.configure()
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -10,7 +16,6 @@ import keras
 import pytest
 from helpers import Answer, call, forgetting
 
-import dqfd_bc_keras  # noqa: F401  (first: TF settings; custom objects, Gymnasium ids)
 from dqfd_bc_keras.core.bc import build_bc_model
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.methods import METHODS

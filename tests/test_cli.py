@@ -160,19 +160,6 @@ def test_expert_loss_takes_any_name_and_config_refuses_an_unknown_one():
     assert_answered_without_tensorflow(done)
 
 
-def test_the_package_imports_without_tensorflow_and_sets_its_threads_when_it_loads():
-    code = (
-        "import sys, dqfd_bc_keras; light = 'tensorflow' not in sys.modules and 'keras' not in sys.modules; "
-        "from dqfd_bc_keras.core.networks import dense_stack; import tensorflow as tf; tf.reduce_sum(tf.ones(3)); "
-        "print(light, tf.config.threading.get_intra_op_parallelism_threads(), "
-        "tf.config.threading.get_inter_op_parallelism_threads(), dqfd_bc_keras.BCModel.__name__)"
-    )
-    env = {k: v for k, v in ENV.items() if not k.startswith(("TF_", "DQFD_"))}
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["True", "1", "1", "BCModel"]
-
-
 def test_load_model_registers_the_custom_objects_first():
     model = dqfd_bc_keras.load_model(REPO / "models" / "cartpole" / "bc_model.keras")
     assert isinstance(model, dqfd_bc_keras.BCModel)

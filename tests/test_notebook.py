@@ -15,6 +15,8 @@ REPO = Path(__file__).resolve().parents[1]
 def test_the_quickstart_notebook_runs_top_to_bottom(tmp_path, monkeypatch):
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
     monkeypatch.setenv("TMPDIR", str(tmp_path))  # the notebook writes only into a temporary directory
+    for name in [name for name in os.environ if name.startswith(("TF_", "DQFD_", "KERAS_"))]:
+        monkeypatch.delenv(name)  # a user's kernel: the notebook's first cell configures it (runtime.configure)
     notebook = nbformat.read(REPO / "docs" / "quickstart.ipynb", as_version=4)
     docs_before = sorted(p.name for p in (REPO / "docs").iterdir())
     nbclient.NotebookClient(
@@ -34,6 +36,7 @@ def test_the_quickstart_notebook_runs_top_to_bottom(tmp_path, monkeypatch):
     assert "python callable walk_right" in printed and "demonstrations from minari:cartpole/push-v0" in printed
     assert "episode 5: return" in printed and "episode 6:" not in printed  # the callback stopped training
     assert "'complete.json'" in printed and "'q_network.keras'" in printed
+    assert "DqfdWarning" not in shown  # configure() came before TensorFlow loaded
     assert "3000/3000" in shown  # learn(progress_bar=True) in Jupyter: tqdm.auto's bar (text without ipywidgets)
     [work] = tmp_path.glob("dqfd-quickstart-*")
     assert (work / "cartpole" / "complete.json").is_file() and (work / "minari" / "cartpole" / "push-v0").is_dir()

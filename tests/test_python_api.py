@@ -19,7 +19,6 @@ from helpers import call
 from toy_envs import Chain
 
 from dqfd_bc_keras import DQfD, demos
-from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning, OutputExistsError
 from dqfd_bc_keras.evaluation import EvalResult, evaluate, load_policy
 from dqfd_bc_keras.seeds import EVAL_SEED
@@ -43,20 +42,42 @@ def walk_right(obs):
     return 1
 
 
+SAME_AS_TRAIN_PY = """
+import json
+import dqfd_bc_keras
+
+dqfd_bc_keras.configure()  # docs/PYTHON.md: first, for train.py's numbers
+from dqfd_bc_keras import DQfD
+from dqfd_bc_keras.core.config import QUICK
+
+model = DQfD("cartpole", seed=0, **{k: v for k, v in QUICK.items() if k != "total_steps"}).learn(QUICK["total_steps"])
+rows = [row.to_row() for row in model.state.metrics]
+print(json.dumps([{k: "" if v is None else str(v) for k, v in row.items() if k != "wall_time"} for row in rows]))
+print(model.config.expert)
+"""
+
+
 def test_the_same_metrics_as_train_py(quick_run):
-    """DQfD(preset, seed, QUICK's fields).learn(N) gives train.py --quick's metrics.csv (seed 0, the
-    default loss), wall time aside."""
-    fields = {key: value for key, value in QUICK.items() if key != "total_steps"}
-    model = DQfD("cartpole", seed=0, **fields).learn(QUICK["total_steps"])
+    """A user's script that calls `configure()` first, then DQfD(preset, seed, QUICK's fields).learn(N), in a
+    process of its own with none of the settings made for it, gives train.py --quick's metrics.csv (seed 0,
+    the default loss), wall time aside."""
+    clean = {k: v for k, v in os.environ.items() if not k.startswith(("TF_", "DQFD_", "KERAS_"))}
+    done = subprocess.run(
+        [sys.executable, "-c", SAME_AS_TRAIN_PY],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**clean, "PYTHONPATH": str(REPO)},
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    printed, expert = done.stdout.splitlines()[-2:]
     run = quick_run().out
     with open(run / "metrics.csv") as file:
         expected = [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(file)]
-    ours = [
-        {k: "" if v is None else str(v) for k, v in row.to_row().items() if k != "wall_time"}
-        for row in model.state.metrics
-    ]
+    ours = json.loads(printed)
     assert ours == expected and len(ours) > 1
-    assert json.loads((run / "config.json").read_text())["expert"] == model.config.expert == "imperfect"
+    assert json.loads((run / "config.json").read_text())["expert"] == expert == "imperfect"
 
 
 def test_an_env_object_a_callable_expert_callbacks_save_load(tmp_path):

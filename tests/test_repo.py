@@ -2,7 +2,6 @@
 short README, links and § citations that resolve, no issue letters, quiet TF."""
 
 import csv
-import os
 import re
 import subprocess
 import sys
@@ -117,19 +116,6 @@ def test_user_facing_docs_cite_no_issue_letters():
         f"{name}: {m.group(0)!r}" for name, text in user_facing_text().items() for m in ISSUE_LETTER.finditer(text)
     ]
     assert not found, found
-
-
-def test_tensorflow_is_quiet_and_single_threaded():
-    code = (
-        "from dqfd_bc_keras import runtime; runtime.configure_tensorflow(); import tensorflow as tf; "
-        "print(tf.reduce_sum(tf.ones(3)).numpy(), tf.config.threading.get_intra_op_parallelism_threads(), "
-        "tf.config.threading.get_inter_op_parallelism_threads())"
-    )
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("TF_", "DQFD_"))}
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, env=env, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["3.0", "1", "1"]
-    assert done.stderr == ""
 
 
 def test_the_quick_start_says_what_the_default_run_gives_on_any_cpu(tmp_path):

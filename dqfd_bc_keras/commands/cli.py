@@ -1,6 +1,6 @@
-"""What every command-line entry point shares: one-line errors and exit code 2, near misses
-answered with a suggestion. Light on purpose (no TensorFlow): a command parses its arguments
-before it imports anything heavy."""
+"""What every command-line entry point shares: TensorFlow's process settings (`runtime.configure`),
+one-line errors and exit code 2, near misses answered with a suggestion. Light on purpose (no
+TensorFlow): a command parses its arguments before it imports anything heavy."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import sys
 import warnings
 from collections.abc import Callable, Sequence
 
+from dqfd_bc_keras import runtime
 from dqfd_bc_keras.errors import DqfdError, DqfdWarning
 from dqfd_bc_keras.seeds import MAX_SEED
 
@@ -67,6 +68,25 @@ def add_task_arguments(parser: argparse.ArgumentParser, default: str | None = No
         "map_name=8x8); anything else, e.g. a value that does not parse, is an error",
     )
     parser.set_defaults(default_task=default)
+
+
+def preset_default(field: str) -> str:
+    """Config `field`'s default as the task presets set it, for a help text: its one value, or the
+    most common one, then each other with its presets (`10; 5 on cartpole, cartpole-200`). Generated,
+    so that a help text cannot state a default the presets do not have."""
+    from dqfd_bc_keras.core.config import Config
+    from dqfd_bc_keras.tasks import TASKS
+
+    presets: dict[object, list[str]] = {}
+    for name in sorted(TASKS):
+        presets.setdefault(getattr(Config.for_task(name), field), []).append(name)
+    common, *others = sorted(presets, key=lambda value: -len(presets[value]))
+    shown = [_shown(common), *(f"{_shown(value)} on {', '.join(presets[value])}" for value in others)]
+    return "; ".join(shown)
+
+
+def _shown(value: object) -> str:
+    return f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value)
 
 
 def chosen_task(args: argparse.Namespace) -> str | None:
@@ -238,12 +258,15 @@ RESUMABLE = "a training run continues from its last checkpoint with --resume"
 def run(
     main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None, interrupted: str = RESUMABLE
 ) -> int:
-    """Call `main`, turning every failure a user can meet into one line on stderr: a user error
-    or an OS error (full disk, read-only path, a directory where a file belongs) exits 2,
-    Ctrl-C 130 and SIGTERM 143 (saying `interrupted`: what the interruption left)."""
+    """Call `main` in a process configured as every command's is (`runtime.configure`: quiet, oneDNN
+    off, `DQFD_TF_THREADS` or 1 thread, set before the command loads TensorFlow), turning every
+    failure a user can meet into one line on stderr: a user error or an OS error (full disk,
+    read-only path, a directory where a file belongs) exits 2, Ctrl-C 130 and SIGTERM 143 (saying
+    `interrupted`: what the interruption left)."""
     signal.signal(signal.SIGTERM, _terminate)
     warnings.showwarning = _show_warning
     try:
+        runtime.configure()
         return main(argv)
     except DqfdError as error:
         print(f"error: {error}", file=sys.stderr)

@@ -33,6 +33,7 @@ from dqfd_bc_keras.commands.cli import (
     chosen_task,
     env_settings,
     positive_int,
+    preset_default,
     run,
     seed,
 )
@@ -60,11 +61,13 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--expert-loss",
         metavar="METHOD",
-        help=f"J_E: {' | '.join(METHODS)} or your own MODULE:NAME (default: bayes; "
+        help=f"J_E: {' | '.join(METHODS)} or your own MODULE:NAME (default: {preset_default('expert_loss')}; "
         "none = plain DQN; sqil = SQIL's rewards, no J_E)",
     )
-    parser.add_argument("--target", choices=TARGETS, help="bootstrap target (default: dqn)")
-    parser.add_argument("--timeout", choices=TIMEOUT_MODES, help="time-limit handling (default: bootstrap)")
+    parser.add_argument("--target", choices=TARGETS, help=f"bootstrap target (default: {preset_default('target')})")
+    parser.add_argument(
+        "--timeout", choices=TIMEOUT_MODES, help=f"time-limit handling (default: {preset_default('timeout')})"
+    )
     parser.add_argument(
         "--demos",
         help="demonstrations: a .npz file or minari:DATASET_ID (the local Minari cache); else recorded from --expert",
@@ -73,13 +76,17 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
         "--expert",
         "--policy",
         dest="expert",
-        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: imperfect; a preset "
+        help=f"who demonstrates: a preset's {' | '.join(EXPERT_NAMES)} (default: {preset_default('expert')}; a preset "
         "of yours without one: its first expert), "
         "a rule module:function (obs → action) or a saved model.keras",
     )
-    parser.add_argument("--demo-episodes", type=positive_int, help="episodes to record (default: 5; 10 on MountainCar)")
-    parser.add_argument("--steps", type=positive_int, help="environment-step budget")
-    parser.add_argument("--seed", type=seed, help="seed of every random generator (default: 0)")
+    parser.add_argument(
+        "--demo-episodes", type=positive_int, help=f"episodes to record (default: {preset_default('demo_episodes')})"
+    )
+    parser.add_argument(
+        "--steps", type=positive_int, help=f"environment-step budget (default: {preset_default('total_steps')})"
+    )
+    parser.add_argument("--seed", type=seed, help=f"seed of every random generator (default: {preset_default('seed')})")
     parser.add_argument("--out", help="run directory (default: runs/TASK-LOSS-seedSEED)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     parser.add_argument("--force", action="store_true", help="replace an existing run in --out")

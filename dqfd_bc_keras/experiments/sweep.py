@@ -28,13 +28,13 @@ from multiprocessing import get_context
 from multiprocessing.connection import wait as wait_for
 from pathlib import Path
 
+from dqfd_bc_keras import runtime
 from dqfd_bc_keras.commands.cli import Terminated
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError, DirectoryInUseError, RunDirectoryError
 from dqfd_bc_keras.experiments.data import SWEEP_LOG
 from dqfd_bc_keras.experiments.names import BACKENDS, RUNS_PER_WORKER
 from dqfd_bc_keras.experiments.suites import Arm, suite_arms
 from dqfd_bc_keras.files import DirectoryLock, write_text
-from dqfd_bc_keras.runs.directory import COMPLETE
 from dqfd_bc_keras.runs.provenance import provenance
 
 
@@ -56,6 +56,8 @@ class Job:
         without checkpoints/ (`export` keeps none, and a run started here has one until it is
         done). Neither is run again, so resuming a sweep in an unpacked archive trains only what
         it lacks and never replaces an archived run."""
+        from dqfd_bc_keras.runs.directory import COMPLETE  # TensorFlow: a worker loads it after runtime.configure()
+
         d = self.directory
         return (d / COMPLETE).is_file() or ((d / "eval.json").is_file() and not (d / "checkpoints").exists())
 
@@ -271,7 +273,9 @@ def _serve(jobs, outcomes) -> None:
     """A worker: run the jobs it is given until it is given None. Ctrl-C is the sweep's to relay
     (as SIGTERM), not the run's. It leaves through `os._exit`: what a run keeps is on disk
     already, and skipping the interpreter's teardown spares a stopping worker the seconds (and
-    the hangs TensorFlow's teardown is known for) that it would add to the sweep's stop."""
+    the hangs TensorFlow's teardown is known for) that it would add to the sweep's stop. Its
+    TensorFlow runs as a command's does, on one core (`DQFD_TF_THREADS` or 1: one run per core)."""
+    runtime.configure()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _stop)
     try:
@@ -302,7 +306,7 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None, runs_per_worker
             num_cpus=None if address else workers,
             include_dashboard=False,
             log_to_driver=False,
-            runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2])}},
+            runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2]), **runtime.environment()}},
         )
     try:
         task = ray.remote(num_cpus=1, max_calls=runs_per_worker)(run_job)
@@ -376,7 +380,6 @@ def run_jobs(
         f"{name}: {len(jobs)} runs, {len(jobs) - len(todo)} already complete, {len(todo)} to run "
         f"on {workers} {backend} worker(s)"
     )
-    os.environ.setdefault("DQFD_TF_THREADS", "1")  # one core per run
     outcomes, started, interrupted = [], time.perf_counter(), True
     stream = (
         _local(todo, workers, runs_per_worker) if backend == "local" else _ray(todo, workers, address, runs_per_worker)

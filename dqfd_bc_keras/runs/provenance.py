@@ -13,6 +13,8 @@ import platform
 import subprocess
 from pathlib import Path
 
+from dqfd_bc_keras import runtime
+
 RULES = (
     "dqfd_bc_keras/experiments/claims.py",
     "dqfd_bc_keras/experiments/metrics.py",
@@ -60,15 +62,15 @@ def tensorflow_build() -> dict:
     """TensorFlow's version and build, whether oneDNN is on, and the thread pools in force."""
     import tensorflow as tf
 
-    threading = tf.config.threading
+    intra_op_threads, inter_op_threads = runtime.tensorflow_threads()
     return {
         "version": tf.__version__,
         "git_version": tf.version.GIT_VERSION,
         "compiler": tf.version.COMPILER_VERSION,
         "build": {key: value for key, value in tf.sysconfig.get_build_info().items() if isinstance(value, bool)},
         "onednn": os.environ.get("TF_ENABLE_ONEDNN_OPTS", "(TensorFlow's default)"),
-        "intra_op_threads": threading.get_intra_op_parallelism_threads(),
-        "inter_op_threads": threading.get_inter_op_parallelism_threads(),
+        "intra_op_threads": intra_op_threads,
+        "inter_op_threads": inter_op_threads,
     }
 
 
