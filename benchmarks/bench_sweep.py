@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     if min(args.seeds, args.rounds, args.workers) < 1:
         parser.error("--seeds, --rounds and --workers must be ≥ 1")
     import dqfd_bc_keras  # noqa: F401  (first: TensorFlow's threads)
-    from dqfd_bc_keras.experiments.sweep import RUNS_PER_WORKER, run_jobs, sweep_jobs
+    from dqfd_bc_keras.experiments.sweep import RUNS_PER_WORKER, SweepOptions, run_jobs, sweep_jobs
 
     chosen = arms(args.quick)
     load_start = os.getloadavg()
@@ -82,9 +82,7 @@ def main(argv=None) -> int:
                     out,
                     f"bench_sweep {side}",
                     args.seeds,
-                    args.workers,
-                    runs_per_worker=SIDES[side] or RUNS_PER_WORKER,
-                    progress=lambda _: None,
+                    SweepOptions(args.workers, runs_per_worker=SIDES[side] or RUNS_PER_WORKER, progress=lambda _: None),
                 )
                 seconds[side].append(time.perf_counter() - start)
                 found[side] = results(out)

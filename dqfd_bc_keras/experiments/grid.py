@@ -33,7 +33,7 @@ from dqfd_bc_keras.experiments.imitation import imitation_arms, load_imitation, 
 from dqfd_bc_keras.experiments.lab_settings import lab_settings
 from dqfd_bc_keras.experiments.metrics import interactions_to_threshold
 from dqfd_bc_keras.experiments.suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
-from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 
 BC_ALONE, DQN = "BC alone", "DQN (no demos)"
@@ -341,9 +341,8 @@ def run_grid(
     out = Path(out)
     tasks = tasks or grid_tasks(quick)
     arms = [a for task in tasks for a in grid_arms(task, quick)]
-    run_suite(
-        arms, seeds, out, workers, progress=progress, name="demos (quick)" if quick else f"demos ({', '.join(tasks)})"
-    )
+    name = "demos (quick)" if quick else f"demos ({', '.join(tasks)})"
+    run_suite(arms, seeds, out, SweepOptions(workers, progress=progress), name=name)
     run_imitation(out, quick, progress, tasks)
     section = grid_section(group_arms(load_runs(out)), out, out / "figures", out, quick, tasks if quick else None)
     write_text(out / GRID_FILE, "\n".join(["# Demonstration quality × quantity", "", *section, ""]))
