@@ -34,13 +34,14 @@ from dqfd_bc_keras.experiments.claims import (
     rule_text,
     too_few,
 )
-from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, RunFileError, load_runs, open_suite
+from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, load_runs, open_suite
 from dqfd_bc_keras.experiments.efficiency import efficiency_section
 from dqfd_bc_keras.experiments.estimators import estimators_section
 from dqfd_bc_keras.experiments.grid import grid_only, grid_section
 from dqfd_bc_keras.experiments.metrics import EARLY_EPISODES, METRICS, PER_RUN, finished
 from dqfd_bc_keras.experiments.plans import PLANNED_SEEDS
 from dqfd_bc_keras.experiments.replicate import replication_section
+from dqfd_bc_keras.experiments.run_files import RunFileError
 from dqfd_bc_keras.experiments.stats import CensoredSummary, Summary
 from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.files import write_text
