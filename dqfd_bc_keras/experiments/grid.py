@@ -26,13 +26,14 @@ import numpy as np
 
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.arms import ArmRuns, group_arms
 from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import ratio_ci, teacher_verdict
 from dqfd_bc_keras.experiments.imitation import imitation_arms, load_imitation, run_imitation
 from dqfd_bc_keras.experiments.lab_settings import lab_settings
 from dqfd_bc_keras.experiments.metrics import interactions_to_threshold
-from dqfd_bc_keras.experiments.suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
+from dqfd_bc_keras.experiments.suites import SUITES, all_grid_arms, grid_arms, grid_cells, grid_tasks
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dqfd_bc_keras.errors import BrokenRunError, DirectoryInUseError, RunDirectoryError
-from dqfd_bc_keras.experiments.suites import Arm
+from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.files import DirectoryLock
 from dqfd_bc_keras.runs.directory import COMPLETE
 

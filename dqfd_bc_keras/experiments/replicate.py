@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.arm_config import arm
 from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm, group_arms
 from dqfd_bc_keras.experiments.claims import CLAIMS, judge
 from dqfd_bc_keras.experiments.data import REPLICATIONS, load_runs
@@ -35,7 +36,6 @@ from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.metrics import PER_RUN, interactions_to_threshold
 from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.stats import mann_whitney
-from dqfd_bc_keras.experiments.suites import arm
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs
 from dqfd_bc_keras.files import write_text
 

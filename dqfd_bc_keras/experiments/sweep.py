@@ -22,10 +22,11 @@ from pathlib import Path
 
 from dqfd_bc_keras.commands.cli import Terminated
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.data import SWEEP_LOG
 from dqfd_bc_keras.experiments.jobs import Job, Outcome, locked, run_job, sweep_jobs
 from dqfd_bc_keras.experiments.names import BACKENDS, RUNS_PER_WORKER
-from dqfd_bc_keras.experiments.suites import Arm, suite_arms
+from dqfd_bc_keras.experiments.suites import suite_arms
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.runs.provenance import provenance
 
