@@ -147,7 +147,12 @@ def report_command(args: argparse.Namespace, parser: ArgumentParser) -> int:
     results = Path(args.results or (Path("docs") if args.docs else default_location(args.source)) / "RESULTS.md")
     figures = Path(args.figures or results.parent / "figures")
     skipped: list[str] = []
-    report(args.source, results, figures, warn=lambda line: (skipped.append(line), warn(line)))
+
+    def skip(line: str) -> None:
+        skipped.append(line)
+        warn(line)
+
+    report(args.source, results, figures, warn=skip)
     print(f"wrote {results}, {results.with_name(PER_SEED)} and figures in {figures}")
     return EXIT_SKIPPED if args.strict and skipped else 0
 

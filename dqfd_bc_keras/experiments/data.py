@@ -114,9 +114,11 @@ def _extract(archive: Path, root: Path) -> None:
                 if name.is_absolute() or ".." in name.parts:
                     raise ConfigError(f"{archive}: member {member.name!r} points outside the suite")
                 if member.isfile():
+                    data = tar.extractfile(member)
+                    assert data is not None  # a regular file's contents
                     target = root.joinpath(*name.parts)
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    target.write_bytes(tar.extractfile(member).read())
+                    target.write_bytes(data.read())
     except (tarfile.TarError, lzma.LZMAError, EOFError) as error:
         problem = f"not a suite directory or a readable {ARCHIVE_SUFFIX} archive ({error})"
         raise ConfigError(f"{archive}: {problem}") from None

@@ -233,7 +233,7 @@ def heatmap(table: Heatmap, colors: dict, label: str, path: Path) -> None:
     with _figure(path, figsize=(1.1 * len(table.columns) + 3, 0.55 * len(table.rows) + 2)) as (fig, ax):
         fig.colorbar(ax.imshow(table.shown, aspect="auto", **colors), ax=ax, label=label)
         for i, j in np.ndindex(table.values.shape):
-            v = table.values[i, j]
+            v = float(table.values[i, j])
             ax.text(
                 j,
                 i,

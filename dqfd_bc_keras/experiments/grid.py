@@ -281,7 +281,8 @@ def _task_section(
         return [f"Not run: `python -m dqfd_bc_keras.experiments grid --task {task} --out results` runs it."]
     seeds = max(e.final.size for entries in table.values() for e in entries.values())
     names = (f"grid-{task}-interactions.png", f"grid-{task}-final.png")
-    heatmaps(cells, table, *(figures_dir / n for n in names), seeds)
+    steps_png, final_png = (figures_dir / n for n in names)
+    heatmaps(cells, table, steps_png, final_png, seeds)
     links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
     config = grid_arms(task)[0].config(0)
     stop = "early stop" if config.early_stop_window else "no early stop"

@@ -118,7 +118,8 @@ def report(
     PER_SEED beside it; return the markdown. A run with a missing or unreadable file is skipped:
     `warn` gets one line naming the file, and the markdown lists it."""
     out_markdown, figures_dir = Path(out_markdown), Path(figures_dir)
-    suite_name, skipped = Path(source).resolve().name, []
+    suite_name = Path(source).resolve().name
+    skipped: list[RunFileError] = []
     with open_suite(source) as directory:
         directory = directory.resolve()
         arms = group_arms(load_runs(directory, skipped))

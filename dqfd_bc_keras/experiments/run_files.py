@@ -11,13 +11,14 @@ import json
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Any
 
 import numpy as np
 
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.episodes import EvalResult
 from dqfd_bc_keras.errors import OLDER, ConfigError
-from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow
+from dqfd_bc_keras.training.records import DemoSummary, DemoUpdate, EpisodeRow, EvalRow, R
 
 RUN_FILES = (
     "config.json",
@@ -31,8 +32,6 @@ RUN_FILES = (
 """What the lab reads of a run directory; the first five are in every complete run, demonstrations.json
 in every run of a method with demonstrations, dynamic_demos.json once D_demo has been updated."""
 REQUIRED = RUN_FILES[:5]
-ROWS: dict[str, type[EpisodeRow] | type[EvalRow]] = {"metrics.csv": EpisodeRow, "evals.csv": EvalRow}
-"""The record each row of a run's CSV files parses into."""
 
 
 @dataclass(frozen=True)
@@ -112,8 +111,8 @@ def _text(path: Path, file: PurePosixPath) -> str:
         raise RunFileError(file, "not UTF-8 text") from None
 
 
-def _read_csv(path: Path, file: PurePosixPath) -> list[EpisodeRow] | list[EvalRow]:
-    """The rows of `path` as its records (`ROWS`); a truncated or garbled file is refused."""
+def _read_csv(path: Path, file: PurePosixPath, record: type[R]) -> list[R]:
+    """The rows of `path` as `record`s; a truncated or garbled file is refused."""
     text = _text(path, file)
     if text and not text.endswith("\n"):
         raise RunFileError(file, "ends in the middle of a line (truncated?)")
@@ -122,11 +121,10 @@ def _read_csv(path: Path, file: PurePosixPath) -> list[EpisodeRow] | list[EvalRo
         header, *lines = list(reader) or [[]]
     except csv.Error as error:
         raise RunFileError(file, f"line {reader.line_num}: {error}") from None
-    record = ROWS[path.name]
     missing = [c for c in record.columns() if c not in header]
     if missing:
         raise RunFileError(file, f"no column(s) {missing} in the header: {OLDER}")
-    rows = []
+    rows: list[R] = []
     for line, values in enumerate(lines, start=2):  # one row per line: no field holds a newline
         if len(values) != len(header):
             raise RunFileError(file, f"line {line} has {len(values)} of {len(header)} fields (truncated?)")
@@ -140,7 +138,7 @@ def _read_csv(path: Path, file: PurePosixPath) -> list[EpisodeRow] | list[EvalRo
 def _read_json(path: Path, file: PurePosixPath, kind: type) -> dict | list:
     """The JSON object (`kind` dict) or array (`kind` list) in `path`."""
     try:
-        value = json.loads(_text(path, file))
+        value: Any = json.loads(_text(path, file))
     except json.JSONDecodeError as error:
         raise RunFileError(file, f"not valid JSON ({error})") from None
     if not isinstance(value, kind):
@@ -203,7 +201,7 @@ def read_run(directory: Path, relative: PurePosixPath, shown: Path) -> FinishedR
     for name in REQUIRED:
         if not (directory / name).is_file():
             raise RunFileError(relative / name, "missing (the run has eval.json, so it should be complete)")
-    metrics = _read_csv(directory / "metrics.csv", relative / "metrics.csv")
+    metrics = _read_csv(directory / "metrics.csv", relative / "metrics.csv", EpisodeRow)
     if not metrics:
         raise RunFileError(relative / "metrics.csv", "no episodes")
     config = read("config.json", dict, _config)
@@ -219,7 +217,7 @@ def read_run(directory: Path, relative: PurePosixPath, shown: Path) -> FinishedR
         shown,
         config,
         metrics,
-        _read_csv(directory / "evals.csv", relative / "evals.csv"),
+        _read_csv(directory / "evals.csv", relative / "evals.csv", EvalRow),
         read("eval.json", dict, _final),
         demonstrations,
         read("dynamic_demos.json", list, _updates) if updates.is_file() else [],

@@ -63,6 +63,7 @@ def claim_rows(arms: list[ArmRuns]) -> tuple[list[str], list[str]]:
                     )
                 )
                 if i == 0:
+                    assert ce is not None  # the reference pair has its ce arm (checked above)
                     diff = _cell(result.comparisons, lambda c: c.interval())
                     test = _cell(result.comparisons, lambda c: f"{c.test} p = {c.p:.3g}")
                     power = "—" if result.power is None else f"sd {result.sd:.3g} · power {result.power:.2f}"

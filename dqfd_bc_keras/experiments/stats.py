@@ -15,14 +15,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy import stats as sps
 
-Statistic = Callable[..., float]
+Statistic = Callable[..., float | np.ndarray]
+"""A statistic over a sample (np.mean, iqm): one value, or one per row with `axis=1`."""
+Values = Sequence[float] | np.ndarray
+"""A metric's values over seeds, as a list or an array."""
 
 
-def iqm(x: Sequence[float], axis: int | None = None) -> float | np.ndarray:
+def iqm(x: Values, axis: int | None = None) -> float | np.ndarray:
     """Interquartile mean: the mean of the middle 50% (25% trimmed from each side).
 
     rliable's definition (`scipy.stats.trim_mean(x, 0.25)`): as robust as the median to a
@@ -31,7 +35,7 @@ def iqm(x: Sequence[float], axis: int | None = None) -> float | np.ndarray:
     return sps.trim_mean(np.asarray(x, dtype=float), 0.25, axis=axis)
 
 
-def as_sample(x: Sequence[float]) -> np.ndarray:
+def as_sample(x: Values) -> np.ndarray:
     """`x` as a flat float array; ValueError if it is empty (no statistic over no seeds)."""
     sample = np.asarray(x, dtype=float).reshape(-1)
     if sample.size == 0:
@@ -65,13 +69,13 @@ def _percentiles(values: np.ndarray, level: float) -> tuple[float, float]:
         raise ValueError(f"level must be in (0, 1), got {level}")
     tail = 100.0 * (1.0 - level) / 2.0
     # Censored samples (inf: "never reached") have no interpolation between values: take order statistics.
-    method = "linear" if np.isfinite(values).all() else "inverted_cdf"
+    method: Literal["linear", "inverted_cdf"] = "linear" if np.isfinite(values).all() else "inverted_cdf"
     low, high = np.percentile(values, [tail, 100.0 - tail], method=method)
     return float(low), float(high)
 
 
 def bootstrap_ci(
-    x: Sequence[float],
+    x: Values,
     statistic: Statistic = np.mean,
     level: float = 0.95,
     resamples: int = 10_000,
@@ -249,7 +253,7 @@ class Summary:
     ci_high: float
 
     @classmethod
-    def of(cls, x: Sequence[float], level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> Summary:
+    def of(cls, x: Values, level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> Summary:
         sample = as_sample(x)
         low, high = bootstrap_ci(sample, np.mean, level, resamples, seed)
         return cls(int(sample.size), float(sample.mean()), float(iqm(sample)), low, high)
@@ -274,7 +278,7 @@ class CensoredSummary:
     censored: int
 
     @classmethod
-    def of(cls, x: Sequence[float], level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> CensoredSummary:
+    def of(cls, x: Values, level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> CensoredSummary:
         sample = as_sample(x)
         low, high = bootstrap_ci(sample, np.median, level, resamples, seed)
         return cls(int(sample.size), float(np.median(sample)), low, high, int(np.sum(np.isinf(sample))))

@@ -12,6 +12,7 @@ field, and how many seeds it gets); each (arm, seed) is one `train.py`-equivalen
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import cast
 
 from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
 from dqfd_bc_keras.envs.make import checked_spaces
@@ -283,7 +284,9 @@ def suite_arms(suite: str) -> list[Arm]:
         return SUITES[suite]
     if parse(suite) is None:
         raise ConfigError(f"unknown suite {suite!r}; expected one of {sorted(SUITES)} or module:NAME")
-    return list(load(suite, f"suite {suite!r}", _is_arms, "non-empty list of experiments.suites.Arm"))
+    return list(
+        cast("list[Arm]", load(suite, f"suite {suite!r}", _is_arms, "non-empty list of experiments.suites.Arm"))
+    )
 
 
 def _is_arms(value: object) -> bool:

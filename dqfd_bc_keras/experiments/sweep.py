@@ -17,7 +17,10 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing import get_context
+from multiprocessing.connection import Connection
 from multiprocessing.connection import wait as wait_for
+from multiprocessing.context import SpawnContext
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 
 from dqfd_bc_keras.commands.cli import Terminated
@@ -41,14 +44,14 @@ the next runner takes over the dead one's lock."""
 class _Worker:
     """A worker process, the pipes that give it jobs and bring back outcomes, and its runs so far."""
 
-    process: object
-    jobs: object
-    outcomes: object
+    process: BaseProcess
+    jobs: Connection
+    outcomes: Connection
     job: Job | None = None
     runs: int = 0
 
     @classmethod
-    def start(cls, context) -> _Worker:
+    def start(cls, context: SpawnContext) -> _Worker:
         take, give = context.Pipe(duplex=False)
         receive, send = context.Pipe(duplex=False)
         process = context.Process(target=_serve, args=(take, send), daemon=True)
@@ -85,7 +88,7 @@ def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WO
     consumer closing this generator), no run is started after it and each running one is sent
     SIGTERM and awaited."""
     context = get_context("spawn")
-    queue, idle, busy = list(jobs), [], {}
+    queue, idle, busy = list(jobs), list[_Worker](), dict[int, _Worker]()
     try:
         while queue or busy:
             while queue and len(busy) < workers:
@@ -102,6 +105,7 @@ def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WO
                 except EOFError:  # its end of the pipe closed without an outcome
                     outcome = None
                 if outcome is None:  # it died during the run
+                    assert worker.job is not None  # a busy worker's
                     worker.process.join()
                     yield Outcome(
                         worker.job, 0, 0, float("nan"), 0.0, f"its process died (exit code {worker.process.exitcode})"
@@ -129,6 +133,7 @@ def _stop_all(workers: list[_Worker]) -> None:
     deadline = time.monotonic() + STOP_GRACE
     for worker in workers:
         if worker.end_by(deadline):
+            assert worker.job is not None  # a running worker's
             print(
                 f"warning: {worker.job.directory}: the run had not stopped {STOP_GRACE:g} s after SIGTERM; "
                 "killed (its last checkpoint is kept, and the next sweep resumes from it)",
