@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     from dqfd_bc_keras import runtime
 
     runtime.configure()  # as the lab's command line does, before TensorFlow loads; its workers inherit it
-    from dqfd_bc_keras.experiments.sweep import RUNS_PER_WORKER, run_jobs, sweep_jobs
+    from dqfd_bc_keras.experiments.sweep import RUNS_PER_WORKER, SweepOptions, run_jobs, sweep_jobs
 
     chosen = arms(args.quick)
     load_start = os.getloadavg()
@@ -84,9 +84,7 @@ def main(argv=None) -> int:
                     out,
                     f"bench_sweep {side}",
                     args.seeds,
-                    args.workers,
-                    runs_per_worker=SIDES[side] or RUNS_PER_WORKER,
-                    progress=lambda _: None,
+                    SweepOptions(args.workers, runs_per_worker=SIDES[side] or RUNS_PER_WORKER, progress=lambda _: None),
                 )
                 seconds[side].append(time.perf_counter() - start)
                 found[side] = results(out)

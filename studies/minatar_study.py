@@ -48,7 +48,7 @@ from dqfd_bc_keras.experiments.stats import (
     stratified_bootstrap_diff_ci,
 )
 from dqfd_bc_keras.experiments.suites import Arm, arm
-from dqfd_bc_keras.experiments.sweep import run_jobs, sweep_jobs
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs, sweep_jobs
 from dqfd_bc_keras.files import write_text
 from studies.pixels import Sb3Job, run_sb3
 
@@ -144,7 +144,7 @@ def measure(
     for seed in range(seeds):
         progress(f"minatar study: seed {seed} of 0–{seeds - 1}")
         jobs = [job for job in sweep_jobs(ours, seed + 1, out) if job.seed == seed]
-        run_jobs(jobs, out, "minatar", seed + 1, workers, progress=progress, finished=export)
+        run_jobs(jobs, out, "minatar", seed + 1, SweepOptions(workers, progress=progress, finished=export))
         run_sb3([job for job in theirs if job.seed == seed], workers, progress, finished=export)
 
 

@@ -39,7 +39,7 @@ from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, load_runs, open_suite
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, ArmSteps, interaction_evals, save, table
 from dqfd_bc_keras.experiments.stats import bootstrap_ci
 from dqfd_bc_keras.experiments.suites import Arm, arm
-from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 
 TASK, ENV_ID = "minatar-breakout", "MinAtar/Breakout-v1"
@@ -161,7 +161,7 @@ def measure(
     seeds = 1 if quick else seeds
     suite = arms(quick)
     if not no_run:
-        run_suite(suite, seeds, out, workers=workers, progress=progress, name="pixels")
+        run_suite(suite, seeds, out, SweepOptions(workers, progress=progress), name="pixels")
     curves = ours(suite, seeds, out)
     baseline = sb3(seeds, workers, out, quick, no_run, progress)
     curves += [baseline] if baseline is not None else []

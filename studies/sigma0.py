@@ -199,12 +199,13 @@ ARCHIVE = "docs/data/sigma0.tar.xz"
 def study_report(source: str | os.PathLike) -> str:
     """docs/SIGMA0.md from the study's runs (a suite directory or its archive): provenance, the
     study's table and answer, the sweeps' wall time. The same data give the same bytes."""
-    from dqfd_bc_keras.experiments.report import _provenance, _skipped, _sweeps
+    from dqfd_bc_keras.experiments.report import _skipped
+    from dqfd_bc_keras.experiments.sections import provenance_line, sweeps_section
 
     skipped: list = []
     with open_suite(source) as directory:
         arms = group_arms(load_runs(directory, skipped))
-        sweeps = _sweeps(directory)
+        sweeps = sweeps_section(directory)
     runs = sum(len(a.runs) for a in arms)
     return "\n".join(
         [
@@ -215,7 +216,7 @@ def study_report(source: str | os.PathLike) -> str:
             "version, apart from docs/data/results.tar.xz (whose runs the current code does not reproduce seed for "
             "seed).",
             "",
-            _provenance(arms),
+            provenance_line(arms),
             "",
             *_skipped(skipped),
             *sigma0_section(arms),

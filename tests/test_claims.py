@@ -19,7 +19,7 @@ from dqfd_bc_keras.experiments import metrics
 from dqfd_bc_keras.experiments import plans as planning
 from dqfd_bc_keras.experiments import report as results
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
-from dqfd_bc_keras.experiments.data import FinishedRun, Provenance, load_runs
+from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import ArmSteps
 from dqfd_bc_keras.experiments.lab_settings import (
     LAB_SETTINGS,
@@ -28,6 +28,7 @@ from dqfd_bc_keras.experiments.lab_settings import (
     lab_settings,
     register_lab_settings,
 )
+from dqfd_bc_keras.experiments.run_files import FinishedRun, Provenance
 from dqfd_bc_keras.experiments.stats import mann_whitney, tost_ci
 from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.runs.directory import EVAL_FIELDS

@@ -23,7 +23,7 @@ from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.core.config import QUICK, Config
 from dqfd_bc_keras.errors import ConfigError, DemoFileError, RunDirectoryError
 from dqfd_bc_keras.experiments.suites import Arm
-from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import DirectoryLock, temporary_of
 from dqfd_bc_keras.runs import checkpoints
 from dqfd_bc_keras.runs import directory as runs
@@ -292,9 +292,9 @@ def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tm
     (run / "checkpoints" / "latest.json").write_text("")  # … and its checkpoint is damaged
     lines = []
     with pytest.raises(ConfigError, match="1 of 1 runs failed"):
-        run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+        run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append))
     assert "failed: BrokenRunError" in lines[-1] and "--restart-broken" in lines[-1]
-    [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append, restart_broken=True)
+    [outcome] = run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append), restart_broken=True)
     assert not outcome.error and (run / "eval.json").is_file()
 
 
@@ -587,9 +587,9 @@ def test_the_runner_resumes_a_run_only_if_its_config_is_the_arms(finished, tmp_p
     (run / runs.COMPLETE).unlink()
     lines = []
     with pytest.raises(ConfigError, match="1 of 1 runs failed"):
-        run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+        run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append))
     assert "not the arm's config (learning_rate: 0.001 (was 0.002))" in lines[-1] and "--restart-broken" in lines[-1]
-    [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append, restart_broken=True)
+    [outcome] = run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append), restart_broken=True)
     assert not outcome.error and json.loads((run / "config.json").read_text())["learning_rate"] == 0.002
 
 
@@ -655,7 +655,7 @@ def test_a_run_held_by_another_live_runner_is_left_to_it_and_not_failed(finished
     (run / runs.COMPLETE).unlink()
     lines = []
     with DirectoryLock(run):  # this test process is the other runner
-        [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+        [outcome] = run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append))
     assert outcome.busy and not outcome.error
     assert "left to the runner that holds it" in lines[1] and f"in use by process {os.getpid()}" in lines[1]
     assert "1 run(s) left to another runner" in lines[-1]

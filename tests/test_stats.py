@@ -7,23 +7,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dqfd_bc_keras.experiments.power import (
+    bound_power,
+    equivalence_power,
+    pooled_sd,
+    sd_from_ci,
+    seeds_for_bound,
+    seeds_for_equivalence,
+)
 from dqfd_bc_keras.experiments.stats import (
     CensoredSummary,
     Summary,
     beyond,
     bootstrap_ci,
     bootstrap_diff_ci,
-    bound_power,
-    equivalence_power,
     equivalent,
     fisher_exact,
     iqm,
     mann_whitney,
-    pooled_sd,
     score_distribution,
-    sd_from_ci,
-    seeds_for_bound,
-    seeds_for_equivalence,
     stratified_bootstrap_ci,
     tost_ci,
 )

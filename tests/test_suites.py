@@ -12,7 +12,7 @@ from dqfd_bc_keras.experiments.__main__ import main
 from dqfd_bc_keras.experiments.claims import PAPER
 from dqfd_bc_keras.experiments.plans import planned_seeds
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, suite_arms
-from dqfd_bc_keras.experiments.sweep import Job, run_suite, sweep_jobs
+from dqfd_bc_keras.experiments.sweep import Job, SweepOptions, run_suite, sweep_jobs
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -125,7 +125,7 @@ def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
 
     monkeypatch.setattr(sweep, "_local", cut_after_one)
     with pytest.raises(KeyboardInterrupt):
-        run_suite("quick", 2, tmp_path, progress=lambda line: None)
+        run_suite("quick", 2, tmp_path, SweepOptions(progress=lambda line: None))
     [logged] = [json.loads(line) for line in (tmp_path / "sweeps.jsonl").read_text().splitlines()]
     assert (logged["suite"], logged["runs"], logged["interrupted"]) == ("quick", 1, True)
 
@@ -144,7 +144,7 @@ def test_a_sweep_in_an_unpacked_archive_runs_only_what_it_lacks(tmp_path):
     (cut_off.directory / "eval.json").write_text("{}")
     assert archived.complete and not cut_off.complete
     lines = []
-    assert run_jobs([archived], tmp_path, "unpacked", 1, workers=1, progress=lines.append) == []
+    assert run_jobs([archived], tmp_path, "unpacked", 1, SweepOptions(1, progress=lines.append)) == []
     assert lines == ["unpacked: 1 runs, 1 already complete, 0 to run on 1 local worker(s)"]
     assert [p.name for p in archived.directory.iterdir()] == ["eval.json"]
 
@@ -153,7 +153,7 @@ def test_unknown_suite_or_backend_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="unknown suite 'everything'"):
         suite_arms("everything")
     with pytest.raises(ConfigError, match="unknown backend 'slurm'"):
-        run_suite("quick", 1, tmp_path, backend="slurm")
+        run_suite("quick", 1, tmp_path, SweepOptions(backend="slurm"))
 
 
 def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path):
@@ -163,15 +163,15 @@ def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path
 
     bayes, ce = SUITES["quick"]
     jobs = [Job(bayes, 1, tmp_path / "reused"), Job(ce, 0, tmp_path / "reused"), Job(bayes, 0, tmp_path / "reused")]
-    reused = run_jobs(jobs, tmp_path / "reused", "reused", 2, workers=1, runs_per_worker=3, progress=lambda _: None)
+    reused = run_jobs(
+        jobs, tmp_path / "reused", "reused", 2, SweepOptions(1, runs_per_worker=3, progress=lambda _: None)
+    )
     fresh = run_jobs(
         [Job(bayes, 0, tmp_path / "fresh")],
         tmp_path / "fresh",
         "fresh",
         1,
-        workers=1,
-        runs_per_worker=1,
-        progress=lambda _: None,
+        SweepOptions(1, runs_per_worker=1, progress=lambda _: None),
     )
     assert len({o.pid for o in reused}) == 1 and fresh[0].pid not in {o.pid for o in reused}
     assert not any(o.error for o in reused + fresh)
@@ -198,7 +198,9 @@ def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_on
         match=r"1 of 2 runs failed; first: .*quick-dies/seed0: its process died "
         r"\(exit code 3\)",
     ):
-        run_jobs([Job(dying, 0, tmp_path), Job(ce, 0, tmp_path)], tmp_path, "dies", 1, workers=1, progress=lines.append)
+        run_jobs(
+            [Job(dying, 0, tmp_path), Job(ce, 0, tmp_path)], tmp_path, "dies", 1, SweepOptions(1, progress=lines.append)
+        )
     assert (tmp_path / ce.name / "seed0" / "complete.json").is_file()
     assert "its process died (exit code 3)" in lines[1] and "episodes" in lines[2]
 
@@ -206,7 +208,7 @@ def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_on
 @pytest.mark.parametrize("backend", ["local", "ray"])
 def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_path):
     lines = []
-    outcomes = run_suite("quick", 1, tmp_path, workers=2, backend=backend, progress=lines.append)
+    outcomes = run_suite("quick", 1, tmp_path, SweepOptions(2, backend, progress=lines.append))
     assert len(outcomes) == 2 and not any(o.error for o in outcomes)
     assert lines[0] == f"quick: 2 runs, 0 already complete, 2 to run on 2 {backend} worker(s)"
     for loss in ("bayes", "ce"):
@@ -216,7 +218,7 @@ def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_pat
         assert json.loads((run_dir / "config.json").read_text())["total_steps"] == QUICK["total_steps"]
     assert sum(line.startswith("[") for line in lines) == 2
     again = []
-    assert run_suite("quick", 1, tmp_path, backend=backend, progress=again.append) == []
+    assert run_suite("quick", 1, tmp_path, SweepOptions(backend=backend, progress=again.append)) == []
     assert again == [f"quick: 2 runs, 2 already complete, 0 to run on 2 {backend} worker(s)"]
     [logged] = [json.loads(line) for line in (tmp_path / "sweeps.jsonl").read_text().splitlines()]
     assert (logged["suite"], logged["runs"], logged["workers"], logged["backend"]) == ("quick", 2, 2, backend)
@@ -244,7 +246,7 @@ def test_cli_rejects_bad_arguments_in_one_line(capsys):
 def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     from dqfd_bc_keras.experiments.report import report
 
-    run_suite("quick", 2, tmp_path / "suite", workers=2, progress=lambda line: None)
+    run_suite("quick", 2, tmp_path / "suite", SweepOptions(2, progress=lambda line: None))
     assert (
         main(
             [

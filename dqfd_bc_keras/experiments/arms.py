@@ -16,8 +16,8 @@ import numpy as np
 
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.methods import METHODS, method_fields
-from dqfd_bc_keras.experiments.data import FinishedRun
 from dqfd_bc_keras.experiments.metrics import PER_RUN
+from dqfd_bc_keras.experiments.run_files import FinishedRun
 
 BAYES_ONLY = tuple(sorted(set(METHODS["bayes"].reads) - set(METHODS["ce"].reads)))
 """Config fields only the bayes loss reads (methods.py): a bayes arm pairs with the ce arm equal in

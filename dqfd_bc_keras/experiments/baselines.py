@@ -40,11 +40,12 @@ from typing import NamedTuple
 from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.evaluation import evaluate
+from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, ArmSteps, interaction_evals, load, save
 from dqfd_bc_keras.experiments.metrics import first_reaching
-from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES, Arm
-from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import eval_seed
 
@@ -307,7 +308,7 @@ def measure(
     steps = []
     if "ours" in parts:
         if not no_run:
-            run_suite(suite, seeds, out, workers=workers, progress=progress, name="sample efficiency")
+            run_suite(suite, seeds, out, SweepOptions(workers, progress=progress), name="sample efficiency")
         steps += ours(suite, seeds, out, complete_only=no_run)
     if "sb3" in parts:
         steps += sb3(sorted({a.task for a in suite}), seeds, workers, out, quick, progress, no_run)

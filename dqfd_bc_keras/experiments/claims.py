@@ -17,17 +17,15 @@ from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting, common_seeds
 from dqfd_bc_keras.experiments.lab_settings import lab_settings
 from dqfd_bc_keras.experiments.metrics import CENSORED, SHARES
+from dqfd_bc_keras.experiments.power import bound_power, equivalence_power, pooled_sd
 from dqfd_bc_keras.experiments.stats import (
     CensoredSummary,
     Summary,
     beyond,
     bootstrap_diff_ci,
-    bound_power,
-    equivalence_power,
     equivalent,
     fisher_exact,
     mann_whitney,
-    pooled_sd,
     tost_ci,
 )
 

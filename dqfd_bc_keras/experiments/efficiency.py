@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dqfd_bc_keras.experiments.data import FinishedRun
 from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS, lab_settings
 from dqfd_bc_keras.experiments.metrics import first_reaching
+from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.stats import bootstrap_ci
 from dqfd_bc_keras.files import write_text
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import itertools
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -213,3 +213,35 @@ def setting_figures(
         cases,
     )
     return [curves, cases]
+
+
+@dataclass(frozen=True)
+class Heatmap:
+    """A table drawn as coloured squares: `shown` gives the colours, `values` the number written in
+    each square by `text` (∞: never; nan: —)."""
+
+    rows: list[str]
+    columns: list[str]
+    values: np.ndarray
+    shown: np.ndarray
+    text: Callable[[float], str]
+    title: str
+
+
+def heatmap(table: Heatmap, colors: dict, label: str, path: Path) -> None:
+    """`table` drawn with the colour map `colors` (imshow's arguments), its colour bar labelled `label`."""
+    with _figure(path, figsize=(1.1 * len(table.columns) + 3, 0.55 * len(table.rows) + 2)) as (fig, ax):
+        fig.colorbar(ax.imshow(table.shown, aspect="auto", **colors), ax=ax, label=label)
+        for i, j in np.ndindex(table.values.shape):
+            v = float(table.values[i, j])
+            ax.text(
+                j,
+                i,
+                table.text(v) if np.isfinite(v) else "never" if v == np.inf else "—",
+                ha="center",
+                va="center",
+                fontsize=7,
+            )
+        ax.set_xticks(range(len(table.columns)), table.columns, fontsize=7)
+        ax.set_yticks(range(len(table.rows)), table.rows, fontsize=8)
+        ax.set_title(table.title)

@@ -26,14 +26,16 @@ import numpy as np
 
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.arms import ArmRuns, group_arms
 from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import ratio_ci, teacher_verdict
+from dqfd_bc_keras.experiments.figures import Heatmap, heatmap
 from dqfd_bc_keras.experiments.imitation import imitation_arms, load_imitation, run_imitation
 from dqfd_bc_keras.experiments.lab_settings import lab_settings
 from dqfd_bc_keras.experiments.metrics import interactions_to_threshold
-from dqfd_bc_keras.experiments.suites import SUITES, Arm, all_grid_arms, grid_arms, grid_cells, grid_tasks
-from dqfd_bc_keras.experiments.sweep import run_suite
+from dqfd_bc_keras.experiments.suites import SUITES, all_grid_arms, grid_arms, grid_cells, grid_tasks
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 
 BC_ALONE, DQN = "BC alone", "DQN (no demos)"
@@ -224,59 +226,35 @@ def heatmaps(
         [[np.median(table[m][c].final) - c.teacher_return if c in table[m] else np.nan for c in cells] for m in methods]
     )
     bound = float(np.nanmax(np.abs(final))) if np.isfinite(final).any() else 1.0
-    _heatmap(
-        path_steps,
-        cells,
-        methods,
-        steps,
-        np.log10(np.maximum(np.where(np.isfinite(steps), steps, np.nan), 1.0)),
+    columns = [c.name.replace(" × ", "\n× ") for c in cells]
+    title = f"{cells[0].task}, teacher × demonstrated episodes: "
+    log_steps = np.log10(np.maximum(np.where(np.isfinite(steps), steps, np.nan), 1.0))
+    heatmap(
+        Heatmap(
+            methods,
+            columns,
+            steps,
+            log_steps,
+            _steps,
+            f"{title}median counted interactions to {cells[0].threshold:g} ({seeds} seeds per cell)",
+        ),
         dict(cmap="viridis_r"),
         "log10 interactions",
-        _steps,
-        f"median counted interactions to {cells[0].threshold:g} ({seeds} seeds per cell)",
+        path_steps,
     )
-    _heatmap(
-        path_final,
-        cells,
-        methods,
-        final,
-        final,
+    heatmap(
+        Heatmap(
+            methods,
+            columns,
+            final,
+            final,
+            lambda v: f"{v:+.0f}",
+            f"{title}median final return − the teacher's mean ({seeds} seeds per cell)",
+        ),
         dict(cmap="RdBu", vmin=-bound, vmax=bound),
         "return − teacher",
-        lambda v: f"{v:+.0f}",
-        f"median final return − the teacher's mean ({seeds} seeds per cell)",
+        path_final,
     )
-
-
-def _heatmap(
-    path: Path,
-    cells: list[Cell],
-    methods: list[str],
-    values: np.ndarray,
-    shown: np.ndarray,
-    colors: dict,
-    label: str,
-    text: Callable[[float], str],
-    title: str,
-) -> None:
-    """`shown` coloured, `values` written in each square (∞: never; nan: —)."""
-    from dqfd_bc_keras.experiments.figures import _figure
-
-    with _figure(path, figsize=(1.1 * len(cells) + 3, 0.55 * len(methods) + 2)) as (fig, ax):
-        fig.colorbar(ax.imshow(shown, aspect="auto", **colors), ax=ax, label=label)
-        for i, j in np.ndindex(values.shape):
-            v = values[i, j]
-            ax.text(
-                j,
-                i,
-                text(v) if np.isfinite(v) else "never" if v == np.inf else "—",
-                ha="center",
-                va="center",
-                fontsize=7,
-            )
-        ax.set_xticks(range(len(cells)), [c.name.replace(" × ", "\n× ") for c in cells], fontsize=7)
-        ax.set_yticks(range(len(methods)), methods, fontsize=8)
-        ax.set_title(f"{cells[0].task}, teacher × demonstrated episodes: {title}")
 
 
 def grid_section(
@@ -303,7 +281,8 @@ def _task_section(
         return [f"Not run: `python -m dqfd_bc_keras.experiments grid --task {task} --out results` runs it."]
     seeds = max(e.final.size for entries in table.values() for e in entries.values())
     names = (f"grid-{task}-interactions.png", f"grid-{task}-final.png")
-    heatmaps(cells, table, *(figures_dir / n for n in names), seeds)
+    steps_png, final_png = (figures_dir / n for n in names)
+    heatmaps(cells, table, steps_png, final_png, seeds)
     links = [f"![{n}]({os.path.relpath(figures_dir / n, markdown_dir)})" for n in names]
     config = grid_arms(task)[0].config(0)
     stop = "early stop" if config.early_stop_window else "no early stop"
@@ -341,9 +320,8 @@ def run_grid(
     out = Path(out)
     tasks = tasks or grid_tasks(quick)
     arms = [a for task in tasks for a in grid_arms(task, quick)]
-    run_suite(
-        arms, seeds, out, workers, progress=progress, name="demos (quick)" if quick else f"demos ({', '.join(tasks)})"
-    )
+    name = "demos (quick)" if quick else f"demos ({', '.join(tasks)})"
+    run_suite(arms, seeds, out, SweepOptions(workers, progress=progress), name=name)
     run_imitation(out, quick, progress, tasks)
     section = grid_section(group_arms(load_runs(out)), out, out / "figures", out, quick, tasks if quick else None)
     write_text(out / GRID_FILE, "\n".join(["# Demonstration quality × quantity", "", *section, ""]))

@@ -23,7 +23,8 @@ import numpy as np
 
 from dqfd_bc_keras.core.bc import build_bc_model
 from dqfd_bc_keras.evaluation import GreedyPolicy, evaluate
-from dqfd_bc_keras.experiments.suites import Arm, grid_arms, grid_tasks
+from dqfd_bc_keras.experiments.arm_config import Arm
+from dqfd_bc_keras.experiments.suites import grid_arms, grid_tasks
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.runs.provenance import provenance
 from dqfd_bc_keras.seeds import final_eval_seed

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from dqfd_bc_keras.envs.make import get_task
-from dqfd_bc_keras.experiments.data import FinishedRun
+from dqfd_bc_keras.experiments.run_files import FinishedRun
 
 EARLY_EPISODES = 30
 """C4's "early in training": the first 30 training episodes."""

@@ -15,7 +15,7 @@ from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arms import Setting
 from dqfd_bc_keras.experiments.claims import ALPHA, GOALS_MARGIN, PAPER, RETURN_MARGIN, SHARE_MARGIN, TODAY, rule_power
-from dqfd_bc_keras.experiments.stats import sd_from_ci, seeds_for_bound, seeds_for_equivalence
+from dqfd_bc_keras.experiments.power import sd_from_ci, seeds_for_bound, seeds_for_equivalence
 
 POWER = 0.8
 """Every rule is planned to reach its verdict with this power when bayes and ce truly do not differ."""

@@ -28,13 +28,15 @@ from pathlib import Path
 import numpy as np
 
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.arm_config import arm
 from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm, group_arms
 from dqfd_bc_keras.experiments.claims import CLAIMS, judge
-from dqfd_bc_keras.experiments.data import REPLICATIONS, FinishedRun, load_runs
+from dqfd_bc_keras.experiments.data import REPLICATIONS, load_runs
+from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.metrics import PER_RUN, interactions_to_threshold
+from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.stats import mann_whitney
-from dqfd_bc_keras.experiments.suites import arm
-from dqfd_bc_keras.experiments.sweep import Job, run_jobs
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs
 from dqfd_bc_keras.files import write_text
 
 DEFAULT_ARCHIVE = "docs/data/results.tar.xz"
@@ -147,7 +149,9 @@ def replicate(
         rerun = dataclasses.replace(rerun, label=name.removeprefix(prefix))
     out = Path(out)
     jobs = [Job(rerun, seed, out) for seed in seeds]
-    run_jobs(jobs, out, f"replicate {name}", f"{seeds.start}-{seeds.stop - 1}", workers, progress=progress)
+    run_jobs(
+        jobs, out, f"replicate {name}", f"{seeds.start}-{seeds.stop - 1}", SweepOptions(workers, progress=progress)
+    )
     fresh = [run for run in load_runs(out / rerun.name) if run.config.seed in seeds]
     arms = group_arms(everything)
     comparisons = compare(next(a for a in arms if a.runs[0].path.parent.name == name), fresh, arms)

@@ -1,4 +1,4 @@
-"""Statistics over seeds: robust averages, bootstrap intervals, significance, equivalence and power.
+"""Statistics over seeds: robust averages, bootstrap intervals, significance and equivalence.
 
 The paper shows single runs; the lab compares arms over many seeds the way rliable
 (Agarwal et al. 2021) recommends: a point estimate (mean, and the interquartile mean, which a
@@ -6,7 +6,7 @@ few outlying seeds cannot drag), a 95% percentile-bootstrap interval, a two-side
 difference (Mann–Whitney U for values, Fisher's exact test for proportions) and, for a claim of
 "no difference", equivalence within a margin stated in advance: two one-sided tests (TOST) at
 α, i.e. the (1 − 2α) interval of the difference (90% at α = 0.05) lies inside ±margin.
-Seeds per arm come from the power of that test (normal approximation).
+Seeds per arm come from the power of that test (power.py).
 
 Every function is pure: the same inputs (and seed) give the same numbers.
 """
@@ -15,14 +15,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy import stats as sps
 
-Statistic = Callable[..., float]
+Statistic = Callable[..., float | np.ndarray]
+"""A statistic over a sample (np.mean, iqm): one value, or one per row with `axis=1`."""
+Values = Sequence[float] | np.ndarray
+"""A metric's values over seeds, as a list or an array."""
 
 
-def iqm(x: Sequence[float], axis: int | None = None) -> float | np.ndarray:
+def iqm(x: Values, axis: int | None = None) -> float | np.ndarray:
     """Interquartile mean: the mean of the middle 50% (25% trimmed from each side).
 
     rliable's definition (`scipy.stats.trim_mean(x, 0.25)`): as robust as the median to a
@@ -31,7 +35,8 @@ def iqm(x: Sequence[float], axis: int | None = None) -> float | np.ndarray:
     return sps.trim_mean(np.asarray(x, dtype=float), 0.25, axis=axis)
 
 
-def _as_sample(x: Sequence[float]) -> np.ndarray:
+def as_sample(x: Values) -> np.ndarray:
+    """`x` as a flat float array; ValueError if it is empty (no statistic over no seeds)."""
     sample = np.asarray(x, dtype=float).reshape(-1)
     if sample.size == 0:
         raise ValueError("a statistic over seeds needs at least one value, got none")
@@ -64,13 +69,13 @@ def _percentiles(values: np.ndarray, level: float) -> tuple[float, float]:
         raise ValueError(f"level must be in (0, 1), got {level}")
     tail = 100.0 * (1.0 - level) / 2.0
     # Censored samples (inf: "never reached") have no interpolation between values: take order statistics.
-    method = "linear" if np.isfinite(values).all() else "inverted_cdf"
+    method: Literal["linear", "inverted_cdf"] = "linear" if np.isfinite(values).all() else "inverted_cdf"
     low, high = np.percentile(values, [tail, 100.0 - tail], method=method)
     return float(low), float(high)
 
 
 def bootstrap_ci(
-    x: Sequence[float],
+    x: Values,
     statistic: Statistic = np.mean,
     level: float = 0.95,
     resamples: int = 10_000,
@@ -83,7 +88,7 @@ def bootstrap_ci(
     or not); a fixed-seed generator makes reports reproducible. A constant sample gives the
     single point (c, c).
     """
-    sample = _as_sample(x)
+    sample = as_sample(x)
     return _percentiles(_resampled(statistic, sample, np.random.default_rng(seed), resamples), level)
 
 
@@ -100,8 +105,8 @@ def bootstrap_diff_ci(
     The two arms are independent sets of seeds, so each is resampled on its own.
     """
     rng = np.random.default_rng(seed)
-    first = _resampled(statistic, _as_sample(a), rng, resamples)
-    second = _resampled(statistic, _as_sample(b), rng, resamples)
+    first = _resampled(statistic, as_sample(a), rng, resamples)
+    second = _resampled(statistic, as_sample(b), rng, resamples)
     return _percentiles(first - second, level)
 
 
@@ -170,7 +175,7 @@ def mann_whitney(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
     p-value for small samples without ties, else the normal approximation with tie and
     continuity corrections. Two samples of one and the same value give p = 1.
     """
-    result = sps.mannwhitneyu(_as_sample(a), _as_sample(b), alternative="two-sided", method="auto")
+    result = sps.mannwhitneyu(as_sample(a), as_sample(b), alternative="two-sided", method="auto")
     return float(result.statistic), float(result.pvalue)
 
 
@@ -237,87 +242,6 @@ def beyond(diff_ci: tuple[float, float], margin: float) -> bool:
     return low > margin or high < -margin
 
 
-def pooled_sd(a: Sequence[float], b: Sequence[float]) -> float:
-    """The pooled standard deviation of two arms, √(((n_a − 1)s_a² + (n_b − 1)s_b²)/(n_a + n_b − 2)):
-    the spread the power calculation assumes both arms share."""
-    x, y = _as_sample(a), _as_sample(b)
-    if x.size + y.size < 3:
-        raise ValueError(f"a pooled spread needs 3 values or more, got {x.size} and {y.size}")
-    squares = np.sum((x - x.mean()) ** 2) + np.sum((y - y.mean()) ** 2)
-    return float(np.sqrt(squares / (x.size + y.size - 2)))
-
-
-def sd_from_ci(ci: tuple[float, float], n: int, level: float = 0.95) -> float:
-    """The spread of one arm's values from the normal CI of its mean over n seeds:
-    half-width · √n / z_{(1 + level)/2} (a reported interval is often all that is left of a round)."""
-    if n < 2:
-        raise ValueError(f"a spread needs n ≥ 2 seeds, got {n}")
-    return float((ci[1] - ci[0]) / 2.0 * np.sqrt(n) / _z((1.0 + level) / 2.0))
-
-
-def _z(p: float) -> float:
-    return float(sps.norm.ppf(p))
-
-
-def _check_design(sd: float, margin: float, alpha: float) -> None:
-    if sd < 0.0 or margin <= 0.0 or not 0.0 < alpha < 0.5:
-        raise ValueError(f"need sd ≥ 0, margin > 0 and 0 < alpha < 0.5, got sd={sd}, margin={margin}, alpha={alpha}")
-
-
-def _check_power(power: float) -> None:
-    if not 0.0 < power < 1.0:
-        raise ValueError(f"power must be in (0, 1), got {power}")
-
-
-def bound_power(sd: float, distance: float, n: int, alpha: float = 0.05) -> float:
-    """The chance that the one-sided (1 − α) bound of mean(a) − mean(b), n seeds per arm, falls
-    short of a line `distance` away from the true difference (normal approximation):
-    Φ(distance / (sd·√(2/n)) − z_{1−α}). E.g. the upper bound below +margin when the truth is 0.
-    """
-    _check_design(sd, distance, alpha)
-    if n < 1:
-        raise ValueError(f"need n ≥ 1 seeds per arm, got {n}")
-    if sd == 0.0:
-        return 1.0
-    return float(sps.norm.cdf(distance / (sd * np.sqrt(2.0 / n)) - _z(1.0 - alpha)))
-
-
-def seeds_for_bound(sd: float, distance: float, power: float = 0.8, alpha: float = 0.05) -> int:
-    """Seeds per arm for `bound_power` to reach `power`:
-
-        n = ⌈2 (z_{1−α} + z_{1−β})² sd² / distance²⌉,  β = 1 − power,
-
-    the one-sided (non-inferiority / superiority) sample size of Chow, Shao & Wang 2008, §3.2.3.
-    """
-    _check_design(sd, distance, alpha)
-    _check_power(power)
-    return max(1, int(np.ceil(2.0 * (_z(1.0 - alpha) + _z(power)) ** 2 * sd**2 / distance**2)))
-
-
-def equivalence_power(sd: float, margin: float, n: int, alpha: float = 0.05) -> float:
-    """The power of TOST at α (the (1 − 2α) CI inside ±margin) with n seeds per arm when the true
-    difference is 0, normal approximation: both bounds must fall inside, and each misses with
-    1 − `bound_power`, so the power is max(0, 2Φ(margin / (sd·√(2/n)) − z_{1−α}) − 1).
-    The percentile bootstrap's interval is narrower than the normal one with few seeds (plug-in
-    spread), so the decision `tost_ci` makes reaches at least this power (tests/test_stats.py).
-    """
-    return max(0.0, 2.0 * bound_power(sd, margin, n, alpha) - 1.0)
-
-
-def seeds_for_equivalence(sd: float, margin: float, power: float = 0.8, alpha: float = 0.05) -> int:
-    """Seeds per arm for TOST at α to show |Δ| < margin with `power` when the true Δ is 0:
-
-        n = ⌈2 (z_{1−α} + z_{1−β/2})² sd² / margin²⌉,  β = 1 − power,
-
-    the inverse of `equivalence_power` (Julious 2004, Stat. Med. 23:1921, equivalence with a
-    true zero difference; Chow, Shao & Wang 2008, §3.2.4 with ε = 0). β/2, not β: with Δ = 0
-    the two one-sided tests each miss with β/2. For a share, sd = √(p(1 − p)) (ibid. §4.2).
-    """
-    _check_design(sd, margin, alpha)
-    _check_power(power)
-    return max(1, int(np.ceil(2.0 * (_z(1.0 - alpha) + _z(1.0 - (1.0 - power) / 2.0)) ** 2 * sd**2 / margin**2)))
-
-
 @dataclass(frozen=True)
 class Summary:
     """One arm's metric over seeds: how many, mean, IQM and the mean's 95% bootstrap CI."""
@@ -329,8 +253,8 @@ class Summary:
     ci_high: float
 
     @classmethod
-    def of(cls, x: Sequence[float], level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> Summary:
-        sample = _as_sample(x)
+    def of(cls, x: Values, level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> Summary:
+        sample = as_sample(x)
         low, high = bootstrap_ci(sample, np.mean, level, resamples, seed)
         return cls(int(sample.size), float(sample.mean()), float(iqm(sample)), low, high)
 
@@ -354,8 +278,8 @@ class CensoredSummary:
     censored: int
 
     @classmethod
-    def of(cls, x: Sequence[float], level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> CensoredSummary:
-        sample = _as_sample(x)
+    def of(cls, x: Values, level: float = 0.95, resamples: int = 10_000, seed: int = 0) -> CensoredSummary:
+        sample = as_sample(x)
         low, high = bootstrap_ci(sample, np.median, level, resamples, seed)
         return cls(int(sample.size), float(np.median(sample)), low, high, int(np.sum(np.isinf(sample))))
 
