@@ -25,11 +25,7 @@ import sys
 if __name__ == "__main__":
     # SB3's logger imports tensorboard, which imports TensorFlow when it is installed (seconds,
     # and a second framework's threads): keep it out of this process, as benchmarks/interleave.py
-    # does. Only here: a process that imports this module may well want TensorFlow. The package
-    # is imported first, as benchmarks/bench_pixels.py does: its import checks whether TensorFlow
-    # is loaded, and a blocked TensorFlow is a name in sys.modules.
-    import dqfd_bc_keras  # noqa: F401
-
+    # does. Only here: a process that imports this module may well want TensorFlow.
     sys.modules.setdefault("tensorflow", None)  # type: ignore[arg-type]  # a None entry blocks the import
 
 import json
