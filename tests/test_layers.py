@@ -118,33 +118,3 @@ def test_nothing_in_the_package_imports_the_studies():
         if name.split(".")[0] == "studies"
     ]
     assert found == []
-
-
-def test_the_flat_paths_of_before_the_layers_import_the_same_modules():
-    """A plug-in written against an older docs/EXTENDING.md (`from dqfd_bc_keras.methods import
-    Method`), an old pickle or an old `python -m` line finds the module at its new home."""
-    import importlib
-
-    import dqfd_bc_keras
-
-    for old, new in dqfd_bc_keras.MOVED.items():
-        assert (PACKAGE / (new.replace(".", "/") + ".py")).is_file(), new
-        assert not (PACKAGE / f"{old}.py").exists(), f"{old}.py is back at the top level"
-        assert importlib.import_module(f"dqfd_bc_keras.{old}") is importlib.import_module(f"dqfd_bc_keras.{new}")
-    from dqfd_bc_keras.core.methods import Method
-    from dqfd_bc_keras.methods import Method as OldMethod
-
-    assert OldMethod is Method
-    with pytest.raises(ModuleNotFoundError):
-        importlib.import_module("dqfd_bc_keras.no_such_module")
-
-
-def test_python_m_with_a_flat_path_of_before_runs_the_moved_command():
-    import subprocess
-    import sys
-
-    done = subprocess.run(
-        [sys.executable, "-m", "dqfd_bc_keras.experts", "--help"], capture_output=True, text=True, timeout=120
-    )
-    assert done.returncode == 0, done.stderr
-    assert "usage:" in done.stdout and "--episodes" in done.stdout
