@@ -157,10 +157,10 @@ SWEEP_FROM_PYTHON = """
 import json, os, sys
 from pathlib import Path
 from dqfd_bc_keras.experiments.suites import SUITES
-from dqfd_bc_keras.experiments.sweep import Job, run_jobs
+from dqfd_bc_keras.experiments.sweep import Job, SweepOptions, run_jobs
 
 out = Path(sys.argv[1])
-[outcome] = run_jobs([Job(SUITES["quick"][1], 0, out)], out, "one", 1, workers=1, progress=lambda _: None)
+[outcome] = run_jobs([Job(SUITES["quick"][1], 0, out)], out, "one", 1, SweepOptions(workers=1, progress=lambda _: None))
 tensorflow = json.loads((outcome.job.directory / "provenance.json").read_text())["tensorflow"]
 print(outcome.error or "finished", tensorflow["onednn"], tensorflow["intra_op_threads"], tensorflow["inter_op_threads"])
 print(sorted(name for name in os.environ if name.startswith(("TF_", "DQFD_", "KERAS_"))))

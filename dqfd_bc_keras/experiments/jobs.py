@@ -73,7 +73,8 @@ def run_job(job: Job) -> Outcome:
     graphs and names are let go."""
     import keras
 
-    from dqfd_bc_keras.runs.directory import differences, saved_config, train
+    from dqfd_bc_keras.runs.directory import train
+    from dqfd_bc_keras.runs.resume import differences, saved_config
 
     keras.backend.clear_session()
 
