@@ -1,8 +1,10 @@
-"""The experiment runner: suites as declared, the quick suite end to end on both backends."""
+"""The experiment runner: suites as declared, the quick suite end to end on both backends, and a run
+it finds broken, or in another config than its arm's, reported and restarted only when asked."""
 
 import csv
 import dataclasses
 import json
+import shutil
 
 import pytest
 
@@ -13,6 +15,7 @@ from dqfd_bc_keras.experiments.claims import PAPER
 from dqfd_bc_keras.experiments.plans import planned_seeds
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, suite_arms
 from dqfd_bc_keras.experiments.sweep import Job, run_suite, sweep_jobs
+from dqfd_bc_keras.runs import directory as runs
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -269,3 +272,31 @@ def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     assert main(["export", str(tmp_path / "suite"), "--out", str(tmp_path / "suite.tar.xz")]) == 0
     again = report(tmp_path / "suite.tar.xz", tmp_path / "again.md", tmp_path / "figures")
     assert again == (tmp_path / "again.md").read_text() and again.replace("suite.tar.xz", "suite") == text
+
+
+def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tmp_path):
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
+    run = tmp_path / "suite" / arm.name / "seed0"
+    shutil.copytree(finished, run)
+    (run / "eval.json").unlink()  # cut off before it finished …
+    (run / runs.COMPLETE).unlink()
+    (run / "checkpoints" / "latest.json").write_text("")  # … and its checkpoint is damaged
+    lines = []
+    with pytest.raises(ConfigError, match="1 of 1 runs failed"):
+        run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+    assert "failed: BrokenRunError" in lines[-1] and "--restart-broken" in lines[-1]
+    [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append, restart_broken=True)
+    assert not outcome.error and (run / "eval.json").is_file()
+
+
+def test_the_runner_resumes_a_run_only_if_its_config_is_the_arms(finished, tmp_path):
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, "learning_rate": 0.002}.items()), "quick", 1)
+    run = tmp_path / "suite" / arm.name / "seed0"
+    shutil.copytree(finished, run)  # trained with learning_rate 0.001, and cut off before its end
+    (run / runs.COMPLETE).unlink()
+    lines = []
+    with pytest.raises(ConfigError, match="1 of 1 runs failed"):
+        run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append)
+    assert "not the arm's config (learning_rate: 0.001 (was 0.002))" in lines[-1] and "--restart-broken" in lines[-1]
+    [outcome] = run_suite([arm], None, tmp_path / "suite", workers=1, progress=lines.append, restart_broken=True)
+    assert not outcome.error and json.loads((run / "config.json").read_text())["learning_rate"] == 0.002
