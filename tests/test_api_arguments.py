@@ -33,6 +33,7 @@ def lake():
 # --- expert= ----------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_expert_takes_every_demonstrator_that_demos_takes():
     """A function, a preset expert's name and module:function, as --expert takes them: the same
     demonstrations as given as demos=."""
@@ -165,6 +166,7 @@ def test_predict_takes_a_discrete_state_as_an_integer_in_range(lake):
     assert isinstance(lake.predict(obs)[0], int)
 
 
+@pytest.mark.slow
 def test_predict_takes_a_dict_observation_with_its_keys():
     """Chain's {"cell": Discrete(5), "mission": Text, "visits": MultiBinary(5)}: the text is dropped
     in training, and predict takes the dict as the env gives it, or a batch of them."""

@@ -49,6 +49,7 @@ def test_sb3s_evaluate_policy_plays_the_model_as_evaluate_does(model):
     assert 1 <= mean <= 500 and std >= 0
 
 
+@pytest.mark.slow
 def test_evaluate_policy_on_a_discrete_observation_env():
     """FrozenLake's states through a VecEnv (an int array per step) are a batch of states."""
     lake = DQfD(gym.make("FrozenLake-v1", is_slippery=False), lambda obs: 2, expert_loss="margin", **TINY).learn(100)
@@ -74,6 +75,7 @@ def test_the_attributes_sb3_users_reach_for(model):
     assert lake.get_env().observation_space == lake.observation_space == gym.spaces.Discrete(16)  # not one-hot
 
 
+@pytest.mark.slow
 def test_a_list_of_callbacks_each_sees_every_row_and_any_false_stops():
     seen_first, seen_second = [], []
 

@@ -37,6 +37,7 @@ TINY_PONG = [
 """A run of a few seconds whose greedy episodes end at 50 agent steps: Pong cannot end a game in 50."""
 
 
+@pytest.mark.slow
 def test_atari_evaluation_plays_max_steps_agent_steps_and_plain_dqn_needs_no_demo_capacity(tmp_path):
     # demo_capacity=10 is below the limit 50: sized D_demo only for a method with demonstrations.
     done = call(
@@ -59,12 +60,14 @@ def test_atari_evaluation_plays_max_steps_agent_steps_and_plain_dqn_needs_no_dem
     assert "length 30.0 steps on average" in done.stdout
 
 
+@pytest.mark.slow
 def test_a_method_with_demonstrations_still_needs_demo_capacity_for_an_episode(tmp_path):
     done = command("train.py", "--env", PONG, *TINY_PONG, "--set", "demo_capacity=10", "--out", tmp_path / "a")
     assert_refused(done, "error: demo_capacity must be ≥ the episode limit 50, got 10")
     assert not (tmp_path / "a").exists()
 
 
+@pytest.mark.slow
 def test_atari_ram_trains_on_a_128_byte_vector_with_the_step_limit_in_agent_steps(tmp_path):
     (tmp_path / "ram_rules.py").write_text("def fire(obs):\n    return 1\n")
     done = call(

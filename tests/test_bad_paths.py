@@ -33,6 +33,7 @@ def test_bad_paths_are_named_in_one_line(tmp_path, capsys, monkeypatch, make, ar
     one_line(capsys, cli.run(train_main, [a.format(p=path) for a in args]), message.format(p=path))
 
 
+@pytest.mark.slow
 def test_evaluate_into_a_directory_is_one_line(finished, tmp_path, capsys):
     code = cli.run(evaluate_main, [str(finished), "--episodes", "1", "--out", str(tmp_path)])
     one_line(capsys, code, f"error: {tmp_path}: is a directory, not a file")

@@ -21,6 +21,8 @@ from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.runs import directory as runs
 from dqfd_bc_keras.training.loop import TrainingState
 
+pytestmark = pytest.mark.slow
+
 # --- a save: the old checkpoint or the new one, never neither ---
 
 

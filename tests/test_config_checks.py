@@ -205,6 +205,7 @@ RESUMED = {
 """An edit of a finished run (`train.py --quick`) and what the refusal says of it."""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", RESUMED)
 def test_resuming_a_run_whose_files_hold_a_wrong_value_is_one_line_naming_file_and_key(quick_run, tmp_path, case):
     run = tmp_path / "run"
@@ -224,6 +225,7 @@ def test_resuming_a_run_whose_files_hold_a_wrong_value_is_one_line_naming_file_a
     assert tree(run) == before
 
 
+@pytest.mark.slow
 def test_loading_a_run_whose_state_json_is_impossible_names_it(quick_run, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(quick_run().out, run)
@@ -232,6 +234,7 @@ def test_loading_a_run_whose_state_json_is_impossible_names_it(quick_run, tmp_pa
         DQfD.load(run)
 
 
+@pytest.mark.slow
 def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(finished, run)
@@ -280,6 +283,7 @@ def test_every_float_field_must_be_finite(field):
             Config.for_task("cartpole", **{field: value})
 
 
+@pytest.mark.slow
 def test_the_largest_seed_runs(tmp_path):
     assert (
         cli.run(

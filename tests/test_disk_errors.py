@@ -21,6 +21,8 @@ from dqfd_bc_keras.commands.train import main as train_main
 from dqfd_bc_keras.files import temporary_of
 from dqfd_bc_keras.runs import directory as runs
 
+pytestmark = pytest.mark.slow
+
 # --- full disks ---
 
 

@@ -3,10 +3,13 @@ checkpoint; diverged in pre-training, before any checkpoint, it keeps nothing.""
 
 import json
 
+import pytest
 from helpers import one_line
 
 from dqfd_bc_keras.commands import cli
 from dqfd_bc_keras.commands.train import main as train_main
+
+pytestmark = pytest.mark.slow
 
 
 def test_divergence_stops_at_the_first_non_finite_loss_and_keeps_the_last_good_checkpoint(tmp_path, capsys):

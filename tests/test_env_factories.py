@@ -28,6 +28,7 @@ def test_a_factory_is_a_task_with_the_limit_its_env_keeps():
     assert [env.step(0)[2:4] for _ in range(12)][-1] == (False, True)  # its TimeLimit of 12 is the limit
 
 
+@pytest.mark.slow
 def test_a_factory_trains_resumes_and_evaluates_in_a_new_process(tmp_path):
     run = tmp_path / "run"
     args = ["--env", FACTORY, "--env-kwargs", "size=4", "--expert", "toy_envs:go_right", "--quick", "--quiet"]

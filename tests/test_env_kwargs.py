@@ -46,6 +46,7 @@ def test_a_config_from_python_records_a_tuple_so_that_its_json_gives_it_back():
     assert as_json({"a": (1, [2, (3,)])}) == {"a": {"__tuple__": [1, [2, {"__tuple__": [3]}]]}}
 
 
+@pytest.mark.slow
 def test_highway_image_observation_from_the_command_line_trains_resumes_and_evaluates(tmp_path):
     """highway-env's `observation_shape` must be a tuple (`(stack,) + shape`): given as a Python
     literal it reaches the env as one in train.py, in --resume and in evaluate.py, which rebuild it
@@ -74,6 +75,7 @@ def test_highway_image_observation_from_the_command_line_trains_resumes_and_eval
     assert "a tuple is written as a Python literal: (84, 84), not [84, 84]" in as_list.stderr
 
 
+@pytest.mark.slow
 def test_highway_image_observation_from_python_keeps_its_tuple():
     pytest.importorskip("highway_env")
     env = gym.make("highway_env:highway-fast-v0", config={"observation": {**GREY, "observation_shape": (84, 84)}})
@@ -151,6 +153,7 @@ def test_env_kwargs_refuses_a_value_it_would_otherwise_pass_on_as_a_string(text,
     assert str(refused.value).startswith(message) and "\n" not in str(refused.value)
 
 
+@pytest.mark.slow
 def test_is_slippery_false_reaches_the_env_and_config_json_as_false(tmp_path):
     out = tmp_path / "run"
     done = call(

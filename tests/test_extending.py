@@ -103,6 +103,7 @@ def test_the_recipes_method_is_the_j_e_the_agent_learns_with(users_method, demos
     assert expected > 0.0
 
 
+@pytest.mark.slow
 def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_path):
     """`--quick` added to the doc's command; evaluating the run, as the doc's introduction says,
     needs the preset's module and plays the plain env."""
@@ -122,6 +123,7 @@ def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_p
     assert max(json.loads(evaluated.stdout)["lengths"]) <= 500  # scored on the plain CartPole-v1
 
 
+@pytest.mark.slow
 def test_the_suite_recipe_runs_its_arms_and_reports_them(tmp_path):
     """`--seeds 1` and a run of seconds added to the doc's `run`; its `report` as written. What each
     arm should be is read from the doc's module (the SIGMAS arms)."""

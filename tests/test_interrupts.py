@@ -19,6 +19,8 @@ from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.experiments.suites import Arm
 from dqfd_bc_keras.runs import directory as runs
 
+pytestmark = pytest.mark.slow
+
 
 def ctrl_c_reaches() -> None:
     """A child's SIGINT back to the default: launched from a background job without job control

@@ -24,6 +24,7 @@ from dqfd_bc_keras.files import DirectoryLock
 from dqfd_bc_keras.runs import directory as runs
 
 
+@pytest.mark.slow
 def test_a_second_writer_is_refused_with_the_holders_pid_and_force_deletes_nothing(tmp_path, capsys):
     out = tmp_path / "run"
     out.mkdir()
@@ -75,6 +76,7 @@ def test_a_lock_is_exclusive_within_a_process_too(tmp_path):
 # --- the lab's runners ---
 
 
+@pytest.mark.slow
 def test_a_run_held_by_another_live_runner_is_left_to_it_and_not_failed(finished, tmp_path):
     arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
     run = tmp_path / "suite" / arm.name / "seed0"
@@ -91,6 +93,7 @@ def test_a_run_held_by_another_live_runner_is_left_to_it_and_not_failed(finished
 DONE = re.compile(r"\[\d+/\d+\] (\S+) seed0: \d+ episodes, \d+ steps, eval ")
 
 
+@pytest.mark.slow
 def test_two_runners_on_one_out_finish_each_run_once(tmp_path):
     """The second runner lists both runs as to do, then is held (SIGSTOP) while the first finishes
     them: when it goes on, it finds them complete and skips them, instead of resuming each and

@@ -4,9 +4,11 @@ sets), TensorFlow's version, build and thread settings, and the code's commit.""
 import json
 import os
 
+import pytest
 import tensorflow as tf
 
 
+@pytest.mark.slow
 def test_provenance_records_the_machine_and_tensorflows_build(finished):
     record = json.loads((finished / "provenance.json").read_text())
     assert record["machine"]["cpu"] and record["machine"]["cores"] == os.cpu_count()

@@ -172,6 +172,7 @@ def test_a_run_that_stopped_early_holds_its_last_value():
     np.testing.assert_allclose(running, [2, 2, 2])
 
 
+@pytest.mark.slow
 def test_a_run_given_demonstrations_in_a_file_is_reported_as_such(tmp_path):
     """train.py --demos FILE, as a user runs it: the lab reads where the demonstrations came from
     out of the run's own demonstrations.json, not the file's demonstrator."""
@@ -242,6 +243,7 @@ def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_
     assert tree(suite) == before
 
 
+@pytest.mark.slow
 def test_the_report_names_every_run_it_leaves_out(finished, tmp_path):
     from dqfd_bc_keras.experiments.report import report
 

@@ -50,6 +50,7 @@ DAMAGE = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", DAMAGE)
 def test_resuming_a_corrupt_or_mismatched_run_is_one_line_and_changes_nothing(finished, tmp_path, capsys, damage):
     apply, problem, where = DAMAGE[damage]
@@ -64,6 +65,7 @@ def test_resuming_a_corrupt_or_mismatched_run_is_one_line_and_changes_nothing(fi
     assert tree(run) == before
 
 
+@pytest.mark.slow
 def test_a_checkpoint_without_a_variable_the_learner_has_is_one_line(finished, tmp_path, capsys):
     """As a checkpoint of an earlier version is (e.g. before the replay counted its unsettled rows):
     here one that holds only the Q-network."""
@@ -86,6 +88,7 @@ def test_a_checkpoint_without_a_variable_the_learner_has_is_one_line(finished, t
     assert tree(run) == before
 
 
+@pytest.mark.slow
 def test_resume_refuses_flags_that_would_change_the_run(finished, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(finished, run)

@@ -119,6 +119,7 @@ def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
     from dqfd_bc_keras.experiments import sweep
 
@@ -133,6 +134,7 @@ def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
     assert (logged["suite"], logged["runs"], logged["interrupted"]) == ("quick", 1, True)
 
 
+@pytest.mark.slow
 def test_a_sweep_in_an_unpacked_archive_runs_only_what_it_lacks(tmp_path):
     """An exported run has eval.json and no checkpoints/: complete, never retrained or replaced. One
     with checkpoints/ started here and was cut off in its final phase: it is resumed."""
@@ -159,6 +161,7 @@ def test_unknown_suite_or_backend_is_refused(tmp_path):
         run_suite("quick", 1, tmp_path, backend="slurm")
 
 
+@pytest.mark.slow
 def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path):
     """Three runs in one worker process, in an order that puts bayes seed 0 last, against bayes
     seed 0 alone in a fresh process: the same episodes, losses and evaluations, to the bit."""
@@ -190,6 +193,7 @@ def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path
     assert len(metrics) > 1 and (metrics, evals, returns) == results(tmp_path / "fresh")
 
 
+@pytest.mark.slow
 def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_one(tmp_path):
     from dqfd_bc_keras.experiments.sweep import run_jobs
 
@@ -206,6 +210,7 @@ def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_on
     assert "its process died (exit code 3)" in lines[1] and "episodes" in lines[2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["local", "ray"])
 def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_path):
     lines = []
@@ -244,6 +249,7 @@ def test_cli_rejects_bad_arguments_in_one_line(capsys):
     assert "/no/such/dir: no such suite directory" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     from dqfd_bc_keras.experiments.report import report
 
@@ -274,6 +280,7 @@ def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     assert again == (tmp_path / "again.md").read_text() and again.replace("suite.tar.xz", "suite") == text
 
 
+@pytest.mark.slow
 def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tmp_path):
     arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
     run = tmp_path / "suite" / arm.name / "seed0"
@@ -289,6 +296,7 @@ def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tm
     assert not outcome.error and (run / "eval.json").is_file()
 
 
+@pytest.mark.slow
 def test_the_runner_resumes_a_run_only_if_its_config_is_the_arms(finished, tmp_path):
     arm = Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, "learning_rate": 0.002}.items()), "quick", 1)
     run = tmp_path / "suite" / arm.name / "seed0"

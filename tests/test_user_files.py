@@ -35,6 +35,7 @@ def refused(done, message: str) -> None:
 # --- a .lock of the user's ----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("text", ["bob is editing\n", "4242\n", ""], ids=["text", "a pid", "empty"])
 @pytest.mark.parametrize("force", [False, True], ids=["plain", "force"])
 def test_a_users_lock_file_in_a_folder_that_is_not_a_run_is_left_as_it_was(tmp_path, text, force):
@@ -130,6 +131,7 @@ def run_with_users_files(quick_run, tmp_path) -> Path:
     return run
 
 
+@pytest.mark.slow
 def test_resume_deletes_its_own_temporaries_and_keeps_every_file_of_the_users(run_with_users_files):
     run = run_with_users_files
     (run / runs.COMPLETE).unlink()  # cut off in its final phase: the resume finishes it, with a new checkpoint
@@ -145,6 +147,7 @@ def test_resume_deletes_its_own_temporaries_and_keeps_every_file_of_the_users(ru
     )
 
 
+@pytest.mark.slow
 def test_force_replaces_the_run_and_keeps_every_file_of_the_users(run_with_users_files):
     run = run_with_users_files
     old_metrics = (run / "metrics.csv").read_bytes()
@@ -178,6 +181,7 @@ def test_force_refuses_a_directory_that_is_not_a_run(tmp_path, capsys, force):
     assert tree(out) == before and left_in(out) == ["photos", "thesis.tex"]
 
 
+@pytest.mark.slow
 def test_force_replaces_a_run_but_keeps_a_file_the_user_put_in_it(finished, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(finished, run)
@@ -196,6 +200,7 @@ def test_force_replaces_a_run_but_keeps_a_file_the_user_put_in_it(finished, tmp_
     assert (run / "metrics.csv").read_bytes() != old_metrics
 
 
+@pytest.mark.slow
 def test_an_empty_existing_directory_is_trained_into(tmp_path, capsys):
     out = tmp_path / "empty"
     out.mkdir()

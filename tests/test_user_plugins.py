@@ -112,6 +112,7 @@ def test_a_demonstrator_module_that_cannot_give_its_rule_is_one_line_before_tens
     assert left_in(tmp_path) == ["my_rules.py"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("body", ["    return np.int64(obs[3] > 0)", "    return np.array(1)", "    return 1"])
 def test_a_rule_answering_an_integer_passes_the_check_and_training_goes_on(tmp_path, body):
     """A numpy integer or a 0-d integer array is an action: the command goes on to load TensorFlow
@@ -132,6 +133,7 @@ def test_a_rule_answering_an_integer_passes_the_check_and_training_goes_on(tmp_p
     assert "my_rules" not in done.stderr
 
 
+@pytest.mark.slow
 def test_a_rule_that_raises_while_demonstrations_are_recorded_is_one_line_and_leaves_no_run(tmp_path):
     (tmp_path / "my_rules.py").write_text(
         "calls = 0\n\n\ndef bad(obs):\n    global calls\n    calls += 1\n"
@@ -183,6 +185,7 @@ def unlocked_tree(run: Path) -> dict:
     return {name: data for name, data in tree(run).items() if Path(name).name != ".lock"}
 
 
+@pytest.mark.slow
 def test_a_run_of_a_users_method_evaluates_without_its_module_and_resume_says_it_is_missing(tmp_path):
     code = tmp_path / "code"
     code.mkdir()
