@@ -19,6 +19,8 @@ from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 from stable_baselines3.common.evaluation import evaluate_policy  # noqa: E402
 from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def model():
@@ -49,7 +51,6 @@ def test_sb3s_evaluate_policy_plays_the_model_as_evaluate_does(model):
     assert 1 <= mean <= 500 and std >= 0
 
 
-@pytest.mark.slow
 def test_evaluate_policy_on_a_discrete_observation_env():
     """FrozenLake's states through a VecEnv (an int array per step) are a batch of states."""
     lake = DQfD(gym.make("FrozenLake-v1", is_slippery=False), lambda obs: 2, expert_loss="margin", **TINY).learn(100)
@@ -75,7 +76,6 @@ def test_the_attributes_sb3_users_reach_for(model):
     assert lake.get_env().observation_space == lake.observation_space == gym.spaces.Discrete(16)  # not one-hot
 
 
-@pytest.mark.slow
 def test_a_list_of_callbacks_each_sees_every_row_and_any_false_stops():
     seen_first, seen_second = [], []
 

@@ -146,6 +146,7 @@ def test_expert_loss_takes_any_name_and_config_refuses_an_unknown_one():
     assert_answered_without_tensorflow(done)
 
 
+@pytest.mark.slow
 def test_the_package_imports_without_tensorflow_and_sets_its_threads_when_it_loads():
     code = (
         "import sys, dqfd_bc_keras; light = 'tensorflow' not in sys.modules and 'keras' not in sys.modules; "

@@ -70,6 +70,7 @@ def write(modules: dict[str, str], where: Path) -> None:
         (where / name).write_text(code)
 
 
+@pytest.mark.slow
 def test_the_method_recipe_trains_and_evaluates_with_the_users_method(tmp_path):
     modules, (train, evaluate) = recipe("A method (an expert loss)")
     write(modules, tmp_path)

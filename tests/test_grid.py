@@ -42,6 +42,7 @@ def lab(*args, timeout=600):
 TEACHERS = [(task, teacher) for task in GRID_TASKS for teacher in sorted(lab_settings(task).grid_teachers)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task, teacher", TEACHERS)
 def test_teacher_means_are_the_measured_ones(task, teacher):
     expert, epsilon = teacher

@@ -24,6 +24,7 @@ def test_every_shipped_model_is_in_the_table_of_models_readme():
     assert len(SHIPPED) >= 8 and all(f"| `{name}/` |" in table for name in SHIPPED)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_plays_as_its_eval_json_says(name):
     folder = MODELS / name

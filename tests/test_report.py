@@ -219,6 +219,7 @@ ONE_SEED = ("cartpole-bootstrap-bayes", "cartpole-bootstrap-ce", "cartpole-boots
 """C3's pair and an ablation of it: arms whose comparisons need two seeds."""
 
 
+@pytest.mark.slow
 def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_path):
     suite = tmp_path / "suite"
     with tarfile.open(REPO / "docs" / "data" / "results.tar.xz") as archive:

@@ -271,6 +271,7 @@ def test_play_stops_at_the_step_budget_and_the_episode_continues(built):
     assert int(interaction.env_steps.numpy()) - env0 == interaction.episode.length > 3
 
 
+@pytest.mark.slow
 def test_a_bayes_run_learns_the_same_whatever_its_evaluation_grid():
     """The replay settles its newest rows (their n-step returns, the BC model's MC-dropout view) before
     each sample and every SETTLE_ROWS rows, never where a graph call ends: so where `play` stops (the
