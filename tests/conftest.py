@@ -80,3 +80,9 @@ def quick_run(tmp_path_factory) -> Callable[[str], QuickRun]:
         return finished[loss]
 
     return train
+
+
+@pytest.fixture
+def finished(quick_run) -> Path:
+    """The session's finished `train.py --quick` run (read-only: a test copies it before it changes it)."""
+    return quick_run().out

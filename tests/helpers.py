@@ -1,11 +1,16 @@
 """The package's commands called in the test's own process, as their console scripts call them
 (`cli.run`: one-line errors and exit codes). A test that needs a command's answer, or a finished
 run, pays no new Python process and no second TensorFlow import; a subprocess stays where the
-process itself is what a test is about (a kill, a lock between processes, imports, a fresh registry)."""
+process itself is what a test is about (a kill, a lock between processes, imports, a fresh registry):
+`command` runs one as a user types it. And what a refused command must leave: one line on stderr,
+and the user's directory as it was (`one_line`, `assert_refused`, `tree`, `left_in`)."""
 
 import contextlib
 import io
+import json
+import os
 import signal
+import subprocess
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -141,3 +146,99 @@ TINY_SWEEP = [
     for arg in ("--set", setting)
 ]
 """`--set` flags that make each run of a sweep a few seconds: 100 interactions, one episode of everything."""
+
+
+# --- a command in a process of its own, and what a refusal leaves ---
+
+ENV = {**os.environ, "PYTHONPATH": str(REPO)}
+"""The environment of a command run as its own process: the repository importable, as if installed."""
+
+
+NO_TENSORFLOW = 'raise ImportError("tensorflow is blocked by the test")\n'
+"""A `tensorflow` package first on the path: a command that imports TensorFlow fails with this."""
+
+
+def command(*args: object, cwd: Path = REPO, path: Sequence[str | Path] = (), block_tensorflow: bool = False) -> Answer:
+    """`python -X importtime ARGS` run in `cwd` as a user types it: a first argument `NAME.py` is the
+    repository's script; `path`, then the repository, on PYTHONPATH; with `block_tensorflow`, a
+    `tensorflow` first on the path that cannot be imported (written to `cwd`/no_tensorflow)."""
+    if block_tensorflow:
+        blocker = cwd / "no_tensorflow"
+        (blocker / "tensorflow").mkdir(parents=True, exist_ok=True)
+        (blocker / "tensorflow" / "__init__.py").write_text(NO_TENSORFLOW)
+        path = [blocker, *path]
+    first, *rest = map(str, args)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(map(str, [*path, REPO]))}
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", str(REPO / first) if first.endswith(".py") else first, *rest],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=600,
+    )
+    lines = done.stderr.splitlines(keepends=True)
+    timed = [line.split("|")[-1].rstrip("\n") for line in lines if line.startswith("import time:")]
+    own = [
+        line for line in lines if not line.startswith("import time:") and "A.L.E" not in line and "Stella" not in line
+    ]
+    return Answer(done.returncode, done.stdout, "".join(own), timed[1:])  # timed[0] is importtime's header
+
+
+def importers(timings: list[str], module: str) -> list[str]:
+    """The modules that imported `module`, innermost first: importtime prints a module when its
+    import ends, indented by depth, so its importers are the next lines of smaller depth."""
+    names = [(len(t) - len(t.lstrip()), t.strip()) for t in timings]
+    first = next((i for i, (_, name) in enumerate(names) if name == module), None)
+    if first is None:
+        return []
+    chain, depth = [], names[first][0]
+    for indent, name in names[first + 1 :]:
+        if indent < depth:
+            chain.append(name)
+            depth = indent
+    return chain
+
+
+def assert_refused(done: Answer, message: str) -> None:
+    """Exit code 2, nothing on stdout, and `message` as the one line on stderr."""
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", message + "\n"), done.stderr
+
+
+def assert_without_tensorflow(done: Answer) -> None:
+    """The command answered before TensorFlow: importtime timed its imports, and none was TensorFlow."""
+    assert done.imports, "importtime timed no import"
+    assert "tensorflow" not in [name.strip() for name in done.imports], (
+        f"TensorFlow imported by {importers(done.imports, 'tensorflow')}"
+    )
+
+
+def left_in(directory: Path) -> list[str]:
+    """What `directory` holds, by name, besides the test's TensorFlow blocker and Python's bytecode cache."""
+    return sorted({p.name for p in directory.iterdir()} - {"no_tensorflow", "__pycache__"})
+
+
+def one_line(capsys, code, message, expected_code=2):
+    """What `capsys` caught on stderr, checked to be one line holding `message`, after the exit `code`."""
+    err = capsys.readouterr().err
+    assert code == expected_code, err
+    assert message in err, err
+    assert len(err.strip().splitlines()) == 1, err
+    return err
+
+
+def tree(path: Path) -> dict:
+    """Every file under `path` and its bytes: to show that a failure damaged nothing."""
+    return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+def latest_checkpoint(run: Path) -> Path:
+    """The directory of the run's current checkpoint, as checkpoints/latest.json names it."""
+    return run / "checkpoints" / json.loads((run / "checkpoints" / "latest.json").read_text())["dir"]
+
+
+TINY_RUN = ["--quick", "--quiet", "--set", "total_steps=300", "--set", "pretrain_steps=10"]
+"""A run of a few seconds: one checkpoint after ckpt-0, one evaluation."""
+LAB = ("-m", "dqfd_bc_keras.experiments")
+DEMOS = ("-m", "dqfd_bc_keras.demos")
+"""The lab's and the demonstrations' commands, as `python -m` runs them."""

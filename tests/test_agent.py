@@ -34,6 +34,7 @@ def agreement(agent, data):
     return float(np.mean(agent.greedy_actions(data.obs).numpy() == data.actions))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loss", EXPERT_LOSSES)
 def test_pretraining_imitates_the_expert_on_held_out_states(loss, demos, held_out, bc_models):
     """Within the default pre-training budget k = 1,000 (≈ 0.5 s); measured: ≥ 0.90 already
@@ -43,6 +44,7 @@ def test_pretraining_imitates_the_expert_on_held_out_states(loss, demos, held_ou
     assert agreement(agent, held_out) >= 0.90
 
 
+@pytest.mark.slow
 def test_without_an_expert_loss_pretraining_does_not_imitate(demos, held_out, bc_models):
     """The control: TD alone on expert-only data cannot tell the actions apart."""
     agent = agent_for("none", demos, bc_models)
@@ -144,6 +146,7 @@ def test_a_method_that_declares_no_reference_is_refused_by_the_check(demos, bc_m
         assert_assembles_the_total_loss("half_ce", "dqn", demos, bc_models)
 
 
+@pytest.mark.slow
 def test_target_network_is_refreshed_every_period(demos, bc_models):
     agent = agent_for("ce", demos, bc_models, target_update_period=4)
 
@@ -160,6 +163,7 @@ def test_target_network_is_refreshed_every_period(demos, bc_models):
     assert same() and int(agent.train_steps.numpy()) == 4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("center", ["pretrained", "zero"])
 def test_prior_center_is_captured_after_pretraining(center, demos, bc_models):
     agent = agent_for("bayes", demos, bc_models, prior_center=center)
@@ -170,6 +174,7 @@ def test_prior_center_is_captured_after_pretraining(center, demos, bc_models):
         np.testing.assert_array_equal(prior.numpy(), np.broadcast_to(expected, prior.shape))
 
 
+@pytest.mark.slow
 def test_importance_weights_anneal_beta_to_one(demos, bc_models):
     agent = agent_for("margin", demos, bc_models, priority_beta0=0.6, beta_anneal_steps=10)
     np.testing.assert_allclose(float(agent.beta()), 0.6)
@@ -179,6 +184,7 @@ def test_importance_weights_anneal_beta_to_one(demos, bc_models):
     np.testing.assert_allclose(float(agent.beta()), 1.0)
 
 
+@pytest.mark.slow
 def test_store_in_a_graph_adds_agent_rows_whose_bc_view_is_written_when_settled(demos, bc_models):
     """Rows stored one by one hold NaN for π̄_bc and σ² until the replay settles them in one batch
     (as `sample` does first, and by itself every SETTLE_ROWS rows): then each holds its state's view."""
@@ -219,6 +225,7 @@ def test_q_network_round_trips_through_keras_file(demos, bc_models, held_out, tm
     np.testing.assert_allclose(loaded(held_out.obs), agent.q_network(held_out.obs), rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_checkpoint_restores_optimizer_and_replay_for_an_identical_continuation(demos, bc_models, tmp_path):
     first = agent_for("bayes", demos, bc_models)
     first.learn(tf.constant(20))
@@ -237,6 +244,7 @@ def test_checkpoint_restores_optimizer_and_replay_for_an_identical_continuation(
         np.testing.assert_array_equal(a.numpy(), b.numpy())
 
 
+@pytest.mark.slow
 def test_fused_learning_equals_one_graph_call_per_update(demos, bc_models, tmp_path):
     """`learn(K)` (K updates in one graph call) is K × `learn(1)`: the same weights, Adam state,
     priorities, target network and loss means, bit for bit (K spans a target refresh)."""
@@ -274,6 +282,7 @@ def test_incompatible_settings_fail_early_naming_the_value(change, match):
         dataclasses.replace(Config.for_task("cartpole"), **change)
 
 
+@pytest.mark.slow
 def test_a_batch_larger_than_the_demonstrations_draws_them_with_replacement(demos, bc_models):
     """One short demonstration (a noisy expert's) is still learnt from: rows repeat in a batch."""
     agent = agent_for("margin", demos, bc_models, batch_size=4096)
@@ -288,6 +297,7 @@ def test_a_bc_loss_without_a_bc_model_is_refused(demos):
     assert isinstance(make_agent(Config.for_task("cartpole", expert_loss="margin"), demos, None), DQfDAgent)
 
 
+@pytest.mark.slow
 def test_sqil_rewards_demonstrations_1_and_its_own_data_0_in_balanced_batches(demos):
     """SQIL (Reddy et al. 2020) on our DQN: the env's rewards are replaced, half of each batch is
     demonstrations, sampled uniformly (no priorities), and no expert loss is added."""

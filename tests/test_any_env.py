@@ -190,6 +190,7 @@ def warnings_of(done):
     return [line for line in done.stderr.splitlines() if line.startswith("warning:")]
 
 
+@pytest.mark.slow
 def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_end(tmp_path):
     """One user's path through every entry point: a Dict observation with a text part, no time
     limit, a constructor kwarg that changes the spaces (size=7: 7 states, 6 steps to the goal)."""
@@ -330,6 +331,7 @@ def test_a_user_env_without_a_limit_with_kwargs_and_a_dict_observation_end_to_en
         assert all(1 <= n <= 9 for n in json.loads((run_dir / "eval.json").read_text())["lengths"])
 
 
+@pytest.mark.slow
 def test_a_grid_observation_is_flattened_in_c_order(tmp_path):
     out = tmp_path / "grid"
     done = run(
@@ -405,6 +407,7 @@ def readme_any_env_block() -> str:
     return section.split("```bash\n", 1)[1].split("```", 1)[0]
 
 
+@pytest.mark.slow
 def test_the_readme_third_party_env_commands_train_and_evaluate(tmp_path):
     """Each `train.py` line of the README block, as written, plus a budget of seconds; the rules
     module is the block's own heredoc. The three runs go at once (one per core, and a third)."""

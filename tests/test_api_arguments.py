@@ -33,6 +33,7 @@ def lake():
 # --- expert= ----------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_expert_takes_every_demonstrator_that_demos_takes():
     """A function, a preset expert's name and module:function, as --expert takes them: the same
     demonstrations as given as demos=."""
@@ -73,6 +74,7 @@ def test_expert_refuses_demonstrations_and_a_second_demonstrator(tmp_path):
 # --- each method's own arguments ------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_methods_check_their_arguments(cartpole, tmp_path):
     """Wrong types and ranges are one line naming the argument, and change nothing: the model
     keeps its step count, and no file is written."""
@@ -117,6 +119,7 @@ def test_config_fields_given_as_keywords_reach_configs_checks():
 # --- predict's observations ---------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_predict_refuses_what_is_not_an_observation_of_the_env(cartpole):
     env = gym.make("CartPole-v1")
     expected = "predict: expected an observation of Box(4,) float32 or a batch of them, got "
@@ -141,6 +144,7 @@ def test_predict_refuses_what_is_not_an_observation_of_the_env(cartpole):
     assert batch.dtype == np.int64 and batch.tolist() == [action, cartpole.predict(-obs)[0], action]
 
 
+@pytest.mark.slow
 def test_predict_takes_a_discrete_state_as_an_integer_in_range(lake):
     expected = "predict: expected an observation of Discrete(16) or a batch of them, got "
     for given, got in (
@@ -165,6 +169,7 @@ def test_predict_takes_a_discrete_state_as_an_integer_in_range(lake):
     assert isinstance(lake.predict(obs)[0], int)
 
 
+@pytest.mark.slow
 def test_predict_takes_a_dict_observation_with_its_keys():
     """Chain's {"cell": Discrete(5), "mission": Text, "visits": MultiBinary(5)}: the text is dropped
     in training, and predict takes the dict as the env gives it, or a batch of them."""

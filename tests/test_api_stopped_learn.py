@@ -13,6 +13,8 @@ from test_python_api import TINY
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
 
+pytestmark = pytest.mark.slow
+
 TINY = {**TINY, "checkpoint_every": 100}
 BUDGET = 400
 

@@ -247,6 +247,7 @@ def test_breakout_life_loss_ends_a_learning_episode_and_the_reset_continues_the_
     np.testing.assert_array_equal(obs, np.repeat(frame[..., None], 4, axis=-1))
 
 
+@pytest.mark.slow
 def test_breakout_plain_env_ends_only_at_game_over():
     env = make_atari(BREAKOUT, learning=False)
     env.reset(seed=3)
@@ -260,6 +261,7 @@ def test_breakout_plain_env_ends_only_at_game_over():
     assert terminated and info["lives"] == 0 and lives_seen == {0, 1, 2, 3, 4, 5}
 
 
+@pytest.mark.slow
 def test_breakout_same_seed_same_observations():
     (obs_a, _), steps_a = play(make_atari(BREAKOUT), 4, 150)
     (obs_b, _), steps_b = play(make_atari(BREAKOUT), 4, 150)

@@ -444,6 +444,7 @@ def claim_rows(text: str) -> list[list[str]]:
     return [[cell.strip() for cell in row] for row in rows if len(row) == 8]
 
 
+@pytest.mark.slow
 def test_report_writes_markdown_and_figures(suite, tmp_path):
     out = tmp_path / "docs" / "RESULTS.md"
     text = results.report(suite, out, tmp_path / "docs" / "figures")

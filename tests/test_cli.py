@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import command, importers
 
 import dqfd_bc_keras
 from dqfd_bc_keras.core.methods import METHODS
@@ -35,21 +36,6 @@ class Done:
         timings = [line.split("|")[-1] for line in done.stderr.splitlines() if line.startswith("import time:")]
         self.stderr = [line for line in done.stderr.splitlines() if not line.startswith("import time:")]
         self.tensorflow_importers = importers(timings[1:], "tensorflow")  # [0] is the header
-
-
-def importers(timings: list[str], module: str) -> list[str]:
-    """The modules that imported `module`, innermost first: importtime prints a module when its
-    import ends, indented by depth, so its importers are the next lines of smaller depth."""
-    names = [(len(t) - len(t.lstrip()), t.strip()) for t in timings]
-    first = next((i for i, (_, name) in enumerate(names) if name == module), None)
-    if first is None:
-        return []
-    chain, depth = [], names[first][0]
-    for indent, name in names[first + 1 :]:
-        if indent < depth:
-            chain.append(name)
-            depth = indent
-    return chain
 
 
 def assert_answered_without_tensorflow(done: Done) -> None:
@@ -167,3 +153,10 @@ def test_load_model_registers_the_custom_objects_first():
         dqfd_bc_keras.load_model(REPO / "models" / "nothing.keras")
     with pytest.raises(AttributeError, match="no attribute 'Nope'"):
         dqfd_bc_keras.Nope  # noqa: B018  (the attribute access is what raises)
+
+
+def test_python_m_experts_still_runs_the_experts_command(tmp_path):
+    done = command("-m", "dqfd_bc_keras.demos.experts", "--help", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("usage: python -m dqfd_bc_keras.demos.experts")
+    assert "Evaluate the scripted experts on the plain envs." in done.stdout

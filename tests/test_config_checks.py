@@ -1,7 +1,9 @@
 """Every Config field's type and range is checked wherever a Config is made, from any source: a
 user's `DQfD(...)` keywords, `train.py --set`/`--env-kwargs`, and a run's config.json and state.json
 read back by `train.py --resume`. Each refusal is one line naming the field (and the file), what
-it got and what it takes; nothing is written and no run is changed."""
+it got and what it takes; nothing is written and no run is changed. Seeds lie in [0, 2³¹ − 1] (the
+largest trains) and every float is finite, wherever given (`demos record --seed` too); a budget too
+small to learn is refused, or warned about."""
 
 import dataclasses
 import json
@@ -12,10 +14,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import call
-from test_reliability import tree
+from helpers import (
+    DEMOS,
+    REPO,
+    assert_refused,
+    assert_without_tensorflow,
+    call,
+    command,
+    latest_checkpoint,
+    left_in,
+    one_line,
+    tree,
+)
 
 from dqfd_bc_keras import DQfD
+from dqfd_bc_keras.commands import cli
+from dqfd_bc_keras.commands.evaluate import main as evaluate_main
+from dqfd_bc_keras.commands.train import main as train_main
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.errors import BrokenRunError, ConfigError
 
@@ -143,16 +158,12 @@ def test_env_kwargs_that_json_cannot_hold_are_refused_before_anything_is_written
 # --- a run's files, edited, then resumed ------------------------------------------------------------
 
 
-def checkpoint(run: Path) -> Path:
-    return run / "checkpoints" / json.loads((run / "checkpoints" / "latest.json").read_text())["dir"]
-
-
 def edit(file: str, key: str | None, value: object) -> object:
     """Set `key` of the run's `file` (config.json, or its checkpoint's state.json) to `value`, written
     as Python's json writes it (NaN as the token NaN); with no key the whole file is `value`."""
 
     def apply(run: Path) -> Path:
-        path = run / file if file == "config.json" else checkpoint(run) / file
+        path = run / file if file == "config.json" else latest_checkpoint(run) / file
         path.write_text(json.dumps(value if key is None else {**json.loads(path.read_text()), key: value}))
         return path
 
@@ -194,6 +205,7 @@ RESUMED = {
 """An edit of a finished run (`train.py --quick`) and what the refusal says of it."""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", RESUMED)
 def test_resuming_a_run_whose_files_hold_a_wrong_value_is_one_line_naming_file_and_key(quick_run, tmp_path, case):
     run = tmp_path / "run"
@@ -213,9 +225,87 @@ def test_resuming_a_run_whose_files_hold_a_wrong_value_is_one_line_naming_file_a
     assert tree(run) == before
 
 
+@pytest.mark.slow
 def test_loading_a_run_whose_state_json_is_impossible_names_it(quick_run, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(quick_run().out, run)
     path = edit("state.json", "episode", -5)(run)
     with pytest.raises(BrokenRunError, match=re.escape(f"{path}: the checkpoint cannot be resumed (ValueError: ")):
         DQfD.load(run)
+
+
+@pytest.mark.slow
+def test_a_wrong_typed_field_of_a_checkpoints_state_is_one_line(finished, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(finished, run)
+    state = latest_checkpoint(run) / "state.json"
+    state.write_text(json.dumps({**json.loads(state.read_text()), "episode": "x"}))
+    before = tree(run)
+    one_line(
+        capsys,
+        cli.run(train_main, ["--quiet", "--resume", "--out", str(run)]),
+        f"error: {state}: the checkpoint cannot be resumed (ValueError: episode must be an integer ≥ 0, got 'x'); "
+        "start the run over with --force\n",
+    )
+    assert tree(run) == before
+
+
+# --- values out of range, budgets too small -------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "main, args, message",
+    [
+        (train_main, ["--seed", "-1"], "argument --seed: must be in [0, 2147483647], got -1"),
+        (train_main, ["--seed", "99999999999999999999"], "got 99999999999999999999"),
+        (train_main, ["--set", "seed=-3"], "seed must be in [0, 2147483647], got -3"),
+        (train_main, ["--set", "learning_rate=inf"], "learning_rate must be a finite number, got inf"),
+        (train_main, ["--set", "sigma0_sq=nan"], "sigma0_sq must be a finite number, got nan"),
+        (evaluate_main, ["models/cartpole", "--seed", "-1"], "argument --seed: must be in [0, 2147483647], got -1"),
+    ],
+)
+def test_out_of_range_values_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, main, args, message):
+    monkeypatch.chdir(REPO)
+    out = tmp_path / "run"
+    extra = ["--quick", "--out", str(out)] if main is train_main else []
+    try:
+        code = cli.run(main, [*args, *extra])
+    except SystemExit as exit_:  # argparse exits itself
+        code = exit_.code
+    one_line(capsys, code, message)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("field", [f for f, v in Config.for_task("cartpole").to_dict().items() if isinstance(v, float)])
+def test_every_float_field_must_be_finite(field):
+    for value in (float("inf"), float("-inf"), float("nan")):
+        with pytest.raises(ConfigError, match=f"{field} must be a finite number"):
+            Config.for_task("cartpole", **{field: value})
+
+
+@pytest.mark.slow
+def test_the_largest_seed_runs(tmp_path):
+    assert (
+        cli.run(
+            train_main, ["--quick", "--quiet", "--seed", "2147483647", "--steps", "100", "--out", str(tmp_path / "run")]
+        )
+        == 0
+    )
+
+
+def test_demos_record_refuses_a_negative_seed_in_one_line(tmp_path):
+    done = command(
+        *DEMOS, "record", "--task", "cartpole", "--expert", "strong", "--seed", "-1", "--out", tmp_path / "d.npz"
+    )
+    assert_refused(
+        done, "python -m dqfd_bc_keras.demos record: error: argument --seed: must be in [0, 2147483647], got -1"
+    )
+    assert_without_tensorflow(done)
+    assert left_in(tmp_path) == []
+
+
+def test_budgets_too_small_to_learn_are_refused_or_warned():
+    with pytest.raises(ConfigError, match="total_steps=10 is below batch_size=64: without demonstrations"):
+        Config.for_task("cartpole", expert_loss="none", total_steps=10)
+    with pytest.warns(UserWarning, match="the episode limit 1 is shorter than the n-step window n_step=10"):
+        Config.for_task("cartpole", max_steps=1, demo_capacity=500)

@@ -163,6 +163,7 @@ def test_teacher_rule_reads_the_ci_of_the_median():
     assert teacher_table(arms()) == []  # no teacher rule on the paper's tasks
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task", sorted(teachers()))
 def test_teacher_means_are_the_measured_ones(task):
     assert round(expert_returns(task, "imperfect", episodes=100, seed=0).mean(), 2) == teachers()[task]

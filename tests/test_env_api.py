@@ -29,6 +29,7 @@ def test_an_old_api_env_steps_as_the_gymnasium_api_says():
     assert ends == [(False, False)] * 7 + [(False, True)]  # info["TimeLimit.truncated"]: truncated
 
 
+@pytest.mark.slow
 def test_an_old_api_env_trains_and_evaluates_from_the_command_line(tmp_path):
     done = call("train.py", "--env", OLD, "--expert", "toy_envs:go_right", *QUICK, "--out", tmp_path / "run")
     assert done.returncode == 0, done.stderr
@@ -39,6 +40,7 @@ def test_an_old_api_env_trains_and_evaluates_from_the_command_line(tmp_path):
     assert all(n in range(4, 9) for n in json.loads(evaluated.stdout)["lengths"])
 
 
+@pytest.mark.slow
 def test_an_old_api_env_object_from_python_learns_and_predicts():
     tiny = {"total_steps": 100, "pretrain_steps": 5, "eval_every": 100, "bc_epochs": 1, "demo_episodes": 3}
     model = DQfD(OldApiChain(), lambda obs: 1, max_steps=10, **tiny)
@@ -49,6 +51,7 @@ def test_an_old_api_env_object_from_python_learns_and_predicts():
     assert action in (0, 1)
 
 
+@pytest.mark.slow
 def test_an_old_api_env_that_is_no_gymnasium_env_learns_from_python_and_the_command_line(tmp_path):
     """A class of one's own (or of the old `gym` package) with reset, step and Gymnasium's spaces:
     its instance, the class itself as a factory, and `--env module:function` returning one."""

@@ -1,6 +1,7 @@
 """`--env module:function`: a function that returns an env (a user's wrapper around one, as
 rl-zoo3's `env_wrapper` adds) is a task, as `DQfD(env=factory)` takes one; config.json names it,
-so `--resume` and `evaluate.py` in a new process make it again."""
+so `--resume` and `evaluate.py` in a new process make it again. A class given to `--env` is one line,
+before TensorFlow loads, saying how to register it as an id."""
 
 import json
 import os
@@ -8,7 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from helpers import call
+import pytest
+from helpers import assert_refused, assert_without_tensorflow, call, command
 
 from dqfd_bc_keras.envs.make import get_task, make_task
 
@@ -26,6 +28,7 @@ def test_a_factory_is_a_task_with_the_limit_its_env_keeps():
     assert [env.step(0)[2:4] for _ in range(12)][-1] == (False, True)  # its TimeLimit of 12 is the limit
 
 
+@pytest.mark.slow
 def test_a_factory_trains_resumes_and_evaluates_in_a_new_process(tmp_path):
     run = tmp_path / "run"
     args = ["--env", FACTORY, "--env-kwargs", "size=4", "--expert", "toy_envs:go_right", "--quick", "--quiet"]
@@ -52,3 +55,31 @@ def test_a_function_that_is_no_factory_is_one_line(tmp_path):
     done = call("train.py", "--env", "user_envs:broken", "--quick", "--out", tmp_path / "x", path=[tmp_path])
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert "--env user_envs:broken: int is not an env (no reset nor step method)" in done.stderr
+
+
+@pytest.mark.parametrize(
+    "registers, says",
+    [
+        (
+            "",
+            'register the class in myenv with gymnasium.register(id="MyEnvClass-v0", entry_point="myenv:MyEnvClass") '
+            "and pass --env myenv:MyEnvClass-v0",
+        ),
+        (
+            'gymnasium.register(id="MyEnv-v0", entry_point="myenv:MyEnvClass")\n',
+            "myenv registers MyEnv-v0: pass --env myenv:MyEnv-v0",
+        ),
+    ],
+)
+def test_env_given_a_class_says_how_to_register_it_before_tensorflow_loads(tmp_path, registers, says):
+    (tmp_path / "myenv.py").write_text(
+        f"import gymnasium\n\n\nclass MyEnvClass(gymnasium.Env):\n    pass\n\n\n{registers}"
+    )
+    done = command("train.py", "--env", "myenv:MyEnvClass", "--quick", "--out", tmp_path / "a", path=[tmp_path])
+    assert_refused(
+        done,
+        "train.py: error: argument --env: myenv:MyEnvClass is a class, not an env id: --env takes a "
+        f"registered Gymnasium id; {says}",
+    )
+    assert_without_tensorflow(done)
+    assert not (tmp_path / "a").exists()

@@ -18,6 +18,8 @@ from toy_envs import Chain
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.errors import DqfdWarning
 
+pytestmark = pytest.mark.slow
+
 TESTS = Path(__file__).resolve().parent
 
 

@@ -58,6 +58,7 @@ def test_minigrid_made_with_its_own_max_steps_is_its_limit():
     assert DQfD("minigrid:MiniGrid-Empty-5x5-v0", lambda obs: 2, **TINY).config.limit == 100  # its default: 4·5²
 
 
+@pytest.mark.slow
 def test_minigrid_from_the_command_line_takes_its_own_max_steps_as_the_limit(tmp_path):
     pytest.importorskip("minigrid")
     (tmp_path / "turn.py").write_text("def left(obs):\n    return 0\n")  # never reaches the goal

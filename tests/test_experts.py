@@ -31,6 +31,7 @@ def test_mountaincar_strong_solves_and_imperfect_is_worse() -> None:
     assert imperfect.mean() < -110.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("family", "solved", "strong_band", "imperfect_band"),
     [
@@ -134,6 +135,7 @@ def test_bad_input_raises_value_error(family: str, name: str, epsilon: float, ma
         expert_returns(family, name, episodes=1, epsilon=epsilon)
 
 
+@pytest.mark.slow
 def test_cli_prints_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--episodes", "2"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()

@@ -79,6 +79,7 @@ def write(modules: dict[str, str], where: Path) -> None:
         (where / name).write_text(code)
 
 
+@pytest.mark.slow
 def test_the_method_recipe_trains_and_evaluates_with_the_users_method(tmp_path):
     modules, (train, evaluate) = recipe("A method (an expert loss)")
     write(modules, tmp_path)
@@ -129,6 +130,7 @@ def test_the_doc_quotes_the_plug_in_protocols_as_the_package_declares_them():
         assert members and all(f"`{prefix}.{name}`" in DOC.read_text() for name in members), members
 
 
+@pytest.mark.slow
 def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_path):
     """`--quick` added to the doc's command; evaluating the run, as the doc's introduction says,
     needs the preset's module and plays the plain env."""
@@ -148,6 +150,7 @@ def test_the_preset_recipe_trains_on_the_users_preset_with_its_only_expert(tmp_p
     assert max(json.loads(evaluated.stdout)["lengths"]) <= 500  # scored on the plain CartPole-v1
 
 
+@pytest.mark.slow
 def test_the_suite_recipe_runs_its_arms_and_reports_them(tmp_path):
     """`--seeds 1` and a run of seconds added to the doc's `run`; its `report` as written. What each
     arm should be is read from the doc's module (the SIGMAS arms)."""

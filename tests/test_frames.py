@@ -200,6 +200,7 @@ def test_the_torso_is_chosen_by_the_observation_and_refused_where_it_cannot_read
 # --- end to end -----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_minatar_run_trains_and_evaluates_end_to_end(tmp_path):
     out = tmp_path / "run"
     done = run(
@@ -228,6 +229,7 @@ def test_a_minatar_run_trains_and_evaluates_end_to_end(tmp_path):
         assert f"minatar-breakout (MinAtar/Breakout-v1), {policy} policy, 2 greedy episodes" in done.stdout
 
 
+@pytest.mark.slow
 def test_an_atari_run_trains_from_a_rule_and_a_saved_model_demonstrates(tmp_path):
     tiny = [
         "--quick",
@@ -274,6 +276,7 @@ def test_an_atari_run_trains_from_a_rule_and_a_saved_model_demonstrates(tmp_path
         assert len(demos["actions"]) == 40 or demos["terminated"][-1]
 
 
+@pytest.mark.slow
 def test_quick_caps_an_atari_games_episodes_so_a_policy_that_never_fires_ends(tmp_path):
     """Breakout waits for FIRE: a greedy agent that never presses it plays every step of the limit
     (27,000 steps). `--quick` caps an Atari game's limit at 200; `--max-steps` still wins."""
@@ -335,6 +338,7 @@ def test_what_frames_do_not_support_yet_is_refused_in_one_line(tmp_path):
     assert not (tmp_path / "t").exists()
 
 
+@pytest.mark.slow
 def test_the_pixels_study_runs_both_sides_and_reports_from_its_archive(tmp_path):
     out = tmp_path / "pixels"
     done = run("-m", "studies.pixels", "--out", out, "--quick")

@@ -22,6 +22,7 @@ def three_episodes(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_train_records_the_files_episode_count_and_resumes_quick(three_episodes, tmp_path):
     run = tmp_path / "run"
     trained = call("train.py", "--task", "cartpole", "--demos", three_episodes, "--quick", "--quiet", "--out", run)

@@ -42,6 +42,7 @@ def lab(*args, timeout=600):
 TEACHERS = [(task, teacher) for task in GRID_TASKS for teacher in sorted(lab_settings(task).grid_teachers)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task, teacher", TEACHERS)
 def test_teacher_means_are_the_measured_ones(task, teacher):
     expert, epsilon = teacher
@@ -150,6 +151,7 @@ def test_the_summary_line_counts_pairs_and_calls_a_grid_short_of_its_seeds_provi
     assert summarising._grid([], tmp_path)[0].endswith("slower in 0, unclear in 0.")
 
 
+@pytest.mark.slow
 def test_grid_quick_runs_every_method_writes_the_tables_and_heatmaps_and_skips_finished_runs(tmp_path):
     done = lab("grid", "--quick", "--out", tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -220,6 +222,7 @@ def test_estimators_section_reads_calibration_json_and_draws_the_figure(tmp_path
     assert "no estimator arms have run" in text and (tmp_path / "figures" / "calibration.png").is_file()
 
 
+@pytest.mark.slow
 def test_calibrate_quick_measures_every_estimator_on_every_kind_of_state(tmp_path):
     done = lab("calibrate", "--quick", "--out", tmp_path / "c.json", "--figure", tmp_path / "c.png")
     assert done.returncode == 0, done.stderr[-2000:]

@@ -268,6 +268,7 @@ def test_without_minari_says_how_to_install(monkeypatch, mountaincar):
         assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_cli_export_then_train_from_the_minari_dataset(cache, tmp_path):
     """A user's path: record a plain env with a rule, publish it with `demos export`, train on it
     with `train.py --demos minari:ID` (the commands, answered in this process, share the local cache)."""
@@ -325,6 +326,7 @@ def test_an_env_minari_cannot_serialise_is_refused_in_one_line(cache):
     assert not (cache / "toy" / "callable-v0").exists()
 
 
+@pytest.mark.slow
 def test_env_kwargs_are_compared_with_the_datasets_env_spec(cache, tmp_path):
     """A dataset recorded on ToyChain-v0 made with size=7 (Minari keeps the kwargs in its env_spec):
     refused without the kwargs or with others, in one line naming both; trained on with them."""

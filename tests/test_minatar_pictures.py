@@ -90,6 +90,7 @@ def assert_shows_a_frame(image: np.ndarray, dataset: demos.DemoDataset) -> None:
     assert any(np.array_equal(game, frame) for frame in frames_of(dataset))
 
 
+@pytest.mark.slow
 def test_a_person_plays_breakout_and_sees_it_in_minatars_colours(tmp_path):
     """The acceptance: Breakout played in a real window with real key presses; the screenshot taken
     while paused shows one of the states the file recorded, cell for cell in MinAtar's colours."""
@@ -109,6 +110,7 @@ def test_a_person_plays_breakout_and_sees_it_in_minatars_colours(tmp_path):
     assert_shows_a_frame(image, demos.load(out))
 
 
+@pytest.mark.slow
 def test_demos_show_draws_the_replay_in_minatars_colours(tmp_path):
     path = tmp_path / "d.npz"
     assert call("dqfd_bc_keras.demos", "record", "--task", "minatar-freeway", "--expert", "strong",
@@ -154,6 +156,7 @@ def test_show_video_holds_each_state_in_minatars_colours(tmp_path):
         assert_close(frame, picture)
 
 
+@pytest.mark.slow
 def test_evaluate_video_shows_the_model_playing_in_minatars_colours(tmp_path):
     answer = call("evaluate.py", REPO / "models" / "minatar-breakout", "--episodes", 1, "--video", tmp_path / "videos")
     assert answer.returncode == 0, answer.stderr

@@ -14,6 +14,8 @@ from dqfd_bc_keras.experiments.efficiency import SB3_METHOD
 from studies import minatar_study as study
 from studies.minatar_study import ANCHORS, GAMES, METHODS, Study, normalised, report
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.parametrize("game", GAMES)
 def test_the_anchors_are_the_random_policys_and_the_teachers_100_episode_returns(game):

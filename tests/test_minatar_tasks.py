@@ -184,6 +184,7 @@ def test_the_experts_answer_valid_actions_on_played_frames(task: str) -> None:
     env.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task", PRESETS)
 def test_the_experts_returns_are_in_their_measured_bands(task: str) -> None:
     n = EPISODES[task]

@@ -24,6 +24,7 @@ def test_every_shipped_model_is_in_the_table_of_models_readme():
     assert len(SHIPPED) >= 8 and all(f"| `{name}/` |" in table for name in SHIPPED)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_plays_as_its_eval_json_says(name):
     folder = MODELS / name
@@ -43,6 +44,7 @@ def test_shipped_model_plays_as_its_eval_json_says(name):
     assert abs(result.mean_return - recorded["mean_return"]) <= max(3 * recorded["std_return"], 5.0)
 
 
+@pytest.mark.slow
 def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_fitted_on():
     """docs/teacher_agreement.py --quick: its BC model takes the teacher's action on (nearly) every state
     of the episodes its run demonstrated, which only holds if the script records those very episodes;
@@ -75,6 +77,7 @@ def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_f
     assert teachers[1][4].split(" ± ")[0] == own_return
 
 
+@pytest.mark.slow
 def test_the_expert_loss_tables_in_models_readme_are_what_the_committed_runs_give():
     """docs/expert_losses.py reads the study's archive and the probe's archive; its tables are the
     ones models/README.md quotes, row for row, and their per-seed columns are the runs' last evaluations

@@ -35,6 +35,7 @@ def test_the_first_step_is_adams_with_bias_correction():
     np.testing.assert_allclose(theta.numpy()[:3], [1.0 - lr, -2.0 + lr, 3.0], rtol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lr", [1e-3, 0.05])
 def test_500_steps_of_random_gradients_match_keras_adam(lr):
     fused_theta, keras_theta = variables(0), variables(0)
@@ -68,6 +69,7 @@ def small_model(optimizer: keras.optimizers.Optimizer) -> keras.Model:
     return model
 
 
+@pytest.mark.slow
 def test_training_a_small_model_matches_keras_adam():
     """200 full-batch steps of a regression: the same losses and weights. tanh, not ReLU: where a
     ReLU's input lies within rounding of 0, two roundings send its gradient different ways."""

@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 from test_cli import Done, assert_answered_without_tensorflow
 
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "dqfd_bc_keras"
 

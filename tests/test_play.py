@@ -47,6 +47,7 @@ def episodes_in(path: Path, timeout: float = 60.0, at_least: int = 1) -> int:
     raise AssertionError(f"{path} did not reach {at_least} episode(s) in {timeout} s")
 
 
+@pytest.mark.slow
 def test_a_person_records_two_cartpole_episodes_that_train_and_evaluate(screen, tmp_path):
     out = tmp_path / "mine.npz"
     process = start(screen, "--task", "cartpole", "--episodes", 2, "--fps", 30, "--out", out)
@@ -119,6 +120,7 @@ def test_a_kill_in_the_third_episode_keeps_the_first_two_and_append_goes_on(scre
     assert (more.episodes()[2].actions == 0).all()
 
 
+@pytest.mark.slow
 def test_a_person_records_into_a_minari_dataset(screen, tmp_path):
     env = {**screen, "MINARI_DATASETS_PATH": str(tmp_path / "minari")}
     process = start(env, "--env", "CartPole-v1", "--episodes", 1, "--fps", 60, "--out", "minari:cartpole/me-v0")
@@ -135,6 +137,7 @@ def test_a_person_records_into_a_minari_dataset(screen, tmp_path):
     assert read.stdout.split("\n")[0] == "1 [0] {0}", read.stderr  # CartPole's keys: ← is action 0
 
 
+@pytest.mark.slow
 def test_ctrl_c_and_escape_keep_what_finished(screen, tmp_path):
     out = tmp_path / "ac.npz"
     process = start(screen, "--task", "acrobot", "--max-steps", 10, "--fps", 30, "--out", out)
@@ -324,6 +327,7 @@ def test_the_python_api_replays_what_the_cli_recorded(tmp_path):
     assert shown.meta.episode_seeds == [3, 4] and shown.meta.max_steps == 40
 
 
+@pytest.mark.slow
 def test_the_screenshot_script_grabs_the_window(tmp_path):
     """docs/play_screenshot.py, as the docs' picture is made: a real window, grabbed from the screen."""
     from PIL import Image
@@ -343,6 +347,7 @@ def test_the_screenshot_script_grabs_the_window(tmp_path):
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10  # a frame and text, not a blank window
 
 
+@pytest.mark.slow
 def test_closing_the_window_quits_and_keeps_the_finished_episodes(tmp_path, monkeypatch):
     """The window's close button (pygame's QUIT event, posted under SDL's headless driver) ends the
     session as Esc does: the episode in play is dropped, the finished ones stay in the file."""

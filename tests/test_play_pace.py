@@ -47,6 +47,7 @@ def test_no_delay_is_the_expert_itself():
     env.close()
 
 
+@pytest.mark.slow
 def test_the_quick_measurement_covers_every_minatar_preset():
     done = subprocess.run(
         [sys.executable, "benchmarks/play_pace.py", "--quick", "--json"],

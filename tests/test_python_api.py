@@ -24,6 +24,8 @@ from dqfd_bc_keras.evaluation import EvalResult, evaluate, load_policy
 from dqfd_bc_keras.seeds import EVAL_SEED
 from dqfd_bc_keras.training.records import EpisodeRow, EvalRow
 
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 TINY = {
     "pretrain_steps": 10,

@@ -176,6 +176,7 @@ def run_both(config: Config, demos: DemoDataset, agent_data: DemoDataset, bc_mod
     return agent, ref, graph_terms, ref_terms, rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loss", ["margin", "bayes"])
 def test_reference_learns_what_the_graph_loop_learns(loss, demos, agent_data, bc_models):
     agent, ref, graph_terms, ref_terms, rows = run_both(config_for(loss), demos, agent_data, bc_models.get(loss))

@@ -18,6 +18,8 @@ from dqfd_bc_keras.experiments.suites import arm
 from dqfd_bc_keras.experiments.summary import summary
 from dqfd_bc_keras.runs.directory import train
 
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 ARM = arm("cartpole", "bootstrap", "ce", 1, **QUICK)
 

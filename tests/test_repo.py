@@ -1,11 +1,15 @@
 """The front door and the docs: README's two commands, CI running the test command verbatim, a
-short README, links and § citations that resolve, no issue letters, quiet TF."""
+short README, the contributor's fast loop it names, links and § citations that resolve, no issue
+letters, quiet TF."""
 
 import csv
 import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
@@ -43,6 +47,37 @@ def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
 def test_readme_is_a_front_door_of_at_most_250_lines():
     lines = README.read_text().splitlines()
     assert len(lines) <= 250, f"README.md has {len(lines)} lines; move reference detail to docs/"
+
+
+FAST_LOOP = '.venv/bin/python -m pytest -m "not slow" -n 2'
+"""The contributor's loop: every test but those marked `slow` (subprocess trainings, long commands)."""
+
+
+def test_the_slow_marker_is_registered_strictly_and_only_selects():
+    """A misspelt marker is an error, not a silently unmarked test; and nothing but `-m` leaves the
+    slow tests out, so the README's full command (CI's) runs them all."""
+    options = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
+    assert [m for m in options["markers"] if m.startswith("slow:")], options["markers"]
+    addopts = options["addopts"].split()
+    assert "--strict-markers" in addopts and "-m" not in addopts and "slow" not in options["addopts"]
+    contributing = README.read_text().split("## Contributing", 1)[1].split("\n## ", 1)[0]
+    assert f"`{FAST_LOOP}`" in contributing and "`.ci/run`" in contributing
+
+
+@pytest.mark.slow
+def test_the_fast_loop_selects_at_least_500_tests_and_leaves_the_slow_ones_out():
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", "-m", "not slow"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    counts = re.search(r"^(\d+)/(\d+) tests collected \((\d+) deselected\)", done.stdout, re.M)
+    assert counts, done.stdout[-3000:]
+    selected, collected, deselected = map(int, counts.groups())
+    assert selected >= 500 and deselected > 0 and selected + deselected == collected
 
 
 def relative_links(markdown: Path) -> list[str]:
@@ -118,6 +153,7 @@ def test_user_facing_docs_cite_no_issue_letters():
     assert not found, found
 
 
+@pytest.mark.slow
 def test_the_quick_start_says_what_the_default_run_gives_on_any_cpu(tmp_path):
     """README's quick start: `train.py` with no flag stops early, at the first 10 episodes in a row
     that return ≥ 490, and evaluates at 500.00, on every machine. Its episodes and interactions depend

@@ -1,5 +1,6 @@
 """The report from an archive: byte-identical to a golden file and to itself, written where it was
-asked (never into docs/ by default), damaged runs named and skipped."""
+asked (never into docs/ by default), damaged or unfinished runs named and skipped, and arms of one
+seed reported as too few for a comparison."""
 
 import contextlib
 import csv
@@ -8,10 +9,12 @@ import shutil
 import struct
 import subprocess
 import sys
+import tarfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REPO, call, tree
 
 from dqfd_bc_keras.commands.cli import run
 from dqfd_bc_keras.demos import record, save
@@ -169,6 +172,7 @@ def test_a_run_that_stopped_early_holds_its_last_value():
     np.testing.assert_allclose(running, [2, 2, 2])
 
 
+@pytest.mark.slow
 def test_a_run_given_demonstrations_in_a_file_is_reported_as_such(tmp_path):
     """train.py --demos FILE, as a user runs it: the lab reads where the demonstrations came from
     out of the run's own demonstrations.json, not the file's demonstrator."""
@@ -209,3 +213,49 @@ def test_the_demonstrations_column_names_their_source():
     for unknown in ("disk", None):
         with pytest.raises(ValueError, match=f"source {unknown!r} is not one of"):
             summary(unknown)
+
+
+ONE_SEED = ("cartpole-bootstrap-bayes", "cartpole-bootstrap-ce", "cartpole-bootstrap-bayes-priorFalse")
+"""C3's pair and an ablation of it: arms whose comparisons need two seeds."""
+
+
+@pytest.mark.slow
+def test_a_report_on_arms_of_one_seed_says_they_have_too_few_and_is_written(tmp_path):
+    suite = tmp_path / "suite"
+    with tarfile.open(REPO / "docs" / "data" / "results.tar.xz") as archive:
+        archive.extractall(
+            suite, [m for m in archive if m.name.split("/")[0] in ONE_SEED and "/seed0/" in m.name], filter="data"
+        )
+    before = tree(suite)
+    results = tmp_path / "report" / "RESULTS.md"
+    done = call("dqfd_bc_keras.experiments", "report", suite, "--results", results)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    assert done.stdout.startswith(f"wrote {results}, ")
+    text = results.read_text()
+    assert "- C3 on cartpole/bootstrap: **inconclusive**: n = 1: too few seeds for a comparison.\n" in text
+    assert (
+        "| C3 | cartpole/bootstrap | with the time-limit bootstrap fix bayes and ce give the same average reward | "
+        "n = 1: too few seeds for a comparison | — | — | 1, 1 · — | **inconclusive (n < 2)** |"
+    ) in text
+    assert (
+        "| cartpole/bootstrap bayes | bayes_prior = False | 1, 1 | n = 1: too few seeds for a comparison | — | — | "
+        "— | **inconclusive (n < 2)** |"
+    ) in text
+    assert tree(suite) == before
+
+
+@pytest.mark.slow
+def test_the_report_names_every_run_it_leaves_out(finished, tmp_path):
+    from dqfd_bc_keras.experiments.report import report
+
+    suite = tmp_path / "suite"
+    shutil.copytree(finished, suite / "cartpole-bootstrap-bayes-quick" / "seed0")
+    cut = suite / "cartpole-bootstrap-bayes-quick" / "seed1"
+    shutil.copytree(finished, cut)
+    (cut / "eval.json").unlink()
+    warned = []
+    report(suite, tmp_path / "RESULTS.md", tmp_path / "figures", warn=warned.append)
+    assert warned == [
+        f"{suite}/cartpole-bootstrap-bayes-quick/seed1/eval.json: missing: the run has not finished "
+        "(still running, or cut off: run the suite again to resume it); run skipped"
+    ]

@@ -25,6 +25,8 @@ from dqfd_bc_keras.errors import ConfigError  # noqa: E402  (after the importors
 from dqfd_bc_keras.seeds import eval_seed  # noqa: E402  (after the importorskip guards)
 from studies.sb3_pixels import MinAtarCNN, hyperparameters, minatar_env_id, policy_kwargs  # noqa: E402  (after the importorskip guards)
 
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 MODULE = "studies.sb3_pixels"
 

@@ -27,6 +27,7 @@ def run(name, *args, timeout=300):
     return subprocess.run(script(name, *args), capture_output=True, text=True, timeout=timeout, cwd=REPO, env=ENV)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loss", LOSSES)
 def test_quick_training_writes_a_complete_run(quick_run, loss):
     run_dir, done = quick_run(loss).out, quick_run(loss).answer
@@ -42,6 +43,7 @@ def test_quick_training_writes_a_complete_run(quick_run, loss):
     assert rows and int(rows[-1]["env_step"]) <= 600
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loss", LOSSES)
 def test_evaluate_reads_a_quick_run(quick_run, loss, tmp_path):
     done = call("evaluate.py", quick_run(loss).out, "--episodes", 3, "--json", "--out", tmp_path / "e.json")
@@ -51,6 +53,7 @@ def test_evaluate_reads_a_quick_run(quick_run, loss, tmp_path):
     assert json.loads((tmp_path / "e.json").read_text())["returns"] == result["returns"]
 
 
+@pytest.mark.slow
 def test_resume_after_sigkill_reproduces_the_uninterrupted_run(tmp_path):
     """Same seed, op determinism: a run killed mid-way and resumed writes the same metrics."""
     args = ["--quick", "--set", "total_steps=2500", "--set", "checkpoint_every=500", "--quiet"]
@@ -87,6 +90,7 @@ def one_line_error(done, message):
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
 
 
+@pytest.mark.slow
 def test_train_refuses_to_overwrite_a_run(quick_run):
     run_dir = quick_run("bayes").out
     before = (run_dir / "metrics.csv").read_bytes()

@@ -105,6 +105,7 @@ def test_runs_from_before_the_weights_were_logged_show_none_and_nothing_ran_says
     assert np.isnan(old[0].column("imitation_weight_demo")).all()
 
 
+@pytest.mark.slow
 def test_the_study_report_command_writes_its_markdown_and_refuses_a_bad_source(tmp_path):
     import subprocess
     import sys

@@ -1,8 +1,10 @@
-"""The experiment runner: suites as declared, the quick suite end to end on both backends."""
+"""The experiment runner: suites as declared, the quick suite end to end on both backends, and a run
+it finds broken, or in another config than its arm's, reported and restarted only when asked."""
 
 import csv
 import dataclasses
 import json
+import shutil
 
 import pytest
 
@@ -13,6 +15,7 @@ from dqfd_bc_keras.experiments.claims import PAPER
 from dqfd_bc_keras.experiments.plans import planned_seeds
 from dqfd_bc_keras.experiments.suites import ALL, SUITES, Arm, suite_arms
 from dqfd_bc_keras.experiments.sweep import Job, SweepOptions, run_suite, sweep_jobs
+from dqfd_bc_keras.runs import directory as runs
 
 
 def test_paper_suite_pits_ce_against_bayes_with_the_planned_seeds_and_both_readings_of_c2():
@@ -116,6 +119,7 @@ def test_a_sweep_runs_seed_major_so_a_cut_off_leaves_arms_balanced(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
     from dqfd_bc_keras.experiments import sweep
 
@@ -130,6 +134,7 @@ def test_a_sweep_cut_off_is_logged_as_interrupted(tmp_path, monkeypatch):
     assert (logged["suite"], logged["runs"], logged["interrupted"]) == ("quick", 1, True)
 
 
+@pytest.mark.slow
 def test_a_sweep_in_an_unpacked_archive_runs_only_what_it_lacks(tmp_path):
     """An exported run has eval.json and no checkpoints/: complete, never retrained or replaced. One
     with checkpoints/ started here and was cut off in its final phase: it is resumed."""
@@ -156,6 +161,7 @@ def test_unknown_suite_or_backend_is_refused(tmp_path):
         run_suite("quick", 1, tmp_path, SweepOptions(backend="slurm"))
 
 
+@pytest.mark.slow
 def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path):
     """Three runs in one worker process, in an order that puts bayes seed 0 last, against bayes
     seed 0 alone in a fresh process: the same episodes, losses and evaluations, to the bit."""
@@ -187,6 +193,7 @@ def test_a_reused_worker_gives_each_seed_the_results_of_a_fresh_process(tmp_path
     assert len(metrics) > 1 and (metrics, evals, returns) == results(tmp_path / "fresh")
 
 
+@pytest.mark.slow
 def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_one(tmp_path):
     from dqfd_bc_keras.experiments.sweep import run_jobs
 
@@ -205,6 +212,7 @@ def test_a_worker_that_dies_mid_run_is_reported_and_the_next_run_gets_a_fresh_on
     assert "its process died (exit code 3)" in lines[1] and "episodes" in lines[2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["local", "ray"])
 def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_path):
     lines = []
@@ -243,6 +251,7 @@ def test_cli_rejects_bad_arguments_in_one_line(capsys):
     assert "/no/such/dir: no such suite directory" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     from dqfd_bc_keras.experiments.report import report
 
@@ -271,3 +280,33 @@ def test_report_on_the_quick_suite_writes_results_and_figures(tmp_path):
     assert main(["export", str(tmp_path / "suite"), "--out", str(tmp_path / "suite.tar.xz")]) == 0
     again = report(tmp_path / "suite.tar.xz", tmp_path / "again.md", tmp_path / "figures")
     assert again == (tmp_path / "again.md").read_text() and again.replace("suite.tar.xz", "suite") == text
+
+
+@pytest.mark.slow
+def test_the_runner_reports_a_broken_run_and_restarts_it_when_asked(finished, tmp_path):
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple(QUICK.items()), "quick", 1)
+    run = tmp_path / "suite" / arm.name / "seed0"
+    shutil.copytree(finished, run)
+    (run / "eval.json").unlink()  # cut off before it finished …
+    (run / runs.COMPLETE).unlink()
+    (run / "checkpoints" / "latest.json").write_text("")  # … and its checkpoint is damaged
+    lines = []
+    with pytest.raises(ConfigError, match="1 of 1 runs failed"):
+        run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append))
+    assert "failed: BrokenRunError" in lines[-1] and "--restart-broken" in lines[-1]
+    [outcome] = run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append), restart_broken=True)
+    assert not outcome.error and (run / "eval.json").is_file()
+
+
+@pytest.mark.slow
+def test_the_runner_resumes_a_run_only_if_its_config_is_the_arms(finished, tmp_path):
+    arm = Arm("cartpole", "bootstrap", "bayes", tuple({**QUICK, "learning_rate": 0.002}.items()), "quick", 1)
+    run = tmp_path / "suite" / arm.name / "seed0"
+    shutil.copytree(finished, run)  # trained with learning_rate 0.001, and cut off before its end
+    (run / runs.COMPLETE).unlink()
+    lines = []
+    with pytest.raises(ConfigError, match="1 of 1 runs failed"):
+        run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append))
+    assert "not the arm's config (learning_rate: 0.001 (was 0.002))" in lines[-1] and "--restart-broken" in lines[-1]
+    [outcome] = run_suite([arm], None, tmp_path / "suite", SweepOptions(1, progress=lines.append), restart_broken=True)
+    assert not outcome.error and json.loads((run / "config.json").read_text())["learning_rate"] == 0.002

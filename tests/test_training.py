@@ -272,6 +272,7 @@ def test_play_stops_at_the_step_budget_and_the_episode_continues(built):
     assert int(interaction.env_steps.numpy()) - env0 == interaction.episode.length > 3
 
 
+@pytest.mark.slow
 def test_a_bayes_run_learns_the_same_whatever_its_evaluation_grid():
     """The replay settles its newest rows (their n-step returns, the BC model's MC-dropout view) before
     each sample and every SETTLE_ROWS rows, never where a graph call ends: so where `play` stops (the
@@ -511,6 +512,7 @@ def bayes_run(tmp_path_factory):
     return config, out, runs.train(config, out, quiet=True)
 
 
+@pytest.mark.slow
 def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
     config, out, result = bayes_run
     assert Config.from_dict(json.loads((out / "config.json").read_text())) == config
@@ -537,6 +539,7 @@ def test_train_writes_config_and_one_metrics_row_per_episode(bayes_run):
     assert summary.plain_returns == recorded.meta.plain_returns and summary.pretrain_steps == config.pretrain_steps
 
 
+@pytest.mark.slow
 def test_train_evaluates_at_exactly_every_eval_every_interactions(bayes_run):
     config, out, result = bayes_run
     fields, evals = read_csv(out / "evals.csv")
@@ -557,6 +560,7 @@ def test_train_evaluates_at_exactly_every_eval_every_interactions(bayes_run):
     } <= tb_tags(out / "tb")
 
 
+@pytest.mark.slow
 def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
     """Evaluations use their own env seeds and a NumPy copy of the network: the CartPole presets'
     eval grid (1,000 steps) can change without changing a single training number."""
@@ -569,6 +573,7 @@ def test_evaluating_more_often_leaves_training_unchanged(bayes_run, tmp_path):
     assert len(read_csv(tmp_path / "often" / "evals.csv")[1]) > len(read_csv(out / "evals.csv")[1])
 
 
+@pytest.mark.slow
 def test_train_saves_models_demos_evaluation_curve_and_checkpoint(bayes_run):
     config, out, result = bayes_run
     q = load_model(out / "q_network.keras")

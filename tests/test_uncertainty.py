@@ -202,6 +202,7 @@ def test_a_run_checkpoint_restores_the_estimator_for_a_resume(demos, held_out, t
         np.testing.assert_allclose(restored, original, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_run_logs_the_imitation_weight_on_and_off_the_demonstrations(tmp_path, demos, bc_models):
     """train.py with the distance estimator at σ0² = 0.1: on D_demo's states (its references, d = 0)
     σ² = σ0², so the weight 1/(2σ²) is 1/(2·0.1) = 5; on the agent's own states it lies between

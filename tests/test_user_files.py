@@ -1,7 +1,8 @@
 """A user's files are never touched: `train.py` writes, replaces (`--force`) and resumes (`--resume`)
 only what the program itself wrote. A `.lock` of the user's is never written, a dotfile that looks
 like a temporary is never deleted, and a folder a user put in a run (beside it, or a checkpoint copied
-into checkpoints/) is kept."""
+into checkpoints/) is kept. `--force` replaces a run only, never a folder of the user's, and an empty
+folder is trained into."""
 
 import json
 import os
@@ -9,15 +10,14 @@ import shutil
 from pathlib import Path
 
 import pytest
-from helpers import call
+from helpers import TINY_RUN, call, left_in, one_line, tree
 from test_python_api import TINY
 
 from dqfd_bc_keras import DQfD
+from dqfd_bc_keras.commands import cli
+from dqfd_bc_keras.commands.train import main as train_main
 from dqfd_bc_keras.errors import OutputExistsError
 from dqfd_bc_keras.runs import directory as runs
-
-TINY_RUN = ["--quick", "--quiet", "--set", "total_steps=300", "--set", "pretrain_steps=10"]
-"""A run of a few seconds: one checkpoint after ckpt-0, one evaluation."""
 
 
 def files(directory: Path) -> dict[str, bytes | None]:
@@ -35,6 +35,7 @@ def refused(done, message: str) -> None:
 # --- a .lock of the user's ----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("text", ["bob is editing\n", "4242\n", ""], ids=["text", "a pid", "empty"])
 @pytest.mark.parametrize("force", [False, True], ids=["plain", "force"])
 def test_a_users_lock_file_in_a_folder_that_is_not_a_run_is_left_as_it_was(tmp_path, text, force):
@@ -130,6 +131,7 @@ def run_with_users_files(quick_run, tmp_path) -> Path:
     return run
 
 
+@pytest.mark.slow
 def test_resume_deletes_its_own_temporaries_and_keeps_every_file_of_the_users(run_with_users_files):
     run = run_with_users_files
     (run / runs.COMPLETE).unlink()  # cut off in its final phase: the resume finishes it, with a new checkpoint
@@ -145,6 +147,7 @@ def test_resume_deletes_its_own_temporaries_and_keeps_every_file_of_the_users(ru
     )
 
 
+@pytest.mark.slow
 def test_force_replaces_the_run_and_keeps_every_file_of_the_users(run_with_users_files):
     run = run_with_users_files
     old_metrics = (run / "metrics.csv").read_bytes()
@@ -156,3 +159,51 @@ def test_force_replaces_the_run_and_keeps_every_file_of_the_users(run_with_users
         json.loads((run / "config.json").read_text())["seed"] == 1 and (run / "metrics.csv").read_bytes() != old_metrics
     )
     assert len(list((run / "tb").glob("events.out.tfevents.*"))) == 1  # the old run's events went
+
+
+# --- --force replaces only a run, and only what the run wrote ---
+
+
+@pytest.mark.parametrize("force", [True, False], ids=["force", "plain"])
+def test_force_refuses_a_directory_that_is_not_a_run(tmp_path, capsys, force):
+    out = tmp_path / "x"
+    (out / "photos").mkdir(parents=True)
+    (out / "photos" / "a.jpg").write_bytes(b"jpeg")
+    (out / "thesis.tex").write_text("t")
+    before = tree(out)
+    err = one_line(
+        capsys,
+        cli.run(train_main, [*TINY_RUN, *(["--force"] if force else []), "--out", str(out)]),
+        f"error: {out} is not a run directory (it holds photos, thesis.tex), and only a run is ever "
+        "replaced; choose a new or empty --out",
+    )
+    assert "--force" not in err
+    assert tree(out) == before and left_in(out) == ["photos", "thesis.tex"]
+
+
+@pytest.mark.slow
+def test_force_replaces_a_run_but_keeps_a_file_the_user_put_in_it(finished, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(finished, run)
+    (run / "notes.txt").write_text("my notes")
+    (run / ".dqfd-tmp-4242-abcd1234-eval.json").write_text("{")  # a temporary a killed run left
+    one_line(
+        capsys,
+        cli.run(train_main, [*TINY_RUN, "--out", str(run)]),
+        f"error: {run} already holds a run; pass --resume to continue it or --force to replace it",
+    )
+    old_metrics = (run / "metrics.csv").read_bytes()
+    assert cli.run(train_main, [*TINY_RUN, "--set", "seed=1", "--force", "--out", str(run)]) == 0
+    assert (run / "notes.txt").read_text() == "my notes"
+    assert not (run / ".dqfd-tmp-4242-abcd1234-eval.json").exists()
+    assert json.loads((run / "config.json").read_text())["seed"] == 1 and (run / runs.COMPLETE).is_file()
+    assert (run / "metrics.csv").read_bytes() != old_metrics
+
+
+@pytest.mark.slow
+def test_an_empty_existing_directory_is_trained_into(tmp_path, capsys):
+    out = tmp_path / "empty"
+    out.mkdir()
+    (out / ".lock").write_text("")  # what a released lock leaves: still empty
+    assert cli.run(train_main, [*TINY_RUN, "--out", str(out)]) == 0
+    assert capsys.readouterr().err == "" and (out / runs.COMPLETE).is_file()
