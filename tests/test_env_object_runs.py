@@ -124,7 +124,7 @@ def test_evaluate_films_it_on_a_registered_id_of_the_same_env(tmp_path, monkeypa
         model.save(run)
     monkeypatch.delitem(gym.registry, model.config.task)  # as another process finds the run
     done = call("evaluate.py", run, "--env", "CartPole-v1", "--episodes", "1", "--video", tmp_path / "videos")
-    assert (done.returncode, done.stderr) == (0, "")
+    assert (done.returncode, done.stderr) == (0, f"recorded 1 episode(s) in {tmp_path / 'videos'}\n")
     (video,) = (tmp_path / "videos").glob("*.mp4")
     env = gym.make("CartPole-v1", render_mode="rgb_array")
     env.reset(seed=EVAL_SEED)  # the first episode's reset
