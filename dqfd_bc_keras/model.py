@@ -180,6 +180,7 @@ class DQfD:
         else:
             self.learner.extend(budget)
         learner, state = self.learner, self.state
+        assert state is not None  # set with the learner
         train_with_callback(learner, state, lambda *_: None, lambda points: evaluate_at(learner, state, points), tell)
 
     # --- the trained policy, in Stable-Baselines3's terms ------------------------------------------
@@ -265,11 +266,12 @@ class DQfD:
         ]
         if lost:
             warnings.warn(f"{path}: a later process cannot make {' nor '.join(lost)}", DqfdWarning, stacklevel=2)
-        if self._run is not None and Path(path).resolve() == self.out.resolve():
+        if self._run is not None and self.out is not None and Path(path).resolve() == self.out.resolve():
             if not (self.out / COMPLETE).is_file():  # a learn stopped halfway: the run ends at the step it reached
                 with DirectoryLock(self.out):
                     self._run.finish()
             return self.out
+        assert self.state is not None  # set with the learner
         save_run(path, learner, self.state, self._source)
         return Path(path)
 
@@ -295,7 +297,7 @@ class DQfD:
             saved_task = saved["task"]
         except (OSError, ValueError, KeyError, TypeError) as error:
             raise BrokenRunError(f"{path / 'config.json'}: cannot be read ({one_line(error)})") from None
-        changes = {}
+        changes: dict[str, Any] = {}
         if isinstance(env, str) and unmade_env(saved_task):
             stand_in(saved_task, env)  # the id makes the object's env, under the run's own id
         elif env is not None:

@@ -1,8 +1,8 @@
 """A run trained on a Python env object (`DQfD(env=<object>)`, saved with `DQfD.save`) read again by
 the command line in another process: `evaluate.py` and `train.py --resume` say that the env was a
 Python object and how to give it again, as `DQfD.save` warned, not that the task is unknown; and
-`evaluate.py --env ID` plays it on a registered id of the same env, and `train.py --resume --env ID`
-and `DQfD.load(path, env="ID")` continue it there, in its own config."""
+`evaluate.py --env ID` plays it on a registered id of the same env (and films it there: `--video`),
+and `train.py --resume --env ID` and `DQfD.load(path, env="ID")` continue it there, in its own config."""
 
 import json
 import shutil
@@ -10,6 +10,7 @@ import warnings
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 import pytest
 from helpers import call
 from test_python_api import TINY, walk_right
@@ -17,6 +18,7 @@ from toy_envs import Chain
 
 from dqfd_bc_keras import DQfD
 from dqfd_bc_keras.errors import DqfdWarning
+from dqfd_bc_keras.seeds import EVAL_SEED
 
 pytestmark = pytest.mark.slow
 
@@ -112,3 +114,23 @@ def test_a_preset_or_an_unknown_id_does_not_stand_in_for_the_object(elsewhere):
         done = call("train.py", "--out", run, "--resume", "--env", env, "--quiet")
         assert done.returncode == 2 and done.stderr.startswith(said), done.stderr
     assert files(run) == before
+
+
+def test_evaluate_films_it_on_a_registered_id_of_the_same_env(tmp_path, monkeypatch):
+    """The id given again renders the video; the factory the run was trained on made no frames."""
+    iio = pytest.importorskip("imageio.v3")  # moviepy's, as RecordVideo writes with it
+    run = tmp_path / "cartpole"
+    model = DQfD(lambda: gym.make("CartPole-v1"), walk_right, max_steps=30, seed=1, **TINY).learn(150)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DqfdWarning)
+        model.save(run)
+    monkeypatch.delitem(gym.registry, model.config.task)  # as another process finds the run
+    done = call("evaluate.py", run, "--env", "CartPole-v1", "--episodes", "1", "--video", tmp_path / "videos")
+    assert (done.returncode, done.stderr) == (0, f"recorded 1 episode(s) in {tmp_path / 'videos'}\n")
+    (video,) = (tmp_path / "videos").glob("*.mp4")
+    env = gym.make("CartPole-v1", render_mode="rgb_array")
+    env.reset(seed=EVAL_SEED)  # the first episode's reset
+    first = env.render()
+    frames = iio.imread(video)
+    assert frames.shape[1:] == first.shape and len(frames) > 1
+    assert np.abs(frames[0].astype(int) - first.astype(int)).mean() < 3  # up to the codec's loss

@@ -13,6 +13,7 @@ import signal
 import sys
 import warnings
 from collections.abc import Callable, Sequence
+from typing import Any, TypedDict
 
 from dqfd_bc_keras import runtime
 from dqfd_bc_keras.errors import DqfdError, DqfdWarning
@@ -137,9 +138,16 @@ def env_id(text: str) -> str:
     return text
 
 
-def env_settings(args: argparse.Namespace) -> dict[str, object]:
+class EnvSettings(TypedDict, total=False):
+    """The Config fields `--max-steps` and `--env-kwargs` give."""
+
+    max_steps: int
+    env_kwargs: dict[str, Any]
+
+
+def env_settings(args: argparse.Namespace) -> EnvSettings:
     """The Config fields given by `--max-steps` and `--env-kwargs` (only those given)."""
-    settings: dict[str, object] = {}
+    settings: EnvSettings = {}
     if args.max_steps is not None:
         settings["max_steps"] = args.max_steps
     if args.env_kwargs:

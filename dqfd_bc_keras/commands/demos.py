@@ -106,14 +106,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "play":
         from dqfd_bc_keras.demos.human import controls, play  # pygame from here on
 
-        env = env_settings(args)
+        task, env = chosen_task(args), env_settings(args)
+        assert task is not None  # --task or --env is required
         if args.list_keys:
-            print("\n".join(controls(chosen_task(args), keys=args.keys, fps=args.fps, **env)))
+            print("\n".join(controls(task, keys=args.keys, fps=args.fps, **env)))
             return 0
         if args.out is None:
             raise ConfigError("play: --out is required (the file to write), unless --list-keys")
         dataset = play(
-            chosen_task(args),
+            task,
             args.out,
             args.episodes,
             keys=args.keys,
@@ -137,9 +138,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.command == "record":
         if not args.out.endswith(".npz"):
             raise ConfigError(f"--out must end in .npz, got {args.out!r}")
-        env = env_settings(args)
+        task, env = chosen_task(args), env_settings(args)
+        assert task is not None  # --task or --env is required
         dataset = record(
-            chosen_task(args),
+            task,
             args.expert,
             args.episodes,
             args.seed,

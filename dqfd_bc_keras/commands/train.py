@@ -145,7 +145,7 @@ NOTHING_WRITTEN = "nothing was written; run the same command again"
 """What an interrupt before the run's first checkpoint left, when training did not say it."""
 
 
-def train_into(args: argparse.Namespace, task: str | None, quick: dict, given: dict, out: str) -> RunResult:
+def train_into(args: argparse.Namespace, task: str, quick: dict, given: dict, out: str) -> RunResult:
     """The run the arguments ask for, in `out`: a new one checked before TensorFlow loads, or the
     one there resumed in its own config (a flag that would change it is refused). `given`: the
     settings the user gave (flags, --env-kwargs, --set), which --quick's budget (`quick`) does not
@@ -211,6 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # without a time limit usable.
     given = {**chosen, **env_settings(args), **parse_assignments(args.set)}
     task = chosen_task(args)
+    assert task is not None  # --task defaults to cartpole
     quick = {**QUICK, **get_task(task).quick} if args.quick else {}
     overrides = {**quick, **given}
     check_out(args.out)

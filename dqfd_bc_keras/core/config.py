@@ -214,7 +214,8 @@ class Config:
         wrong = [key for key in get_task(task).defaults if key not in cls.__dataclass_fields__]
         if wrong:  # a user's preset (tasks.TaskSpec.defaults)
             raise ConfigError(f"task {task!r}: its defaults hold an {unknown_field(wrong[0])}")
-        return cls(**{**preset_defaults(task), **overrides})
+        fields: dict[str, Any] = {**preset_defaults(task), **overrides}  # each checked by `validate`
+        return cls(**fields)
 
     @classmethod
     def from_dict(cls, fields: dict) -> Config:
@@ -300,7 +301,7 @@ def preset_defaults(task: str) -> dict[str, object]:
     `atari.ATARI_DEFAULTS`), without validating them: an env without a time limit has no valid
     defaults until `max_steps` is given."""
     shared = {
-        f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        f.name: f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
         for f in dataclasses.fields(Config)
     }
     return {**shared, **get_task(task).defaults, "task": task}
@@ -317,7 +318,7 @@ def parse_assignments(assignments: list[str]) -> dict[str, object]:
     `env_kwargs` takes a JSON object. Applied before any validation, so an override can make a
     task usable (`max_steps` on an env without a time limit).
     """
-    types = {f.name: f.type for f in dataclasses.fields(Config)}
+    types = {f.name: str(f.type) for f in dataclasses.fields(Config)}  # already strings: annotations are postponed
     changes: dict[str, object] = {}
     for assignment in assignments:
         key, sep, text = assignment.partition("=")

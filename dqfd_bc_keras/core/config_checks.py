@@ -30,7 +30,8 @@ def check(config: Config) -> None:
     """Raise ConfigError for the first field of the wrong type, name outside its choices or number
     out of its range; each typed field is set to its plain Python value (an int given to a float
     field as a float, a list given to a tuple field as a tuple, a numpy integer as an int)."""
-    for name, kind in _annotations(type(config)).items():
+    annotations = _annotations(type(config))  # type: ignore[arg-type]  # a class is hashable: python/mypy#20409
+    for name, kind in annotations.items():
         setattr(config, name, typed(name, kind, getattr(config, name)))
     if not config.method.q_learning:
         raise ConfigError(

@@ -23,7 +23,7 @@ def check_memory(config: Config, spaces: TaskSpaces) -> None:
     available = machine_memory()
     if sum(parts.values()) <= available:
         return
-    largest = max(parts, key=parts.get)
+    largest = max(parts, key=parts.__getitem__)
     what, lower = {
         "replay": (
             f"the replay (replay_capacity={config.replay_capacity}, demo_capacity={config.demo_capacity}) and networks",

@@ -156,8 +156,9 @@ def seeds_text(seeds: Sequence[int | None]) -> str:
     """Episode seeds in a few characters: "0..9" when consecutive, else the list."""
     if all(s is None for s in seeds):
         return "not recorded"
-    if len(seeds) > 1 and None not in seeds and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}..{seeds[-1]}"
+    known = [s for s in seeds if s is not None]
+    if len(known) == len(seeds) > 1 and known == list(range(known[0], known[0] + len(known))):
+        return f"{known[0]}..{known[-1]}"
     return ", ".join("?" if s is None else str(s) for s in seeds)
 
 

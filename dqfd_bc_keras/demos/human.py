@@ -214,7 +214,7 @@ class Player:
             over = False
             if state == "playing" and action is not None:
                 obs, reward, terminated, truncated, info = self.env.step(action)
-                self.recorder.step(action, obs, reward, terminated, truncated, info)
+                self.recorder.step(action, obs, float(reward), terminated, truncated, info)
                 ret, steps, over = ret + info["plain_reward"], steps + 1, terminated or truncated
             lines = [
                 f"{self.recorder.task} · {title} · {saved}",

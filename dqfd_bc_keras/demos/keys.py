@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import gymnasium as gym
 
+from dqfd_bc_keras.envs.make import actions_of
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.tasks import TASKS, TaskSpec
 
@@ -125,7 +126,7 @@ def parse_keys(text: str, n_actions: int) -> dict[str, int]:
 
 def env_keys(env: gym.Env) -> tuple[dict[str, int], str, tuple[str, ...]] | None:
     """The env's own key map (the ALE's, highway-env's, MinAtar's), where and its action names; None if it has none."""
-    base, n = env.unwrapped, int(env.action_space.n)
+    base, n = env.unwrapped, actions_of(env)
     if hasattr(base, "get_keys_to_action"):
         meanings = tuple(base.get_action_meanings()) if hasattr(base, "get_action_meanings") else ()
         keys = {
@@ -138,7 +139,7 @@ def env_keys(env: gym.Env) -> tuple[dict[str, int], str, tuple[str, ...]] | None
     action_type = getattr(base, "action_type", None)
     indexes = getattr(action_type, "actions_indexes", None)
     if isinstance(indexes, Mapping) and set(indexes) <= set(HIGHWAY_KEYS):
-        names = tuple(sorted(indexes, key=indexes.get))
+        names = tuple(sorted(indexes, key=indexes.__getitem__))
         return {HIGHWAY_KEYS[name]: indexes[name] for name in names}, "highway-env's meta-actions", names
     action_set = getattr(base, "action_set", None)
     if type(base).__module__.startswith("minatar") and action_set is not None and len(action_set) == n:
@@ -158,7 +159,7 @@ def played_like(task: TaskSpec) -> TaskSpec | None:
 def key_map(task: TaskSpec, env: gym.Env, given: Mapping[str, int] | str | None = None) -> KeyMap:
     """The key map to play `task` on `env` with: `given` (a dict, or `--keys`'s JSON), the preset's
     (`played_like`), the env's own."""
-    n = int(env.action_space.n)
+    n = actions_of(env)
     own = env_keys(env)
     meanings = own[2] if own else ()
     if given is not None:

@@ -147,16 +147,16 @@ def _headers(path: Path, file: BinaryIO) -> dict[str, tuple[np.dtype, tuple[int,
                 if not info.filename.endswith(".npy"):
                     continue
                 member = f"member {info.filename}"
-                with archive.open(info) as file:
+                with archive.open(info) as stream:
                     try:
-                        version = np.lib.format.read_magic(file)
+                        version = np.lib.format.read_magic(stream)
                         read = HEADER_READERS.get(version)
                         if read is None:
                             raise ValueError(f".npy format version {version} is not read here")
-                        shape, _, dtype = read(file)
+                        shape, _, dtype = read(stream)
                     except ValueError as error:
                         raise DemoFileError(path, f"{member} has no valid .npy header ({error})") from None
-                    offset = file.tell()
+                    offset = stream.tell()
                 if dtype.hasobject:
                     raise DemoFileError(path, f"{member} holds pickled objects, which are not accepted")
                 claimed = math.prod(shape) * dtype.itemsize

@@ -73,9 +73,10 @@ def _replay(
     ret, t, paused = 0.0, 0, False
     while t < len(episode):
         if screen is not None:
-            paused = screen.frame(env, t, ret, paused)
-            if paused is None:
+            answer = screen.frame(env, t, ret, paused)
+            if answer is None:
                 return None
+            paused = answer
             if paused:
                 continue
         obs, reward, terminated, truncated, info = env.step(int(episode.actions[t]))
@@ -106,12 +107,12 @@ def show(
     path = Path(path)
     dataset = load(path)
     m = dataset.meta
-    missing = [i for i, seed in enumerate(m.episode_seeds) if seed is None]
-    if missing:
+    seeds = [seed for seed in m.episode_seeds if seed is not None]
+    if len(seeds) < len(m.episode_seeds):
         raise DemoFileError(
             path,
-            f"episode {missing[0]} has no recorded reset seed (a file of format 1, or an episode reset "
-            "without one), so it cannot be replayed",
+            f"episode {m.episode_seeds.index(None)} has no recorded reset seed (a file of format 1, or an "
+            "episode reset without one), so it cannot be replayed",
         )
     if fps is not None and fps <= 0:
         raise ConfigError(f"fps must be > 0, got {fps}")
@@ -126,7 +127,7 @@ def show(
     screen = Window(f"dqfd_bc_keras - {path.name}") if window else None
     limit = step_limit(m.task, m.max_steps)
     try:
-        for i, (seed, episode) in enumerate(zip(m.episode_seeds, dataset.episodes(), strict=True)):
+        for i, (seed, episode) in enumerate(zip(seeds, dataset.episodes(), strict=True)):
             title = f"{path.name} · episode {i + 1} of {dataset.n_episodes} (seed {seed}) · by {m.expert}"
             ret = _replay(path, env, i, seed, episode, Screen(screen, title, fps, limit) if screen else None)
             if ret is None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -63,7 +64,7 @@ class Window:
         self.pg.font.init()
         self.font = self.pg.font.Font(None, LINE + 2)  # pygame's own font: nothing to find on the system
         self.clock = self.pg.time.Clock()
-        self.screen = None
+        self.screen: Any = None  # pygame's display Surface (pygame is imported untyped), made by the first draw
         self.held: set[str] = set()
 
     def wrap(self, line: str, width: int) -> list[str]:
@@ -78,10 +79,12 @@ class Window:
                 rows[-1] = joined
         return rows
 
-    def draw(self, frame: np.ndarray | None, lines: list[str]) -> None:
-        """Show `frame` (an RGB array, H x W x 3) scaled up, `lines` beneath it (wrapped to its width)."""
+    def draw(self, frame: object, lines: list[str]) -> None:
+        """Show `frame` (an RGB array, H x W x 3: an `rgb_array` render) scaled up, `lines` beneath it
+        (wrapped to its width)."""
         pg = self.pg
-        h, w = frame.shape[:2] if frame is not None else (0, WIDTH)
+        image = None if frame is None else np.asarray(frame, np.uint8)
+        h, w = image.shape[:2] if image is not None else (0, WIDTH)
         scale = max(1, round(WIDTH / max(h, w)))
         width = max(w * scale, WIDTH)
         lines = [row for line in lines for row in self.wrap(line, width - 20)]
@@ -89,10 +92,8 @@ class Window:
         if self.screen is None or self.screen.get_size() != size:
             self.screen = pg.display.set_mode(size)
         self.screen.fill(BACKGROUND)
-        if frame is not None:
-            surface = pg.surfarray.make_surface(
-                np.ascontiguousarray(np.asarray(frame, np.uint8)[..., :3].swapaxes(0, 1))
-            )
+        if image is not None:
+            surface = pg.surfarray.make_surface(np.ascontiguousarray(image[..., :3].swapaxes(0, 1)))
             self.screen.blit(pg.transform.scale(surface, (w * scale, h * scale)), ((size[0] - w * scale) // 2, 0))
         for i, line in enumerate(lines):
             self.screen.blit(self.font.render(line, True, TEXT), (10, h * scale + 8 + i * LINE))

@@ -35,17 +35,18 @@ class GymnasiumApi(gym.Wrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        self._reset_takes = _keywords(env.reset, ("seed", "options"))
+        self._reset_takes = keywords_taken(env.reset, ("seed", "options"))
 
-    @property
-    def spec(self) -> gym.envs.registration.EnvSpec | None:
+    @property  # gym.Env declares `spec` an attribute, gym.Wrapper a property as this one
+    def spec(self) -> gym.envs.registration.EnvSpec | None:  # type: ignore[override]
         """The env's own: the adapter is no wrapper a later `gym.make` should add (Minari, `env.spec`)."""
         return self.env.spec
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        given = {"seed": seed, "options": options}
-        if seed is not None and "seed" not in self._reset_takes and callable(getattr(self.env, "seed", None)):
-            self.env.seed(seed)  # gym 0.21: reset() alone, seeded by seed(s)
+        given: dict[str, Any] = {"seed": seed, "options": options}
+        seeds = getattr(self.env, "seed", None)
+        if seed is not None and "seed" not in self._reset_takes and callable(seeds):
+            seeds(seed)  # gym 0.21: reset() alone, seeded by seed(s)
         result = self.env.reset(**{key: given[key] for key in self._reset_takes})
         if isinstance(result, tuple) and len(result) == 2 and isinstance(result[1], dict):
             return result
@@ -61,7 +62,7 @@ class GymnasiumApi(gym.Wrapper):
         return obs, scalar_reward(reward, self.env), terminated, truncated, info
 
 
-def _keywords(method: Any, names: tuple[str, ...]) -> tuple[str, ...]:
+def keywords_taken(method: Any, names: tuple[str, ...]) -> tuple[str, ...]:
     """Those of `names` that `method` takes (all of them when its signature cannot be read)."""
     try:
         parameters = inspect.signature(method).parameters

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeGuard
 
 import gymnasium as gym
 import numpy as np
@@ -33,7 +33,7 @@ FRAME_OPTIONS = ("frame_layout", "frame_scale")
 """Env kwargs that say how frames are read; they never reach the env's constructor."""
 
 
-def is_frames(space: gym.Space) -> bool:
+def is_frames(space: gym.Space) -> TypeGuard[gym.spaces.Box]:
     """A top-level observation the networks take as frames: a Box of 2 or 3 dimensions of uint8
     or bool values ≥ 0 (a grid of pixels or of binary cells)."""
     return (
@@ -132,6 +132,7 @@ class FrameObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         gym.ObservationWrapper.__init__(self, env)
         self.channels_first = channels_first
         space = env.observation_space
+        assert isinstance(space, gym.spaces.Box)  # `_observe` wraps frames only
         low, high = as_frames(space.low, channels_first), as_frames(space.high, channels_first)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.uint8)
 

@@ -37,7 +37,7 @@ def network_input(layout: ObservationLayout, obs: Any, where: str = "predict") -
         raise ConfigError(
             f"{where}: expected an observation of {describe(layout.space)} or a batch of them, got {given}"
         ) from None
-    if layout.image:
+    if layout.frames is not None:
         return as_frames(obs, layout.frames.channels_first), batch
     return layout.flatten(obs, batch), batch
 
@@ -55,12 +55,13 @@ def _batch(space: gym.Space, obs: Any) -> int | None:
         if missing:
             raise _Refused(f"a mapping without the key(s) {', '.join(map(repr, missing))}")
         return _same_batch([_batch(part, obs[key]) for key, part in space.spaces.items()])
-    if _is_tuple(space):
+    if isinstance(space, gym.spaces.Tuple):
         indices = getattr(space, "indices", range(len(space.spaces)))  # observations._Kept: parts dropped
         if not isinstance(obs, (tuple, list)) or len(obs) <= max(indices):
             raise _Refused(_what(obs))
         return _same_batch([_batch(part, obs[i]) for i, part in zip(indices, space.spaces, strict=True)])
     x = _array(obs)
+    assert space.shape is not None  # the rest of `_numeric`'s kept spaces: Box, Discrete, Multi*
     shape = tuple(space.shape)
     if x.shape == shape:
         batch = None

@@ -118,6 +118,8 @@ def constructor_parameters(env_id: str) -> Mapping[str, inspect.Parameter] | Non
     """The parameters of the callable that env `env_id`'s registration makes it with; None when
     they cannot be read (a C extension, an entry point that does not import)."""
     entry_point = gym.spec(bare_id(env_id)).entry_point
+    if entry_point is None:
+        return None
     try:
         creator = entry_point if callable(entry_point) else gym.envs.registration.load_env_creator(entry_point)
         return inspect.signature(creator).parameters

@@ -43,7 +43,7 @@ from dqfd_bc_keras.envs.compat import adapted
 from dqfd_bc_keras.envs.frames import FrameObservation, split_frame_options
 from dqfd_bc_keras.envs.functions import class_not_id, factory_task
 from dqfd_bc_keras.envs.kwargs import as_json, as_python, check_env_kwargs, kwargs_key
-from dqfd_bc_keras.envs.minatar_pixels import MinAtarPixels
+from dqfd_bc_keras.envs.minatar_pixels import MinAtarPixels, minatar_game
 from dqfd_bc_keras.envs.network_input import NetworkInput, resolve_torso
 from dqfd_bc_keras.envs.observations import FlattenObservation, ObservationLayout, is_flat, observation_layout
 from dqfd_bc_keras.envs.wrappers import FallPenalty, ForgetLastAction, GoalCount, TimeFeature, TimeLimitMode
@@ -80,7 +80,7 @@ def env_task(env_id: str) -> TaskSpec:
         spec = gym.spec(bare)
     except gym.error.Error as error:
         found = getattr(imported, bare, None)
-        if inspect.isclass(found):
+        if module is not None and inspect.isclass(found):
             raise ConfigError(class_not_id(module, bare)) from None
         if inspect.isfunction(found):
             return factory_task(env_id, found)
@@ -170,6 +170,12 @@ def _task_spaces(name: str, key: str) -> TaskSpaces:
     return TaskSpaces(observation_layout(obs_space, name, stack, frame_options), int(action_space.n))
 
 
+def actions_of(env: gym.Env) -> int:
+    """The actions of a task's env, whose action space `_task_spaces` found Discrete."""
+    assert isinstance(env.action_space, gym.spaces.Discrete)
+    return int(env.action_space.n)
+
+
 def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True, **options: Any) -> gym.Env:
     """`gym.make` of task `name`'s plain env with `env_kwargs`; a bad keyword is one `ConfigError`
     line. An Atari env gets its preprocessing (`atari.py`): the learner's when `learning`, else
@@ -186,7 +192,7 @@ def _make(name: str, env_kwargs: Mapping[str, Any] | None, learning: bool = True
         return wrap_atari(gym.make(bare_id(env_id), **options, **make_kwargs), atari, learning)
     try:
         env = adapted(gym.make(env_id, **options, **env_kwargs))
-        return MinAtarPixels(ForgetLastAction(env), pace(env.unwrapped.game.env_name)) if minatar else env
+        return MinAtarPixels(ForgetLastAction(env), pace(minatar_game(env).env_name)) if minatar else env
     except (TypeError, ValueError, AssertionError) as error:
         if not env_kwargs:
             raise
@@ -306,9 +312,7 @@ def make_plain_env(
     registered = gym.spec(bare_id(get_task(name).env_id)).max_episode_steps
     limit = registered if registered is not None else step_limit(name, max_steps, env_kwargs)
     env = gym.wrappers.TimeLimit(_unlimited(name, env_kwargs, learning=False, render_mode=render_mode), limit)
-    if timeout == "time-aware":
-        env = TimeFeature(env, step_limit(name, max_steps, env_kwargs))
-    return env
+    return TimeFeature(env, step_limit(name, max_steps, env_kwargs)) if timeout == "time-aware" else env
 
 
 def register_tasks() -> None:

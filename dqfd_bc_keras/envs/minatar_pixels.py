@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.core import RenderFrame
 
 CELL = 48
 """Pixels per side of a cell: MinAtar's 10×10 grid is 480×480 on screen and in videos."""
@@ -60,7 +62,13 @@ class MinAtarPixels(gym.Wrapper):
         if fps is not None:
             self.metadata = {**env.metadata, "render_fps": fps}
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> RenderFrame | list[RenderFrame] | None:
         if self.render_mode != "rgb_array":
             return self.env.render()
-        return pixels(self.env.unwrapped.game.state())
+        return pixels(minatar_game(self.env).state())
+
+
+def minatar_game(env: gym.Env) -> Any:
+    """The `minatar.Environment` that MinAtar's gym env `env` steps (MinAtar ships no types)."""
+    unwrapped: Any = env.unwrapped
+    return unwrapped.game

@@ -15,15 +15,17 @@ import copy
 import functools
 import warnings
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import gymnasium as gym
 
-from dqfd_bc_keras.envs.compat import as_gymnasium
+from dqfd_bc_keras.envs.compat import as_gymnasium, keywords_taken
 from dqfd_bc_keras.envs.kwargs import as_json
 from dqfd_bc_keras.envs.make import TASKS, forget_spaces, get_task
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
 from dqfd_bc_keras.plugins import bare_id
+
+T = TypeVar("T")
 
 PYTHON_ENV_PREFIX = "dqfd_bc_keras/python-"
 """The namespace of the ids `env_id_of` registers for env objects: no later process can make them."""
@@ -46,7 +48,7 @@ def env_id_of(
         return env, {}, None
     spec = getattr(env, "spec", None) if isinstance(env, gym.Env) else None
     limit = None if spec is None else spec.max_episode_steps
-    if spec is not None and spec.id in gym.registry and not spec.additional_wrappers:
+    if isinstance(env, gym.Env) and spec is not None and spec.id in gym.registry and not spec.additional_wrappers:
         registered = gym.spec(spec.id)
         kwargs = {k: v for k, v in spec.kwargs.items() if k != "render_mode" and registered.kwargs.get(k) != v}
         try:
@@ -89,16 +91,30 @@ def stand_in(task: str, env_id: str) -> None:
 def _registered(env: gym.Env | Callable[[], gym.Env], env_id: str | None) -> str:
     """The id `env` is registered under in this process (`env_id`, or a new one from its class's
     name), whose every `gym.make` calls the factory or copies the instance."""
+    factory: Callable[..., Any]
     if callable(env) and not _is_env(env):
         name, factory = getattr(env, "__qualname__", type(env).__name__).replace(".<locals>.", "."), env
-        make: Callable[[], gym.Env] = lambda: as_gymnasium(factory(), f"env={name}()")
+        what = f"env={name}()"
     elif _is_env(env):
-        name, instance = type(getattr(env, "unwrapped", env)).__name__, env
-        make = lambda: as_gymnasium(_copy_or_same(instance), "env")
+        name, what = type(getattr(env, "unwrapped", env)).__name__, "env"
+        factory = functools.partial(_copy_or_same, env)
     else:
         raise ConfigError(
             f"env must be a Gymnasium id, a preset name, a gymnasium.Env or a factory of one, got {type(env).__name__}"
         )
+
+    def make(**asked: Any) -> gym.Env:
+        """The env, as `gym.make(id, render_mode=...)` asks for it: a factory that takes `render_mode`
+        (`stand_in`'s `gym.make`) is given it; an env made without it cannot render so."""
+        made = as_gymnasium(factory(**{key: asked[key] for key in keywords_taken(factory, tuple(asked))}), what)
+        mode = asked.get("render_mode")
+        if mode is not None and made.render_mode != mode:
+            raise ConfigError(
+                f"{what} renders {made.render_mode!r}, not {mode!r} as a video or a window needs: "
+                f"give an env made with render_mode={mode!r}"
+            )
+        return made
+
     if env_id is None:
         base, k = f"{PYTHON_ENV_PREFIX}{''.join(c if c.isalnum() else '_' for c in name)}", 0
         while f"{base}-v{k}" in gym.registry:
@@ -126,7 +142,7 @@ def _importable_id(spec: gym.envs.registration.EnvSpec) -> str:
     return spec.id if package in ("", "gymnasium", "dqfd_bc_keras", "__main__") else f"{package}:{spec.id}"
 
 
-def _copy_or_same(env: gym.Env) -> gym.Env:
+def _copy_or_same(env: T) -> T:
     try:
         return copy.deepcopy(env)
     except Exception:

@@ -28,8 +28,9 @@ one warning naming them. Inside a Dict or a Tuple, a grid is flattened with the 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeGuard, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -59,7 +60,7 @@ def describe(space: gym.Space) -> str:
     return type(space).__name__
 
 
-def is_image(space: gym.Space) -> bool:
+def is_image(space: gym.Space) -> TypeGuard[gym.spaces.Box]:
     """A frame of pixels: uint8, 2 or 3 dimensions, bounds 0 and 255, more than MAX_IMAGE_VALUES values."""
     return (
         isinstance(space, gym.spaces.Box)
@@ -71,7 +72,7 @@ def is_image(space: gym.Space) -> bool:
     )
 
 
-def is_flat(space: gym.Space) -> bool:
+def is_flat(space: gym.Space) -> TypeGuard[gym.spaces.Box]:
     """A one-dimensional Box: the networks take it as it is."""
     return isinstance(space, gym.spaces.Box) and len(space.shape) == 1
 
@@ -184,17 +185,27 @@ def _numeric(space: gym.Space, path: str, dropped: list[str], env_id: str) -> gy
         )
     if isinstance(space, NUMERIC):
         return space
-    if isinstance(space, (gym.spaces.Dict, gym.spaces.Tuple)):
-        items = space.spaces.items() if isinstance(space, gym.spaces.Dict) else enumerate(space.spaces)
-        parts = {key: _numeric(part, f"{path}.{key}" if path else str(key), dropped, env_id) for key, part in items}
-        parts = {key: part for key, part in parts.items() if part is not None}
-        if not parts:
+    if isinstance(space, gym.spaces.Dict):
+        named = _numeric_parts(space.spaces.items(), path, dropped, env_id)
+        return gym.spaces.Dict(list(named.items())) if named else None  # a list keeps the order
+    if isinstance(space, gym.spaces.Tuple):
+        indexed = _numeric_parts(enumerate(space.spaces), path, dropped, env_id)
+        if not indexed:
             return None
-        if isinstance(space, gym.spaces.Dict):
-            return gym.spaces.Dict(list(parts.items()))  # a list keeps the order
-        return gym.spaces.Tuple(tuple(parts.values())) if len(parts) == len(space.spaces) else _Kept(space, parts)
+        return gym.spaces.Tuple(tuple(indexed.values())) if len(indexed) == len(space.spaces) else _Kept(space, indexed)
     dropped.append(path or type(space).__name__)
     return None
+
+
+Key = TypeVar("Key", str, int)
+
+
+def _numeric_parts(
+    items: Iterable[tuple[Key, gym.Space]], path: str, dropped: list[str], env_id: str
+) -> dict[Key, gym.Space]:
+    """The numeric parts (`_numeric`) of a Dict's or a Tuple's `items`, by key, in order."""
+    parts = {key: _numeric(part, f"{path}.{key}" if path else str(key), dropped, env_id) for key, part in items}
+    return {key: part for key, part in parts.items() if part is not None}
 
 
 class _Kept(gym.spaces.Tuple):
@@ -213,14 +224,15 @@ def _flatten(space: gym.Space, x: Any, batch: int) -> np.ndarray:
         index = np.asarray(x, dtype=np.int64).reshape(batch) - int(space.start)
         return np.eye(int(space.n), dtype=np.float32)[index]
     if isinstance(space, gym.spaces.MultiDiscrete):
-        index = (np.asarray(x, dtype=np.int64) - space.start).reshape(batch, -1)
+        indices = (np.asarray(x, dtype=np.int64) - space.start).reshape(batch, -1)
         return np.concatenate(
-            [np.eye(int(n), dtype=np.float32)[index[:, i]] for i, n in enumerate(space.nvec.reshape(-1))], axis=1
+            [np.eye(int(n), dtype=np.float32)[indices[:, i]] for i, n in enumerate(space.nvec.reshape(-1))], axis=1
         )
     if isinstance(space, gym.spaces.Dict):
         return np.concatenate([_flatten(part, x[key], batch) for key, part in space.spaces.items()], axis=1)
-    indices = getattr(space, "indices", range(len(space.spaces)))
-    return np.concatenate([_flatten(part, x[i], batch) for i, part in zip(indices, space.spaces, strict=True)], axis=1)
+    assert isinstance(space, gym.spaces.Tuple)  # the last of `_numeric`'s kept spaces
+    kept = getattr(space, "indices", range(len(space.spaces)))
+    return np.concatenate([_flatten(part, x[i], batch) for i, part in zip(kept, space.spaces, strict=True)], axis=1)
 
 
 class FlattenObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -231,6 +243,7 @@ class FlattenObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         gym.ObservationWrapper.__init__(self, env)
         self.layout = layout
         flat = gym.spaces.flatten_space(layout.kept)
+        assert isinstance(flat, gym.spaces.Box)  # numeric parts flatten to a Box
         self.observation_space = gym.spaces.Box(
             flat.low.astype(np.float32), flat.high.astype(np.float32), dtype=np.float32
         )

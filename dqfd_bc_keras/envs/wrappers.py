@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from dqfd_bc_keras.choices import TIMEOUT_MODES
+from dqfd_bc_keras.envs.minatar_pixels import minatar_game
 from dqfd_bc_keras.errors import ConfigError
 
 
@@ -69,7 +70,7 @@ class GoalCount(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if terminated:
             self.goals += 1
             reward = self.goal_reward
-            car = self.env.unwrapped
+            car: Any = self.env.unwrapped  # MountainCar's, whose `state` no Env declares
             car.state = np.array([car.np_random.uniform(low=-0.6, high=-0.4), 0.0])
             obs = np.array(car.state, dtype=np.float32)
             terminated = False
@@ -127,6 +128,7 @@ class TimeFeature(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.max_steps = int(max_steps)
         self._t = 0
         space = env.observation_space
+        assert isinstance(space, gym.spaces.Box)  # vectors: frames take no time feature (`network_input`)
         self.observation_space = gym.spaces.Box(
             low=np.append(space.low, 0.0).astype(np.float32),
             high=np.append(space.high, 1.0).astype(np.float32),
@@ -155,7 +157,7 @@ class ForgetLastAction(gym.Wrapper):
     (the no-op, MinAtar's initial `last_action`)."""
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        self.env.unwrapped.game.last_action = 0
+        minatar_game(self.env).last_action = 0
         return self.env.reset(**kwargs)
 
 

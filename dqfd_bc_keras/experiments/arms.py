@@ -60,9 +60,8 @@ def common_seeds(first: ArmRuns, second: ArmRuns) -> tuple[ArmRuns, ArmRuns]:
     """The two arms restricted to the seeds both ran: a comparison the pre-registration plans
     within one suite stays the same when one of its arms gets more seeds in another suite."""
     seeds = {r.config.seed for r in first.runs} & {r.config.seed for r in second.runs}
-    return tuple(
-        dataclasses.replace(arm, runs=[r for r in arm.runs if r.config.seed in seeds]) for arm in (first, second)
-    )
+    kept = [dataclasses.replace(arm, runs=[r for r in arm.runs if r.config.seed in seeds]) for arm in (first, second)]
+    return kept[0], kept[1]
 
 
 def group_arms(runs: list[FinishedRun]) -> list[ArmRuns]:

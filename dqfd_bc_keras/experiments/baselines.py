@@ -35,16 +35,15 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from importlib.metadata import version
 from multiprocessing import get_context
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple, TypedDict
 
 from dqfd_bc_keras.core.config import QUICK
-from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.evaluation import evaluate
 from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, ArmSteps, interaction_evals, load, save
-from dqfd_bc_keras.experiments.metrics import first_reaching
-from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES
+from dqfd_bc_keras.experiments.metrics import first_reaching, solved_return
+from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES, Arm
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import eval_seed
@@ -55,10 +54,20 @@ PARTS = ("ours", "sb3")
 QUICK_PROTOCOL, QUICK_SB3_STEPS = {**PROTOCOL, "eval_every": 300}, 1500
 """--quick: our quick arm's evaluation interval for both sides, and SB3's budget (seconds)."""
 
+
+class ZooEntry(TypedDict):
+    """An rl-baselines3-zoo entry: the env id, the policy, one `learn()` budget and DQN's keyword arguments."""
+
+    env: str
+    policy: str
+    n_timesteps: int
+    kwargs: dict[str, Any]
+
+
 # rl-baselines3-zoo's tuned DQN entries, verbatim: hyperparams/dqn.yml of DLR-RM/rl-baselines3-zoo
 # at 22e3ff24 (2026-04-23; these two entries unchanged since 2020). `n_timesteps` is rl-zoo3's one
 # `learn()` budget, so it also sets the length of the ε schedule (exploration_fraction × n_timesteps).
-ZOO = {
+ZOO: dict[str, ZooEntry] = {
     "cartpole": {
         "env": "CartPole-v1",
         "policy": "MlpPolicy",
@@ -150,7 +159,7 @@ def ours(suite: list[Arm], seeds: int, out: Path, complete_only: bool = False) -
                 a.expert_loss,
                 map(interaction_evals, runs),
                 [r.final.mean_return for r in runs],
-                get_task(a.task).solved_return,
+                solved_return(a.task),
             )
         )
     return steps
@@ -264,7 +273,7 @@ def sb3(
             future.result()
             job = futures[future]
             run = json.loads(job.path.read_text())
-            first = first_reaching(run["evals"], get_task(job.task).solved_return)
+            first = first_reaching(run["evals"], solved_return(job.task))
             progress(
                 f"[{done}/{len(todo)}] sb3 {job.task} seed{job.seed}: threshold first reached at "
                 f"{'never' if first is None else f'{first:,.0f}'} ({run['seconds']:.0f} s)"
@@ -282,7 +291,7 @@ def sb3(
                 SB3_METHOD,
                 evals,
                 [e[-1][1] for e in evals],
-                get_task(task).solved_return,
+                solved_return(task),
                 anchor=ANCHOR.get(task),
                 anchor_final=ANCHOR_FINAL.get(task),
             )

@@ -51,7 +51,7 @@ def baseline_row(arm: ArmRuns) -> str:
     source, transitions, pretrain, teacher, beats = "—", "0", "—", "none", "—"
     if arm.config.expert_loss != "none":
         pretrain = f"{arm.config.pretrain_steps:,}"
-        records = [r.demonstrations for r in arm.runs]
+        records = [r.demonstrations for r in arm.runs if r.demonstrations is not None]  # each, with a method
         demonstrator = float(np.mean([r.demonstrator_return for r in arm.runs]))
         source = " · ".join(sorted({demo_source(d) for d in records}))
         transitions = _span([d.transitions for d in records])

@@ -57,6 +57,13 @@ class Comparison:
     test: str
     p: float
 
+    @property
+    def judged(self) -> tuple[float, float]:
+        """The TOST interval a rule judges by: a censored metric has none, so no rule judges one."""
+        if self.tost is None:
+            raise ValueError(f"{self.metric} is censored: no interval of a difference of means judges it")
+        return self.tost
+
     def interval(self, digits: int = 2) -> str:
         """`low … high (90%: low … high)` for a table cell; — when a mean is undefined."""
         if self.diff is None or self.tost is None:
@@ -108,9 +115,9 @@ def _verdict(
 
 def _equivalence(comparison: Comparison, margin: float) -> str:
     """TOST by the interval: holds inside ±margin, does not hold wholly outside it."""
-    if equivalent(comparison.tost, margin):
+    if equivalent(comparison.judged, margin):
         return "holds"
-    return "does not hold" if beyond(comparison.tost, margin) else "inconclusive"
+    return "does not hold" if beyond(comparison.judged, margin) else "inconclusive"
 
 
 def judge_c1(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
@@ -140,10 +147,10 @@ def judge_c2(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     struck = [bool(arm.values("collapsed").any()) for arm in (bayes, ce)]
     if not any(struck):
         verdict = "not reproduced"
-    elif equivalent(share.tost, SHARE_MARGIN):
+    elif equivalent(share.judged, SHARE_MARGIN):
         verdict = "holds" if all(struck) else "inconclusive"
     else:
-        verdict = "does not hold" if beyond(share.tost, SHARE_MARGIN) else "inconclusive"
+        verdict = "does not hold" if beyond(share.judged, SHARE_MARGIN) else "inconclusive"
     return _verdict(verdict, comparisons, bayes, ce, SHARE_MARGIN)
 
 
@@ -163,7 +170,7 @@ def judge_c4(bayes: ArmRuns, ce: ArmRuns) -> Verdict:
     (a gain shown smaller than the margin, a significant one included); else inconclusive. goals_all
     is reported beside it."""
     early, whole = compare("goals_first30", bayes, ce), compare("goals_all", bayes, ce)
-    low, high = early.tost
+    low, high = early.judged
     if low > GOALS_MARGIN and early.p < ALPHA:
         verdict = "holds"
     else:
@@ -199,6 +206,7 @@ class Claim:
 
 def rule_text(judge: Callable) -> str:
     """A verdict rule as RESULTS.md prints it: the judge's docstring with the constants filled in."""
+    assert judge.__doc__ is not None  # every judge states its rule
     text = " ".join(judge.__doc__.split())
     return re.sub(r"\b[A-Z][A-Z_]+\b", lambda m: RULE_CONSTANTS.get(m.group(), m.group()), text)
 
@@ -303,11 +311,12 @@ def judge_ablation(ablated: ArmRuns, full: ArmRuns) -> Verdict:
     if min(len(full.runs), len(ablated.runs)) < 2:
         return Verdict("inconclusive (n < 2)")
     metric = lab_settings(full.config.task).ablation_metric
+    assert metric is not None  # ablations are run on the tasks that name their metric
     fraction = ABLATION_MARGINS[metric]
     margin = GOALS_MARGIN if fraction is None else fraction * full.config.limit
     comparison = compare(metric, full, ablated)
-    low, high = comparison.tost
-    if equivalent(comparison.tost, margin):
+    low, high = comparison.judged
+    if equivalent(comparison.judged, margin):
         verdict = "no measurable contribution"
     else:
         verdict = "contributes" if low > margin else "hurts" if high < -margin else "inconclusive"

@@ -35,7 +35,7 @@ from dqfd_bc_keras.core.bc import build_bc_model
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.uncertainty import max_policy_variance
 from dqfd_bc_keras.demos import record, rollout
-from dqfd_bc_keras.envs.make import make_task
+from dqfd_bc_keras.envs.make import actions_of, make_task
 from dqfd_bc_keras.evaluation import GreedyPolicy, load_model
 from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm
 from dqfd_bc_keras.experiments.claims import CLAIMS, judge
@@ -64,9 +64,7 @@ def state_sets(task: str, demos, episodes: int, seed: int) -> dict[str, np.ndarr
     agent = GreedyPolicy.from_model(load_model(MODELS / task / "q_network.keras"))
     agent_states = rollout(env, agent, seeds, task=task, source="agent").obs
     rng = np.random.default_rng(seed)
-    random_states = rollout(
-        env, lambda obs: int(rng.integers(env.action_space.n)), seeds, task=task, source="random"
-    ).obs
+    random_states = rollout(env, lambda obs: int(rng.integers(actions_of(env))), seeds, task=task, source="random").obs
     env.close()
     mean, std = demos.obs_scale()
     directions = rng.normal(size=held.shape)
@@ -107,7 +105,7 @@ def calibrate(
     for task in calibrated_tasks() if tasks is None else tasks:
         runs = [measure(task, seed, episodes, bc_epochs) for seed in range(seeds)]
         env = make_task(task)
-        n_actions = summary["n_actions"][task] = int(env.action_space.n)
+        n_actions = summary["n_actions"][task] = actions_of(env)
         env.close()
         table = {}
         for uncertainty in UNCERTAINTIES:

@@ -14,12 +14,16 @@ import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from dqfd_bc_keras.files import atomic_path
 
-STYLE = {"font.family": "DejaVu Sans", "font.size": 10, "savefig.dpi": 100}
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
+STYLE: dict[RcKeyType, Any] = {"font.family": "DejaVu Sans", "font.size": 10, "savefig.dpi": 100}
 """DejaVu Sans ships with matplotlib, so the text is drawn the same wherever the report runs."""
 
 
@@ -56,7 +60,7 @@ def _figure(path: Path, **subplots) -> Iterator:
 def _colors() -> Iterator:
     import matplotlib
 
-    return itertools.cycle(matplotlib.colormaps["tab10"].colors)
+    return itertools.cycle(matplotlib.color_sequences["tab10"])
 
 
 def seeds_text(counts: list[int]) -> str:

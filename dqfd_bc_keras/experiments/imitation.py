@@ -28,7 +28,7 @@ from dqfd_bc_keras.experiments.suites import grid_arms, grid_tasks
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.runs.provenance import provenance
 from dqfd_bc_keras.seeds import final_eval_seed
-from dqfd_bc_keras.training.demonstrations import demonstrations, fit_bc
+from dqfd_bc_keras.training.demonstrations import fit_bc, record_demos
 
 IMITATION_DIR = "bc-alone"
 """The folder of the suite directory that holds BC alone's results (exported with the runs)."""
@@ -47,7 +47,7 @@ def imitation_arms(quick_budget: bool = False, tasks: tuple[str, ...] | None = N
 def imitate(a: Arm, seed: int) -> dict:
     """BC alone on arm `a`'s cell for one seed: the demonstrations, the fit, the evaluation."""
     config = dataclasses.replace(a, expert_loss="ce").config(seed)
-    data = demonstrations(config, None)
+    data = record_demos(config, config.expert)  # what a `ce` run of the seed records
     keras.utils.set_random_seed(config.seed)
     bc = build_bc_model(config, data.meta.obs_dim, data.meta.n_actions, data.obs_scale())
     accuracy = fit_bc(config, bc, data, config.bc_epochs, fit_index=0)

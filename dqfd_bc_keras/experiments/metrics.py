@@ -69,6 +69,14 @@ def collapses(run: FinishedRun) -> int:
     return int(np.sum(run.column("plain_return")[peaks[0] + 1 :] < COLLAPSE_FRACTION * run.config.limit))
 
 
+def solved_return(task: str) -> float:
+    """The mean return that solves `task`, which the interactions to the threshold are counted to."""
+    threshold = get_task(task).solved_return
+    if threshold is None:
+        raise ValueError(f"{task} sets no solved_return: no interactions to a threshold are counted on it")
+    return threshold
+
+
 def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> float | None:
     """The first evaluated step of (step, mean return) pairs whose mean reaches `threshold`."""
     return next((float(step) for step, mean in evals if mean >= threshold), None)
@@ -77,9 +85,7 @@ def first_reaching(evals: Iterable[tuple[float, float]], threshold: float) -> fl
 def interactions_to_threshold(run: FinishedRun) -> float:
     """Counted interactions at the first evaluation that reaches the plain env's threshold; inf if
     none did."""
-    step = first_reaching(
-        ((e["interactions"], e["mean_return"]) for e in run.evals), get_task(run.config.task).solved_return
-    )
+    step = first_reaching(((e["interactions"], e["mean_return"]) for e in run.evals), solved_return(run.config.task))
     return np.inf if step is None else step
 
 

@@ -54,7 +54,7 @@ def claim_metrics(arms: list[ArmRuns], archived: ArmRuns) -> dict[str, Callable[
     """Beside METRICS, what the claims judge `archived` by: the metrics each claim's judge compares
     where `archived` is one side of the pair the claim's verdict reads (C1's episodes to solve, C2's
     unfinished runs or collapses, C4's flags)."""
-    found = {}
+    found: dict[str, Callable[[FinishedRun], float]] = {}
     for claim in CLAIMS:
         for setting in claim.settings:
             pairs = setting.pairs(arms)

@@ -27,6 +27,7 @@ from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, lo
 from dqfd_bc_keras.experiments.estimators import CALIBRATION_FILE, meets_goal
 from dqfd_bc_keras.experiments.grid import BC_ALONE, DQN, collect, effect
 from dqfd_bc_keras.experiments.replicate import replicated
+from dqfd_bc_keras.experiments.stats import Summary
 from dqfd_bc_keras.experiments.suites import ALL, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES, efficiency_tasks
 
 UNKNOWN = ("inconclusive", "not reproduced")
@@ -39,10 +40,11 @@ def _claims(arms: list[ArmRuns]) -> dict[str, list[str]]:
         for setting in claim.settings:
             where = f"{claim.id} on {setting.name}" + (f" ({setting.reading.split(':')[0]})" if setting.reading else "")
             pairs = setting.pairs(arms)
-            if not pairs or pairs[0][1] is None:
+            ce = pairs[0][1] if pairs else None
+            if ce is None:
                 filed["not run"].append(where)
                 continue
-            bayes, ce = pairs[0]
+            bayes = pairs[0][0]
             result = judge(claim, bayes, ce)
             if not result.comparisons:  # a sweep under way or cut off, or `run quick --seeds 1`
                 filed["unknown"].append(f"{where}: **inconclusive**: {too_few(bayes, ce)}.")
@@ -55,6 +57,7 @@ def _claims(arms: list[ArmRuns]) -> dict[str, list[str]]:
                 if claim.id == "C2"
                 else f"+{GOALS_MARGIN:g}"
             )
+            assert isinstance(c.bayes, Summary) and isinstance(c.ce, Summary)  # a judged metric is uncensored
             interval = "—" if c.tost is None else f"{c.tost[0]:.2f} … {c.tost[1]:.2f}"
             power = "" if result.power is None else f", power {result.power:.2f}"
             line = (

@@ -97,12 +97,17 @@ BRICK_ROWS = (1, 3)
 """The first and last rows that can hold bricks."""
 
 
+def cell(grid: np.ndarray) -> tuple[int, int]:
+    """(row, column) of the one cell that is on in `grid`, a channel of a MinAtar frame."""
+    (y,), (x,) = np.nonzero(grid)
+    return int(y), int(x)
+
+
 def _ball_state(obs: np.ndarray) -> tuple[int, int, int, int, bool]:
     """(x, y, dx, dy, strike) of the ball from its cell and trail; `strike`: a brick broke on the step
     before (or the ball sits on a brick, passing through), so the next brick does not reflect it."""
     bricks = obs[:, :, 3]
-    (y,), (x,) = np.nonzero(obs[:, :, 1])
-    (ty,), (tx,) = np.nonzero(obs[:, :, 2])
+    (y, x), (ty, tx) = cell(obs[:, :, 1]), cell(obs[:, :, 2])
     on_brick = bool(bricks[y, x])
     dx = x - tx if x != tx else (1 if x == 0 else -1)  # no sideways move: reflected by a side wall
     if y != ty:
@@ -174,16 +179,17 @@ def breakout_strong(obs: np.ndarray) -> int:
     paddle = int(np.argmax(obs[9, :, 0]))
     x, y, dx, dy, strike = _ball_state(obs)
     flight = _fly(obs[:, :, 3], x, y, dx, dy, strike)
-    if flight.steps is None:
+    steps, bricks = flight.steps, flight.bricks
+    if steps is None or bricks is None:  # both None or neither: it does not come down
         return _move_towards(paddle, x)
 
     def preference(column: int) -> tuple[bool, float, int]:
         """Reachable first (the paddle moves before the ball), then the sooner break, then the nearer."""
         distance = abs(column - paddle)
-        if distance > flight.steps + 1:
+        if distance > steps + 1:
             return True, 0.0, distance
         back_dx = flight.dx if column == flight.columns[0] else -flight.dx
-        return False, _fly(flight.bricks, flight.columns[1], 8, back_dx, -1, False).first_break, distance
+        return False, _fly(bricks, flight.columns[1], 8, back_dx, -1, False).first_break, distance
 
     return _move_towards(paddle, min(flight.columns, key=preference))
 

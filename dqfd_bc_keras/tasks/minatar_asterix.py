@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dqfd_bc_keras.tasks.minatar import DEFAULTS
+from dqfd_bc_keras.tasks.minatar import DEFAULTS, cell
 from dqfd_bc_keras.tasks.registry import TaskSpec, register_task
 
 NOOP, LEFT, UP, RIGHT, DOWN = 0, 1, 2, 3, 4
@@ -79,7 +79,7 @@ def asterix_strong(obs: np.ndarray) -> int:
     """Take a move that is safe this step and leaves the longest worst-case escape (3 steps ahead);
     among those, weigh (heaviest first) a sticky repeat of the move next step being fatal, the
     distance to the nearest treasure and to the centre column (walls are traps)."""
-    (py,), (px,) = np.nonzero(obs[:, :, 0])
+    py, px = cell(obs[:, :, 0])
     dangers = [danger(obs, step) for step in range(1, LOOKAHEAD + 1)]
     to_gold = _gold_distance(obs)
 
@@ -110,7 +110,7 @@ def asterix_strong(obs: np.ndarray) -> int:
 def asterix_imperfect(obs: np.ndarray) -> int:
     """Go for the nearest treasure by any move no enemy can meet this step: no lookahead, so it walks
     into rows it cannot leave, and pins itself against the walls."""
-    (py,), (px,) = np.nonzero(obs[:, :, 0])
+    py, px = cell(obs[:, :, 0])
     now, to_gold = danger(obs, 1), _gold_distance(obs)
     return min(MOVES, key=lambda action: (bool(now[_move(py, px, action)]), to_gold(*_move(py, px, action))))
 

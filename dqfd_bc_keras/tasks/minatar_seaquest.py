@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dqfd_bc_keras.tasks.minatar import DEFAULTS
+from dqfd_bc_keras.tasks.minatar import DEFAULTS, cell
 from dqfd_bc_keras.tasks.registry import TaskSpec, register_task
 
 NOOP, LEFT, UP, RIGHT, DOWN, FIRE = 0, 1, 2, 3, 4, 5
@@ -72,7 +72,7 @@ class Scene:
 
 
 def read(obs: np.ndarray) -> Scene:
-    (y,), (x,) = np.nonzero(obs[:, :, 0])
+    y, x = cell(obs[:, :, 0])
     back = int(np.flatnonzero(obs[y, :, 1])[0])
     enemies = [
         (int(ey), int(ex), direction)
@@ -83,11 +83,11 @@ def read(obs: np.ndarray) -> Scene:
     bullets = []
     for by, bx in zip(*np.nonzero(obs[:9, :, 4]), strict=True):
         subs = np.flatnonzero(obs[by, :, 6])
-        directions = {d for s in subs for d in _directions(obs, by, s)} or {-1, 1}
+        directions = {d for s in subs for d in _directions(obs, by, int(s))} or {-1, 1}
         bullets += [(int(by), int(bx), d) for d in directions]
     return Scene(
-        int(y),
-        int(x),
+        y,
+        x,
         1 if x > back else -1,
         int(obs[9, :, 7].sum()),
         int(obs[9, :, 8].sum()),

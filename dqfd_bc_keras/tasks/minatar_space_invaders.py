@@ -36,7 +36,7 @@ def _cannon(obs: np.ndarray) -> int:
 def _wait(obs: np.ndarray) -> int:
     """Steps before the cannon can fire again, from its lowest bullet: one fired k steps ago is on row 8 − k."""
     rows = np.flatnonzero(obs[:9, :, 4].any(axis=1))
-    flying = [8 - row for row in rows if 8 - row < COOL_DOWN - 1]
+    flying = [8 - int(row) for row in rows if 8 - row < COOL_DOWN - 1]
     return COOL_DOWN - 1 - min(flying) if flying else 0
 
 
@@ -125,7 +125,7 @@ def space_invaders_imperfect(obs: np.ndarray) -> int:
     """The strong rule aiming at where the aliens are, not where they will be: fire when one is above,
     else go to the nearest column that has one. The block shifts while its bullets rise, and the last
     aliens of a wave, moving every frame or two, escape them until the wave lands."""
-    pos, aliens = _cannon(obs), obs[:, :, 1].any(axis=0)
+    pos, aliens = _cannon(obs), np.any(obs[:, :, 1], axis=0)
     if not aliens.any():
         return NOOP
     if aliens[pos]:

@@ -70,8 +70,9 @@ class Interaction(tf.Module):
         Returns one float32 vector [s' (d), r, terminated, truncated]: one array crosses the
         boundary instead of four. Frames cross as they are (uint8), beside [r, terminated, truncated].
         """
-        obs, reward, terminated, truncated, info = self.env.step(int(action))
-        self.episode.add(float(reward), info)
+        obs, step_reward, terminated, truncated, info = self.env.step(int(action))
+        reward = float(step_reward)
+        self.episode.add(reward, info)
         if self.recorder is not None:
             self.recorder.step(int(action), obs, reward, terminated, truncated, info)
         if self.agent.net_input.image:

@@ -29,14 +29,14 @@ class Record:
         """The column names in order: what a CSV header or a JSON object of the record holds."""
         return tuple(
             column
-            for name, kind in _fields(cls)
+            for name, kind in _fields(cls)  # type: ignore[arg-type]  # a class is hashable: python/mypy#20409
             for column in (kind.columns() if _is_record(kind) else (_column(name),))
         )
 
     def to_row(self) -> dict[str, Any]:
         """Column → value, in column order (values as they are: the writer formats them)."""
         row: dict[str, Any] = {}
-        for name, kind in _fields(type(self)):
+        for name, kind in _fields(type(self)):  # type: ignore[arg-type]  # a class is hashable: python/mypy#20409
             value = getattr(self, name)
             row.update(value.to_row() if _is_record(kind) else {_column(name): value})
         return row
@@ -49,7 +49,7 @@ class Record:
         return cls(
             **{
                 name: kind.from_row(row) if _is_record(kind) else _convert(row[_column(name)], kind, _column(name))
-                for name, kind in _fields(cls)
+                for name, kind in _fields(cls)  # type: ignore[arg-type]  # a class is hashable: python/mypy#20409
             }
         )
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.training.records import DemoUpdate, EpisodeRow, EvalRow
+from dqfd_bc_keras.training.records import DemoUpdate, EpisodeRow, EvalRow, Record
 
 
 @dataclass
@@ -68,7 +68,7 @@ class TrainingState:
         return cls(**known)
 
 
-RECORDS = {"metrics": EpisodeRow, "evals": EvalRow, "demo_updates": DemoUpdate}
+RECORDS: dict[str, type[Record]] = {"metrics": EpisodeRow, "evals": EvalRow, "demo_updates": DemoUpdate}
 """TrainingState's lists of records and the record of each."""
 
 
