@@ -13,7 +13,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -131,7 +131,13 @@ def callbacks(callback: Callbacks) -> list[Callback]:
     """`callback` as a list of functions of a row. Stable-Baselines3's `BaseCallback` objects are
     refused: they are called at every env step, and DQfD's steps run inside one TensorFlow graph
     call per episode, with nothing of Python between them."""
-    given = [] if callback is None else list(callback) if isinstance(callback, (list, tuple)) else [callback]
+    given = (
+        []
+        if callback is None
+        else list(callback)
+        if isinstance(callback, (list, tuple))
+        else [cast(Callback, callback)]
+    )
     for one in given:
         if any(
             c.__name__ == "BaseCallback" and c.__module__.startswith("stable_baselines3") for c in type(one).__mro__

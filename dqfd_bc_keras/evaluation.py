@@ -264,7 +264,11 @@ def load_policy(
     config = read_config(model_path.parent / "config.json", task)
     if target.is_dir() and not model_path.exists():
         built_in = config is not None and config.expert_loss in BUILT_IN  # a user's method is not imported here
-        why = f" (expert loss {config.expert_loss!r} fits no BC model)" if built_in and not config.uses_bc else ""
+        why = (
+            f" (expert loss {config.expert_loss!r} fits no BC model)"
+            if config and built_in and not config.uses_bc
+            else ""
+        )
         raise ModelFileError(f"{target}: run directory without {model_path.name}{why}")
     model = load_model(model_path)
     try:
@@ -273,18 +277,20 @@ def load_policy(
         raise ModelFileError(f"{model_path}: {error}") from None
     if policy is not None and greedy.kind != policy:
         raise ModelFileError(f"{model_path}: a {greedy.kind!r} model, not a {policy!r} one")
-    if task is None and config is None:
-        raise ConfigError(f"{target}: no config.json beside the model says which task it plays; pass --task")
-    own = config is not None and task in (None, config.task)  # the config's env settings apply
+    if task is None:
+        if config is None:
+            raise ConfigError(f"{target}: no config.json beside the model says which task it plays; pass --task")
+        task = config.task
+    own = config if config is not None and task == config.task else None  # the config's env settings apply
     settings = EvalSettings(
         model_path,
-        task or config.task,
+        task,
         config.timeout if config else "bootstrap",
-        max_steps if max_steps is not None else config.max_steps if own else None,
-        dict(env_kwargs) if env_kwargs is not None else dict(config.env_kwargs) if own else {},
+        max_steps if max_steps is not None else own.max_steps if own else None,
+        dict(env_kwargs) if env_kwargs is not None else dict(own.env_kwargs) if own else {},
     )
     spaces = task_spaces(settings.task, settings.env_kwargs)
-    obs_shape = spaces.layout.frames.shape if spaces.layout.image else spaces.input_dim(settings.timeout)
+    obs_shape = spaces.layout.frames.shape if spaces.layout.frames is not None else spaces.input_dim(settings.timeout)
     check_model_fits(model, obs_shape, spaces.n_actions, model_path, settings.task)
     return greedy, settings
 

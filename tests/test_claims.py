@@ -13,9 +13,9 @@ from scipy import stats as sps
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.evaluation import EvalResult
+from dqfd_bc_keras.experiments import ablations, metrics
 from dqfd_bc_keras.experiments import arms as grouping
 from dqfd_bc_keras.experiments import claims as analysis
-from dqfd_bc_keras.experiments import metrics
 from dqfd_bc_keras.experiments import plans as planning
 from dqfd_bc_keras.experiments import report as results
 from dqfd_bc_keras.experiments.arms import ArmRuns, Setting
@@ -587,13 +587,13 @@ def test_ablations_pair_with_the_full_arm_and_are_judged_against_the_margin(tmp_
     dynamic = _arm_of(tmp_path, "dyn", [[300] * 5] * 4, dynamic_demos="off")
     dropout = _arm_of(tmp_path, "mc", [[480] * 5] * 4, mc_dropout=False)
     rollouts = _arm_of(tmp_path, "roll", [[420] * 5] * 4, dynamic_demos="rollouts")  # not the preset's mode
-    pairs = analysis.ablation_pairs([full, prior, dynamic, dropout, rollouts])
+    pairs = ablations.ablation_pairs([full, prior, dynamic, dropout, rollouts])
     assert sorted((key, a.name, f.name) for key, a, f in pairs) == [
         ("bayes_prior", "prior", "full"),
         ("dynamic_demos", "dyn", "full"),
         ("mc_dropout", "mc", "full"),
     ]
-    verdicts = {a.name: analysis.judge_ablation(a, f).verdict for _, a, f in pairs}
+    verdicts = {a.name: ablations.judge_ablation(a, f).verdict for _, a, f in pairs}
     assert verdicts == {"prior": "no measurable contribution", "dyn": "contributes", "mc": "hurts"}
     line = "- Ablations (one part of the Bayesian machinery off, against the full arm): contributes in 1, hurts in 1, "
     assert line + "no measurable contribution in 1, of 3." in summary([full, prior, dynamic, dropout], tmp_path)
@@ -632,7 +632,7 @@ def test_a_task_has_the_lab_settings_registered_under_its_name_else_none(users_t
             ("prior", make_run(tmp_path / "prior", cartpole_rows([100] * 5), task="cartpole-200", bayes_prior=False)),
         )
     )
-    assert analysis.ablation_pairs([full, prior]) == []
+    assert ablations.ablation_pairs([full, prior]) == []
     with pytest.raises(ConfigError, match="register_lab_settings\\(\\) takes LabSettings, got dict"):
         register_lab_settings("lab-pole", {"target_ratio": 3.0})
 
@@ -688,16 +688,16 @@ def test_dynamic_default_follows_three_of_four_pairs_and_episodes_at_a_tie(tmp_p
         arm("e3", "episodes", "bayes", fast),
         arm("r3", "rollouts", "bayes", slow),
     ]
-    assert analysis.dynamic_default(arms)[0] is None  # 3 of the 4 pairs have run
+    assert ablations.dynamic_default(arms)[0] is None  # 3 of the 4 pairs have run
     four = arms + [arm("e4", "episodes", "ce", slow), arm("r4", "rollouts", "ce", fast)]
-    choice, pairs = analysis.dynamic_default(four)
+    choice, pairs = ablations.dynamic_default(four)
     assert choice == "rollouts" and [w for *_, w in pairs].count("rollouts") == 3
     tie = arms + [arm("e4", "episodes", "ce", fast), arm("r4", "rollouts", "ce", slow)]
-    assert analysis.dynamic_default(tie)[0] == "episodes"  # 2–2
+    assert ablations.dynamic_default(tie)[0] == "episodes"  # 2–2
     # Seeds one mode ran elsewhere (C3's 26 seeds of the episodes arm) do not enter the comparison:
     # seeds 0–2 tie (fast, fast); seeds 3–6 of the episodes arm alone (slow) would make rollouts win.
     e5, r5 = arm("e5", "episodes", "bayes", fast + slow + slow + slow + slow), arm("r5", "rollouts", "bayes", fast)
-    [(first, second, winner)] = analysis.dynamic_default([e5, r5])[1]
+    [(first, second, winner)] = ablations.dynamic_default([e5, r5])[1]
     assert winner == "tie" and len(first.runs) == len(second.runs) == 3
 
 

@@ -186,7 +186,7 @@ class DQfDAgent(keras.Model):
         """Fill D_demo with these transitions (with the BC model's view of each state)."""
         rewards = np.ones_like(rewards) if self.sqil else rewards
         pi_bc, sigma_sq = self.expert_view(tf.constant(obs, self.net_input.dtype))
-        if self.net_input.image:  # the table holds the frames' pool indices
+        if self.replay.frame_pool is not None:  # frames: the table holds their pool indices
             obs, next_obs = self.replay.frame_pool.store_demos(obs, next_obs, np.logical_or(terminated, truncated))
         self.replay.set_demos(self.replay.rows(obs, actions, rewards, next_obs, terminated, truncated, pi_bc, sigma_sq))
 
@@ -199,7 +199,7 @@ class DQfDAgent(keras.Model):
         else:
             pi_bc, sigma_sq = tf.fill([1, self.n_actions], np.nan), tf.fill([1], np.nan)
         reward = 0.0 * tf.cast(reward, tf.float32) if self.sqil else reward
-        if self.net_input.image:
+        if self.replay.frame_pool is not None:  # frames: the table holds their pool indices
             obs, next_obs = self.replay.frame_pool.store(obs, next_obs)
         self.replay.store(
             self.replay.rows(obs[None], action, reward, next_obs[None], terminated, truncated, pi_bc, sigma_sq)[0]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, SupportsFloat, cast
 
 import numpy as np
 
@@ -267,7 +267,7 @@ class EpisodeRecorder:
         self.episode_seed = None if seed is None else int(seed)
 
     def step(
-        self, action: int, next_obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
+        self, action: int, next_obs: np.ndarray, reward: SupportsFloat, terminated: bool, truncated: bool, info: dict
     ) -> None:
         values = (self.obs, action, reward, next_obs, terminated, truncated, len(self.returns))
         for name, value in zip(ARRAYS, values, strict=True):

@@ -11,7 +11,7 @@ import statistics
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -33,7 +33,7 @@ class Watcher(Protocol):
     def reset(self, obs: np.ndarray, seed: int | None) -> None: ...
 
     def step(
-        self, action: int, next_obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
+        self, action: int, next_obs: np.ndarray, reward: SupportsFloat, terminated: bool, truncated: bool, info: dict
     ) -> None: ...
 
 

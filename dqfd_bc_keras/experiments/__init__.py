@@ -11,7 +11,8 @@ nothing in the learning core imports it.
     data.py     suites read run by run; the compact per-run archive
     metrics.py  per-run metrics (episodes to solve, collapses, interactions to threshold, …)
     arms.py     runs grouped into arms by config; a bayes arm's ce pair
-    claims.py   the claims C1–C4, the ablations and their verdict rules
+    claims.py   the claims C1–C4 and their verdict rules
+    ablations.py   the ablations and the dynamic-demonstration default, judged
     plans.py    seeds per arm of each claim setting, planned by power
     lab_settings.py  what the lab judges each task by (teachers, efficiency goal, ablation metric)
     efficiency.py  sample efficiency against SB3: steps to threshold, ratios

@@ -43,7 +43,7 @@ from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, ArmSteps, interaction_evals, load, save
 from dqfd_bc_keras.experiments.metrics import first_reaching, solved_return
-from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES, Arm
+from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import eval_seed

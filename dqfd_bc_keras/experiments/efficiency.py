@@ -23,7 +23,7 @@ import numpy as np
 from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS, lab_settings
 from dqfd_bc_keras.experiments.metrics import first_reaching
 from dqfd_bc_keras.experiments.run_files import FinishedRun
-from dqfd_bc_keras.experiments.stats import bootstrap_ci
+from dqfd_bc_keras.experiments.stats import Values, bootstrap_ci
 from dqfd_bc_keras.files import write_text
 
 SB3_METHOD = "SB3 DQN (rl-zoo3)"
@@ -205,7 +205,7 @@ def table(arms: list[ArmSteps]) -> list[str]:
     return lines
 
 
-def teacher_verdict(final: Sequence[float], teacher: float) -> tuple[float, float, float, str]:
+def teacher_verdict(final: Values, teacher: float) -> tuple[float, float, float, str]:
     """PREREGISTRATION §7: (median final return over seeds, its 95% bootstrap CI, verdict):
     *beats its teacher* if the CI lies wholly above the teacher's mean, *does not* if wholly
     below, else *inconclusive*."""

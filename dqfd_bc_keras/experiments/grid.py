@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 from dqfd_bc_keras.core.config import Config
-from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.arms import ArmRuns, group_arms
 from dqfd_bc_keras.experiments.data import load_runs
@@ -33,7 +32,7 @@ from dqfd_bc_keras.experiments.efficiency import ratio_ci, teacher_verdict
 from dqfd_bc_keras.experiments.figures import Heatmap, heatmap
 from dqfd_bc_keras.experiments.imitation import imitation_arms, load_imitation, run_imitation
 from dqfd_bc_keras.experiments.lab_settings import lab_settings
-from dqfd_bc_keras.experiments.metrics import interactions_to_threshold
+from dqfd_bc_keras.experiments.metrics import interactions_to_threshold, solved_return
 from dqfd_bc_keras.experiments.suites import SUITES, all_grid_arms, grid_arms, grid_cells, grid_tasks
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
@@ -64,7 +63,7 @@ class Cell:
 
     @property
     def threshold(self) -> float:
-        return float(get_task(self.task).solved_return)
+        return solved_return(self.task)
 
 
 @dataclass
@@ -91,7 +90,7 @@ def collect(
     arms: list[ArmRuns], suite_dir: Path, task: str, quick: bool = False
 ) -> tuple[list[Cell], dict[str, dict[Cell, Entry]]]:
     """`task`'s cells and {method: {cell: Entry}} from the suite's arms and BC alone's files."""
-    cells = [Cell(task, c["expert"], float(c["expert_epsilon"]), int(c["demo_episodes"])) for c in grid_cells(quick)]
+    cells = [Cell(task, c["expert"], c["expert_epsilon"], c["demo_episodes"]) for c in grid_cells(quick)]
     by_config = {_key(a.fields): a for a in arms}
     table: dict[str, dict[Cell, Entry]] = {}
     for a in grid_arms(task, quick):

@@ -32,7 +32,7 @@ class LabSettings:
     """(expert, ε) → mean plain return over 100 episodes of each teacher of the quality × quantity
     grid (`python -m dqfd_bc_keras.demos.experts --episodes 100 --epsilon ε`), pinned by tests/test_grid.py."""
     ablation_metric: str | None = None
-    """The metric the ablations are judged on (claims.py's ABLATION_MARGINS); None: no ablations."""
+    """The metric the ablations are judged on (ablations.py's ABLATION_MARGINS); None: no ablations."""
     calibrate: bool = False
     """Whether the σ² estimators are calibrated on this task (estimators.py)."""
 

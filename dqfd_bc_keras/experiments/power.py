@@ -6,15 +6,13 @@ Every function is pure: the same inputs give the same numbers.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 from scipy import stats as sps
 
-from dqfd_bc_keras.experiments.stats import as_sample
+from dqfd_bc_keras.experiments.stats import Values, as_sample
 
 
-def pooled_sd(a: Sequence[float], b: Sequence[float]) -> float:
+def pooled_sd(a: Values, b: Values) -> float:
     """The pooled standard deviation of two arms, √(((n_a − 1)s_a² + (n_b − 1)s_b²)/(n_a + n_b − 2)):
     the spread the power calculation assumes both arms share."""
     x, y = as_sample(a), as_sample(b)

@@ -11,7 +11,7 @@ import json
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -143,7 +143,7 @@ def _read_json(path: Path, file: PurePosixPath, kind: type) -> dict | list:
         raise RunFileError(file, f"not valid JSON ({error})") from None
     if not isinstance(value, kind):
         raise RunFileError(file, f"expected a JSON {'object' if kind is dict else 'array'}")
-    return value
+    return cast("dict | list", value)  # mypy narrows by a variable class to object
 
 
 def _config(fields: dict) -> Config:

@@ -15,15 +15,13 @@ import numpy as np
 
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.experiments import figures
+from dqfd_bc_keras.experiments.ablations import ablation_pairs, dynamic_default, judge_ablation
 from dqfd_bc_keras.experiments.arms import ArmRuns, bayes_ce_pairs, preset_distance
 from dqfd_bc_keras.experiments.claims import (
     CLAIMS,
     Comparison,
-    ablation_pairs,
-    dynamic_default,
     flips,
     judge,
-    judge_ablation,
     rule_text,
     too_few,
 )
@@ -103,12 +101,12 @@ def figure_links(arms: list[ArmRuns], figures_dir: Path, markdown_dir: Path) -> 
         pair = next((p for p in bayes_ce_pairs(members, task, timeout) if p[1] is not None), members)
         main = [a.name for a in members if preset_distance(a) == 0] or list(runs)
         stem = figures_dir / setting.replace("/", "-")
-        cases = [a.name for a in pair if a.name in main] or main
+        cases = [a.name for a in pair if a is not None and a.name in main] or main
         paths = figures.setting_figures(setting, {n: runs[n] for n in main}, cases, score, ylabel, stem, window, zoom)
         variants = [a.name for a in members if a.name not in main and not grid_only(a.config)]
         if variants:
             path = stem.with_name(f"{stem.name}-variants.png")
-            shown = [a.name for a in pair if a.name in main] + variants
+            shown = [a.name for a in pair if a is not None and a.name in main] + variants
             figures.learning_curves(f"{setting}, variants", {n: runs[n] for n in shown}, ylabel, path, window, zoom)
             paths.append(path)
         links += [f"![{setting} {p.stem}]({Path(os.path.relpath(p, markdown_dir)).as_posix()})" for p in paths]

@@ -93,8 +93,8 @@ def bootstrap_ci(
 
 
 def bootstrap_diff_ci(
-    a: Sequence[float],
-    b: Sequence[float],
+    a: Values,
+    b: Values,
     statistic: Statistic = np.mean,
     level: float = 0.95,
     resamples: int = 10_000,
@@ -167,7 +167,7 @@ def score_distribution(scores: np.ndarray, taus: Sequence[float], axis: int | No
     return (np.moveaxis(values, axis, -1)[..., None] > thresholds).mean(axis=-2)
 
 
-def mann_whitney(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
+def mann_whitney(a: Values, b: Values) -> tuple[float, float]:
     """Two-sided Mann–Whitney U test: (U of `a`, p).
 
     U counts the pairs (a_i, b_j) with a_i > b_j, ties counting ½. A rank test: it needs no
@@ -209,8 +209,8 @@ def fisher_exact(successes_a: int, n_a: int, successes_b: int, n_b: int) -> tupl
 
 
 def tost_ci(
-    a: Sequence[float],
-    b: Sequence[float],
+    a: Values,
+    b: Values,
     alpha: float = 0.05,
     resamples: int = 10_000,
     seed: int = 0,

@@ -12,7 +12,7 @@ field, and how many seeds it gets); each (arm, seed) is one `train.py`-equivalen
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import cast
+from typing import TypedDict, cast
 
 from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
 from dqfd_bc_keras.envs.make import checked_spaces
@@ -155,7 +155,15 @@ QUICK_GRID = ((("strong", 0.5),), (1,))
 """`--quick`: one cell (a bad teacher, one episode) of the first task, one seed, the QUICK budget (the tests' grid)."""
 
 
-def grid_cells(quick: bool = False) -> list[dict[str, object]]:
+class GridCell(TypedDict):
+    """The Config fields of one cell of the grid."""
+
+    expert: str
+    expert_epsilon: float
+    demo_episodes: int
+
+
+def grid_cells(quick: bool = False) -> list[GridCell]:
     """The Config fields of each cell: teacher × demonstrated episodes."""
     teachers, episodes = QUICK_GRID if quick else (GRID_TEACHERS, GRID_EPISODES)
     return [

@@ -10,17 +10,15 @@ from collections import Counter
 from pathlib import Path
 
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.experiments.ablations import ablation_pairs, dynamic_default, judge_ablation
 from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm
 from dqfd_bc_keras.experiments.claims import (
     CLAIMS,
     GOALS_MARGIN,
     RETURN_MARGIN,
     SHARE_MARGIN,
-    ablation_pairs,
-    dynamic_default,
     flips,
     judge,
-    judge_ablation,
     too_few,
 )
 from dqfd_bc_keras.experiments.efficiency import EFFICIENCY_FILE, SB3_METHOD, load, ratio_ci
