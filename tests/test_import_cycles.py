@@ -1,5 +1,6 @@
 """The package has no import cycle: the modules each module imports anywhere in its source (function
-bodies and `if __name__ == "__main__":` blocks included) form a graph without one. (Which layer may
+bodies and `if __name__ == "__main__":` blocks included) form a graph without one. Imports under
+`if TYPE_CHECKING:` never run (they name a type for the checker), so they are not edges. (Which layer may
 import which: tests/test_layers.py.)"""
 
 import ast
@@ -20,7 +21,16 @@ def import_graph() -> dict[str, set[str]]:
     for name, path in modules.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
         edges = set()
-        for node in ast.walk(ast.parse(path.read_text())):
+        tree = ast.parse(path.read_text())
+        typing_only = {
+            id(child)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.If) and ast.unparse(node.test) in ("TYPE_CHECKING", "typing.TYPE_CHECKING")
+            for child in ast.walk(node)
+        }
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
             if isinstance(node, ast.Import):
                 edges |= {alias.name for alias in node.names}
             elif isinstance(node, ast.ImportFrom):

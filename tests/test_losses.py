@@ -77,11 +77,12 @@ def test_the_modes_config_accepts_are_the_modes_the_losses_take() -> None:
 
 
 def test_the_loss_module_imports_tensorflow_alone() -> None:
-    """Pure math: no config, envs or Gymnasium come in with it."""
+    """Pure math: no config, envs or Gymnasium come in with it (the standard library's abstract
+    collections name the types of its arguments)."""
     tree = ast.parse(Path(losses.__file__).read_text())
     imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
     imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
-    assert imported == {"__future__", "tensorflow"}
+    assert imported == {"__future__", "collections.abc", "tensorflow"}
 
 
 # ---------------------------------------------------------------- 2. td_target / td_error

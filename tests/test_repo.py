@@ -33,12 +33,13 @@ def test_quick_start_is_two_single_line_commands_and_ci_runs_the_second():
     assert len(commands) == 3 and all("\n" not in c for c in commands)
     main, python, tests = commands
     assert main.startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/dqfd-train")
-    assert python.startswith('.venv/bin/python -c "from dqfd_bc_keras import DQfD;')
+    assert python.startswith('.venv/bin/python -c "import dqfd_bc_keras; dqfd_bc_keras.configure();')
     system, _, python_part = tests.partition(" >/dev/null && ")  # Debian's xvfb and xdotool where missing
     assert system.startswith("{ command -v Xvfb && command -v xdotool || {") and "apt-get install" in system
     assert python_part.startswith("python3.11 -m venv .venv && .venv/bin/pip install -q -r requirements.txt")
     assert tests.endswith(
-        "&& .venv/bin/ruff check . && .venv/bin/ruff format --check . && .venv/bin/python -m pytest -q -n 2"
+        "&& .venv/bin/ruff check . && .venv/bin/ruff format --check . && .venv/bin/python -m mypy"
+        " && .venv/bin/python -m pytest -q -n 2"
     )
     ci = (REPO / ".ci" / "run").read_text().splitlines()
     assert tests in ci and "set -euo pipefail" in ci
