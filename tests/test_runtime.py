@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 CLEAN = {k: v for k, v in os.environ.items() if not k.startswith(("TF_", "DQFD_", "KERAS_"))}
 """A user's environment: none of the variables `runtime.configure` sets (the tests' own process has them)."""
@@ -93,6 +95,7 @@ def set_from_python(threads: int) -> list[str]:
     ).stdout.split()
 
 
+@pytest.mark.slow  # trains in a subprocess
 def test_a_command_line_runs_quiet_with_onednn_off_and_one_thread_or_dqfd_tf_threads():
     code = (
         "import os, sys; from dqfd_bc_keras import runtime; from dqfd_bc_keras.commands import cli\n"
@@ -167,6 +170,7 @@ print(sorted(name for name in os.environ if name.startswith(("TF_", "DQFD_", "KE
 """
 
 
+@pytest.mark.slow  # trains in a subprocess
 def test_a_sweep_worker_configures_itself_and_leaves_its_callers_process_alone(tmp_path):
     """The lab's engine called from Python by a process nobody configured: its worker runs as a
     command does (oneDNN off, one thread, as its provenance.json records), the caller stays as it was."""
