@@ -287,7 +287,7 @@ def test_a_users_calls_show_no_numpy_deprecation_warning(tmp_path):
 # --- a user's Method object -----------------------------------------------------------------------------
 
 METHOD_MODULE = """
-from dqfd_bc_keras import losses
+from dqfd_bc_keras.core import losses
 from dqfd_bc_keras.core.methods import Method
 
 
