@@ -79,19 +79,20 @@ class Batch(NamedTuple):
 
 @dataclass(frozen=True)
 class ReplaySettings:
-    """The replay's sizes, n-step return and prioritization (`from_config`: a run's)."""
+    """The replay's sizes, n-step return and prioritization (`from_config`: a run's); each default
+    is the Config's."""
 
-    capacity: int = 100_000
+    capacity: int = Config.replay_capacity
     """Rows of D_replay, the circular buffer of self-generated transitions."""
-    demo_capacity: int = 50_000
+    demo_capacity: int = Config.demo_capacity
     """Rows kept for D_demo."""
-    n_step: int = 10
-    gamma: float = 0.99
-    alpha: float = 0.4
+    n_step: int = Config.n_step
+    gamma: float = Config.gamma
+    alpha: float = Config.priority_alpha
     """The priority exponent: P(i) ∝ p_i^α."""
-    eps_agent: float = 0.001
-    eps_demo: float = 1.0
-    seed: int = 0
+    eps_agent: float = Config.priority_eps_agent
+    eps_demo: float = Config.priority_eps_demo
+    seed: int = Config.seed
     """Seeds the sampling's generator."""
 
     @classmethod
