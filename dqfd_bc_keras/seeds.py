@@ -39,3 +39,11 @@ def final_eval_seed(seed: int) -> int:
 def episode_seed(seed: int, episode: int, stream: int = TRAIN) -> int:
     """A reset seed per (run seed, episode, stream): a resumed run replays the same starts."""
     return int(np.random.SeedSequence([seed, stream, episode]).generate_state(1)[0])
+
+
+TUNE_SEED = 1_000_000
+"""The first run seed of a hyperparameter search (`experiments tune --seeds K`: TUNE_SEED … TUNE_SEED
++ K − 1, the same K for every trial). Evaluations and studies use seeds from 0 up (the lab's arms
+0 … 49, `replicate`'s fresh ones a few hundred at most): what a search is tuned on is never what
+its result is judged on. Every seed a tuning run derives stays apart too (demonstrations from
+10⁹, evaluations from 10⁹ + 10⁴) and below MAX_SEED."""

@@ -30,6 +30,8 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, cast
 
+from dqfd_bc_keras.choices import DYNAMIC_MODES
+from dqfd_bc_keras.core.search_space import Choice, Dimension, Span, check_own
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.plugins import PluginError, WrongKind, load, parse
 
@@ -133,6 +135,9 @@ class Method:
     and no reference. The built-ins' are in reference.py."""
     reads: tuple[str, ...] = ()
     """The Config fields only this method (among the registered ones) reads besides the shared ones."""
+    space: tuple[tuple[str, Dimension], ...] = ()
+    """Where a hyperparameter search varies the fields it reads (`experiments tune`), as (field,
+    `search_space.Span` or `Choice`) pairs; the shared fields' ranges are `search_space.SHARED`."""
     sqil_rewards: bool = False
     """SQIL's relabelling: reward 1 on demonstrations and 0 on the agent's own data, in batches drawn
     half from each replay, uniformly (Reddy et al. 2020)."""
@@ -144,6 +149,7 @@ class Method:
             raise ConfigError(f"method {self.name!r}: bc_fit={self.bc_fit!r} is not one of {BC_FITS}")
         if self.reference is not None and self.term is None:
             raise ConfigError(f"method {self.name!r}: a reference without a term (J_E = 0) checks nothing")
+        check_own(self.name, self.space, self.reads)
 
     @property
     def uses_bc(self) -> bool:
@@ -163,6 +169,12 @@ class Method:
         return cast("Term", load(term, f"method {self.name!r}: {field} {term}", callable, "function"))
 
 
+_BC_SPACE: tuple[tuple[str, Dimension], ...] = (
+    ("bc_learning_rate", Span(1e-4, 3e-3, log=True)),
+    ("bc_epochs", Span(10, 120, log=True)),
+    ("dynamic_demos", Choice(DYNAMIC_MODES)),
+)
+"""What every method with a BC model varies of it: its fit, and how D_demo grows (§5)."""
 _TERMS = "dqfd_bc_keras.core.expert_terms"
 _REFERENCE = "dqfd_bc_keras.core.reference"
 _METHOD = "dqfd_bc_keras.core.methods.Method"
@@ -175,6 +187,7 @@ METHODS: dict[str, Method] = {
             term=f"{_TERMS}:margin",
             reference=f"{_REFERENCE}:margin",
             reads=("margin",),
+            space=(("margin", Span(0.1, 2.0)),),
         ),
         Method(
             "bc_margin",
@@ -183,6 +196,7 @@ METHODS: dict[str, Method] = {
             term=f"{_TERMS}:bc_margin",
             reference=f"{_REFERENCE}:bc_margin",
             reads=("margin", *BC_FIELDS, *DYNAMIC_FIELDS),
+            space=(("margin", Span(0.1, 2.0)), *_BC_SPACE),
         ),
         Method(
             "ce",
@@ -191,6 +205,7 @@ METHODS: dict[str, Method] = {
             term=f"{_TERMS}:ce",
             reference=f"{_REFERENCE}:ce",
             reads=("temperature", *BC_FIELDS, *DYNAMIC_FIELDS),
+            space=(("temperature", Span(0.1, 10.0, log=True)), *_BC_SPACE),
         ),
         Method(
             "bayes",
@@ -199,6 +214,13 @@ METHODS: dict[str, Method] = {
             term=f"{_TERMS}:bayes",
             reference=f"{_REFERENCE}:bayes",
             reads=("temperature", *BAYES_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
+            space=(
+                ("temperature", Span(0.1, 10.0, log=True)),
+                ("sigma0_sq", Span(0.05, 5.0, log=True)),
+                ("prior_scale", Span(0.1, 10.0, log=True)),
+                ("bc_dropout", Span(0.05, 0.5)),
+                *_BC_SPACE,
+            ),
         ),
         Method("none", "plain DQN: no demonstrations, no expert loss", needs_demos=False),
         Method(

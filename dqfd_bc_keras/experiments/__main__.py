@@ -17,6 +17,7 @@ from pathlib import Path
 from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int, run
 from dqfd_bc_keras.experiments.names import BACKENDS, RUNS_PER_WORKER
 from dqfd_bc_keras.experiments.suites import ALL, GRID_TASKS, SUITES, efficiency_tasks, on_task, suite_arms
+from dqfd_bc_keras.tuning.command import tune_arguments, tune_command
 
 EXIT_SKIPPED = 1
 """`report --strict`'s exit code when a run was skipped (2 stays a usage error)."""
@@ -313,6 +314,14 @@ COMMANDS = {
         "Runs the efficiency suite's arms and Stable-Baselines3's DQN as rl-zoo3 runs it (both evaluated "
         "on one grid), prints each arm's steps to the threshold and writes OUT/efficiency.json "
         "(dqfd_bc_keras/experiments/baselines.py).",
+    ),
+    "tune": Command(
+        "a hyperparameter search on Optuna: resumable, shared by many workers",
+        tune_arguments,
+        tune_command,
+        "Runs (or continues) an Optuna study of one method on one task: each trial the mean of its params' "
+        "metric over --seeds runs, each an ordinary run directory under OUT/trials/; writes OUT/best.json "
+        "(train.py --params) and Optuna's figures in OUT/figures/ (docs/TUNING.md).",
     ),
 }
 """The subcommands in `--help`'s order."""

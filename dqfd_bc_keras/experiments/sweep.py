@@ -22,6 +22,7 @@ from multiprocessing.connection import wait as wait_for
 from multiprocessing.context import SpawnContext
 from multiprocessing.process import BaseProcess
 from pathlib import Path
+from typing import Any
 
 from dqfd_bc_keras import runtime
 from dqfd_bc_keras.commands.cli import Terminated
@@ -168,6 +169,18 @@ def _stop(signum: int, frame: object) -> None:
 def _ray(jobs: Sequence[Job], workers: int, address: str | None, runs_per_worker: int) -> Iterator[Outcome]:
     """Each run a Ray task on one CPU, a worker taking up to `runs_per_worker` of them (Ray's
     `max_calls`); joins `address` (a running cluster) or starts a local Ray."""
+    with ray_session(workers, address) as ray:
+        task = ray.remote(num_cpus=1, max_calls=runs_per_worker)(run_job)
+        pending = [task.remote(job) for job in jobs]
+        while pending:
+            finished, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(finished[0])
+
+
+@contextlib.contextmanager
+def ray_session(workers: int, address: str | None) -> Iterator[Any]:
+    """The `ray` module, joined to `address` (a running cluster) or to a local Ray of `workers` CPUs
+    started here (and shut down after), its workers configured as every command is (`runtime`)."""
     try:
         import ray
     except ImportError:
@@ -182,11 +195,7 @@ def _ray(jobs: Sequence[Job], workers: int, address: str | None, runs_per_worker
             runtime_env={"env_vars": {"PYTHONPATH": str(Path(__file__).parents[2]), **runtime.environment()}},
         )
     try:
-        task = ray.remote(num_cpus=1, max_calls=runs_per_worker)(run_job)
-        pending = [task.remote(job) for job in jobs]
-        while pending:
-            finished, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(finished[0])
+        yield ray
     finally:
         if started_here:
             ray.shutdown()

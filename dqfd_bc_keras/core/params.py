@@ -1,0 +1,34 @@
+"""A params file: Config fields a hyperparameter search found (`experiments tune`'s best.json) or a
+user wrote, as `train.py --params FILE` and `DQfD(task, **read_params(FILE))` take them."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from dqfd_bc_keras.core.config import Config, unknown_field
+from dqfd_bc_keras.errors import ConfigError
+
+
+def read_params(path: str | os.PathLike) -> dict[str, Any]:
+    """The Config fields of a params file: `experiments tune`'s best.json (its `params`) or a JSON
+    object of fields, each key checked as `--set` checks it (a misspelt field gets the nearest
+    one's name; the task is not a param); the values are checked with the rest of the Config they
+    go into. `train.py --params FILE` and `DQfD(task, **read_params(FILE))` read it."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such params file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise ConfigError(f"{path}: not a JSON params file ({str(error).splitlines()[0]})") from None
+    params = data.get("params", data) if isinstance(data, dict) else data
+    if not isinstance(params, dict):
+        raise ConfigError(f"{path}: expected a JSON object of Config fields (or best.json's \"params\"), got {params!r:.80}")
+    for key in params:
+        if key == "task":
+            raise ConfigError(f"{path}: the task is not a param; it is chosen with --task or --env")
+        if key not in Config.__dataclass_fields__:
+            raise ConfigError(f"{path}: {unknown_field(key)}")
+    return dict(params)

@@ -1,0 +1,232 @@
+"""`tune`: an Optuna study of one method on one task, in a storage many processes can share.
+
+A study is named and stored (`storage`: a SQLite file under `out` by default; any URL Optuna
+takes, so a PostgreSQL or MySQL server shares it across machines; a `.log` path, a journal file,
+where SQLite's locking is not enough). It records what it tunes (the task, its env settings, the
+demonstrations, the method, the metric, the budget, the seeds, the fixed fields): the same command
+run again continues it, and a command that would tune something else with it is refused. Each
+worker (a process here, or a Ray task) takes trials until the study holds `trials` of them
+complete, pruned or under way; a trial stopped by Ctrl-C or SIGTERM is marked failed, never left
+running, and its run directories keep their last checkpoints.
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from dqfd_bc_keras.core.config import QUICK, Config
+from dqfd_bc_keras.envs.make import get_task, task_slug
+from dqfd_bc_keras.errors import ConfigError, one_line
+from dqfd_bc_keras.experiments.names import BACKENDS
+from dqfd_bc_keras.seeds import TUNE_SEED
+from dqfd_bc_keras.tuning.command import PRUNERS, SAMPLERS
+from dqfd_bc_keras.tuning.objective import METRICS
+from dqfd_bc_keras.tuning.space import as_json, check_space, study_space
+
+if TYPE_CHECKING:
+    import optuna
+
+FAILURES_IN_A_ROW = 3
+"""Trials failed one after the other before a worker gives up: a failure that is not the params'
+(a missing file, a broken env) fails every trial alike."""
+
+
+@dataclass(frozen=True)
+class TuneSettings:
+    """One study: what it tunes, how it searches, where it keeps what it finds."""
+
+    out: Path
+    task: str = "cartpole"
+    """A preset, or any Gymnasium env id (with `env_kwargs` and `max_steps` as train.py takes them)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    max_steps: int | None = None
+    demos: str | None = None
+    """A .npz file or minari:ID, or who demonstrates (train.py's --demos or --expert)."""
+    expert_loss: str = "bayes"
+    trials: int = 20
+    """Trials the study holds when done (complete, pruned or under way): run again with more for more."""
+    study_name: str | None = None
+    """Default: TASK-METHOD-METRIC."""
+    storage: str | None = None
+    """Default: sqlite:///OUT/study.db."""
+    seeds: int = 1
+    """K: each trial's value is the mean over seeds TUNE_SEED … TUNE_SEED + K − 1."""
+    steps: int | None = None
+    """Each run's budget of env steps (default: the task's total_steps)."""
+    metric: str = "auc"
+    threshold: float | None = None
+    """The `threshold` metric's return (default: the task's solved return)."""
+    sampler: str = "tpe"
+    pruner: str = "median"
+    workers: int = 2
+    backend: str = "local"
+    address: str | None = None
+    space_file: str | None = None
+    fixed: dict[str, Any] = field(default_factory=dict)
+    """Config fields every trial keeps (`--set`), out of the search."""
+    quick: bool = False
+    """The quick budget (train.py --quick), for tests."""
+
+    def __post_init__(self) -> None:
+        for name, value, allowed in (
+            ("metric", self.metric, tuple(METRICS)),
+            ("sampler", self.sampler, SAMPLERS),
+            ("pruner", self.pruner, PRUNERS),
+            ("backend", self.backend, BACKENDS),
+        ):
+            if value not in allowed:
+                raise ConfigError(f"{name}={value!r} is not one of {allowed}")
+        for name in ("trials", "seeds", "workers"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be a positive integer, got {getattr(self, name)!r}")
+        object.__setattr__(self, "out", Path(self.out))
+        if self.metric == "threshold" and self.threshold is None:
+            solved = get_task(self.task).solved_return
+            if solved is None:
+                raise ConfigError(f"{self.task} sets no solved return: --metric threshold needs --threshold R")
+            object.__setattr__(self, "threshold", float(solved))
+
+    @property
+    def name(self) -> str:
+        return self.study_name or f"{task_slug(self.task)}-{self.expert_loss}-{self.metric}"
+
+    @property
+    def storage_url(self) -> str:
+        return self.storage or f"sqlite:///{(self.out / 'study.db').resolve()}"
+
+    @property
+    def seed_list(self) -> list[int]:
+        return [TUNE_SEED + k for k in range(self.seeds)]
+
+    @property
+    def trials_dir(self) -> Path:
+        return self.out / "trials"
+
+    def run_fields(self) -> dict[str, Any]:
+        """The Config fields every trial's runs share (the budget, the env settings, `fixed`)."""
+        quick = {**QUICK, **get_task(self.task).quick} if self.quick else {}
+        env = {"env_kwargs": self.env_kwargs} if self.env_kwargs else {}
+        limit = {"max_steps": self.max_steps} if self.max_steps is not None else {}
+        steps = {"total_steps": self.steps} if self.steps is not None else {}
+        return {**quick, **env, **limit, **steps, **self.fixed}
+
+    def identity(self, fixed: dict[str, Any]) -> dict[str, Any]:
+        """What the study tunes: a command asking any of it otherwise is refused on this study."""
+        return {
+            "task": self.task,
+            "demos": self.demos,
+            "expert_loss": self.expert_loss,
+            "metric": self.metric,
+            "threshold": self.threshold,
+            "seeds": self.seed_list,
+            "fixed": fixed,
+        }
+
+
+def open_storage(url: str) -> optuna.storages.BaseStorage:
+    """The storage `url` names: a `.log` path is a journal file, anything else a database URL
+    (SQLite waits up to a minute for another process's write). A URL that cannot be opened is a ConfigError."""
+    import optuna
+
+    try:
+        if "://" not in url:
+            if not url.endswith(".log"):
+                raise ConfigError("expected a database URL (sqlite:///study.db, postgresql://…) or a journal file's path ending in .log")
+            Path(url).parent.mkdir(parents=True, exist_ok=True)
+            return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(url))
+        if url.startswith("sqlite:///"):
+            Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+        engine = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)  # the heartbeat, Optuna's since 2.9
+            return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=30, grace_period=120)
+    except Exception as error:  # sqlalchemy's and the drivers' errors have no common base a user would know
+        raise ConfigError(f"--storage {url}: {one_line(error)}") from None
+
+
+def sampler(name: str) -> optuna.samplers.BaseSampler:
+    import optuna
+
+    if name == "random":
+        return optuna.samplers.RandomSampler()
+    if name == "cmaes":
+        return optuna.samplers.CmaEsSampler(warn_independent_sampling=False)
+    return optuna.samplers.TPESampler()
+
+
+def pruner(name: str, steps: int) -> optuna.pruners.BasePruner:
+    """`steps`: the intermediate values one trial reports (its seeds × its evaluations)."""
+    import optuna
+
+    if name == "median":
+        return optuna.pruners.MedianPruner(n_startup_trials=5, n_warmup_steps=1)
+    if name == "hyperband":
+        return optuna.pruners.HyperbandPruner(min_resource=1, max_resource=steps, reduction_factor=3)
+    return optuna.pruners.NopPruner()
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A study checked and created or found: what each worker needs to take its trials."""
+
+    settings: TuneSettings
+    space: dict
+    fixed: dict[str, Any]
+    runner: str
+
+    def study(self) -> optuna.Study:
+        import optuna
+
+        s = self.settings
+        config = Config.for_task(s.task, **self.fixed)
+        steps = s.seeds * (config.total_steps // config.eval_every + 1)
+        return optuna.load_study(
+            study_name=s.name, storage=open_storage(s.storage_url), sampler=sampler(s.sampler), pruner=pruner(s.pruner, steps)
+        )
+
+
+def prepare(settings: TuneSettings) -> Prepared:
+    """Check everything a trial needs, then create the study, or find it and check that it tunes
+    what `settings` asks (else a ConfigError naming what differs)."""
+    import optuna
+
+    fixed = settings.run_fields()
+    space, fixed = study_space(settings.expert_loss, fixed, settings.space_file)
+    check_space(settings.task, space, {**fixed, "expert_loss": settings.expert_loss, **_demonstrator(settings.demos)})
+    if not space:
+        raise ConfigError("the search space is empty: every field is fixed")
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = open_storage(settings.storage_url)
+    identity = settings.identity(fixed)
+    direction = METRICS[settings.metric].direction
+    study = optuna.create_study(study_name=settings.name, storage=storage, direction=direction, load_if_exists=True)
+    recorded = study.user_attrs.get("tunes")
+    if recorded is None:
+        study.set_user_attr("tunes", identity)
+    elif recorded != _as_stored(identity):
+        differ = [f"{k}: the study's {recorded.get(k)!r}, asked {v!r}" for k, v in _as_stored(identity).items() if recorded.get(k) != v]
+        raise ConfigError(
+            f"study {settings.name!r} in {settings.storage_url} tunes something else ({'; '.join(differ)}): "
+            "choose another --study-name, or ask what it tunes"
+        )
+    study.set_user_attr("space", as_json(space))
+    return Prepared(settings, space, fixed, uuid.uuid4().hex[:12])
+
+
+def _demonstrator(demos: str | None) -> dict[str, str]:
+    """The `expert` field a run of `demos` gets: who demonstrates, or where given demonstrations came from."""
+    from dqfd_bc_keras.demos import GIVEN
+
+    if demos is None:
+        return {}
+    return {"expert": f"{GIVEN}{demos}" if demos.endswith(".npz") or demos.startswith("minari:") else demos}
+
+
+def _as_stored(value: Any) -> Any:
+    """`value` as the storage gives it back (JSON: tuples as lists)."""
+    return json.loads(json.dumps(value))
