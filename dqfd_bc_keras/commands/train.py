@@ -40,6 +40,7 @@ from dqfd_bc_keras.commands.cli import (
 from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
 from dqfd_bc_keras.core.memory import check_memory
 from dqfd_bc_keras.core.methods import METHODS
+from dqfd_bc_keras.core.params import read_params
 from dqfd_bc_keras.demos.experts import try_demonstrator
 from dqfd_bc_keras.envs.make import checked_spaces, get_task, task_slug, task_spaces
 from dqfd_bc_keras.envs.objects import stand_in, unmade_env
@@ -96,6 +97,12 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
         help="a tiny budget (seconds), for tests and smoke checks (an Atari game: episodes of at most 200 steps)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    parser.add_argument(
+        "--params",
+        metavar="FILE",
+        help="Config fields from a JSON file: `experiments tune`'s best.json, or an object of fields; "
+        "the flags and --set win over it",
+    )
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="any Config field")
     return parser.parse_args(argv)
 
@@ -209,9 +216,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen = {k: v for k, v in flags.items() if v is not None}
     # Every override before the one validation: --max-steps or --set max_steps=N makes an env
     # without a time limit usable.
-    given = {**chosen, **env_settings(args), **parse_assignments(args.set)}
     task = chosen_task(args)
     assert task is not None  # --task defaults to cartpole
+    params = read_params(args.params, task) if args.params else {}
+    given = {**params, **chosen, **env_settings(args), **parse_assignments(args.set)}
     quick = {**QUICK, **get_task(task).quick} if args.quick else {}
     overrides = {**quick, **given}
     check_out(args.out)

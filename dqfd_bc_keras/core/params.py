@@ -5,18 +5,20 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
 from dqfd_bc_keras.core.config import Config, unknown_field
-from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.errors import ConfigError, DqfdWarning
 
 
-def read_params(path: str | os.PathLike) -> dict[str, Any]:
+def read_params(path: str | os.PathLike, task: str | None = None) -> dict[str, Any]:
     """The Config fields of a params file: `experiments tune`'s best.json (its `params`) or a JSON
     object of fields, each key checked as `--set` checks it (a misspelt field gets the nearest
     one's name; the task is not a param); the values are checked with the rest of the Config they
-    go into. `train.py --params FILE` and `DQfD(task, **read_params(FILE))` read it."""
+    go into. `train.py --params FILE` and `DQfD(task, **read_params(FILE))` read it; given the
+    `task` they go to, a best.json tuned on another task says so (a warning: params may transfer)."""
     try:
         data = json.loads(Path(path).read_text())
     except FileNotFoundError:
@@ -31,4 +33,7 @@ def read_params(path: str | os.PathLike) -> dict[str, Any]:
             raise ConfigError(f"{path}: the task is not a param; it is chosen with --task or --env")
         if key not in Config.__dataclass_fields__:
             raise ConfigError(f"{path}: {unknown_field(key)}")
+    tuned = data.get("tunes") if isinstance(data, dict) else None
+    if task is not None and isinstance(tuned, dict) and tuned.get("task") not in (None, task):
+        warnings.warn(f"{path} was tuned on {tuned['task']}, not {task}", DqfdWarning, stacklevel=2)
     return dict(params)

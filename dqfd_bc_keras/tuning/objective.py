@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -87,7 +86,6 @@ class Objective:
     fixed: dict[str, Any]
     runner: str
     """This command's id, set on each trial it runs (its trials are failed if it is stopped)."""
-    say: Callable[[str], None] = print
     seconds: dict[int, float] = field(default_factory=dict)
 
     def __call__(self, trial: optuna.Trial) -> float:

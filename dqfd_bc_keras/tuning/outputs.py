@@ -43,6 +43,20 @@ def best(study: optuna.Study, settings: TuneSettings) -> dict[str, Any] | None:
     }
 
 
+PARALLEL_PARAMS = 6
+"""The parallel-coordinate figure shows the most important params only: sixteen axes are unreadable."""
+
+
+def _most_important(study: optuna.Study) -> list[str] | None:
+    """The PARALLEL_PARAMS params of most importance (None, all of them, while importances cannot be had)."""
+    import optuna
+
+    try:
+        return list(optuna.importance.get_param_importances(study))[:PARALLEL_PARAMS]
+    except (ValueError, RuntimeError, ZeroDivisionError):
+        return None
+
+
 def write_outputs(study: optuna.Study, settings: TuneSettings) -> list[Path]:
     """best.json and the figures under `settings.out` (atomically); the files written. A figure
     Optuna cannot draw yet (importances need two complete trials whose params differ) is skipped."""
@@ -64,11 +78,12 @@ def write_outputs(study: optuna.Study, settings: TuneSettings) -> list[Path]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the matplotlib backend is "experimental" to Optuna
             try:
-                axes = getattr(figures, function)(study)
+                shown = {"params": _most_important(study)} if name == "parallel.png" else {}
+                axes = getattr(figures, function)(study, **shown)
             except (ValueError, RuntimeError, ZeroDivisionError):
                 continue
-        figure = axes.figure if hasattr(axes, "figure") else axes.flat[0].figure
-        figure.set_size_inches(8, 5)
+        figure = axes.figure
+        figure.set_size_inches(10, 6)
         figure.tight_layout()
         with atomic_path(settings.out / "figures" / name) as tmp:
             figure.savefig(tmp, format="png", metadata={"Software": None})

@@ -133,10 +133,13 @@ def open_storage(url: str) -> optuna.storages.BaseStorage:
     (SQLite waits up to a minute for another process's write). A URL that cannot be opened is a ConfigError."""
     import optuna
 
+    if "://" not in url and not url.endswith(".log"):
+        raise ConfigError(
+            f"--storage {url}: expected a database URL (sqlite:///study.db, postgresql://…) or a journal "
+            "file's path ending in .log"
+        )
     try:
         if "://" not in url:
-            if not url.endswith(".log"):
-                raise ConfigError("expected a database URL (sqlite:///study.db, postgresql://…) or a journal file's path ending in .log")
             Path(url).parent.mkdir(parents=True, exist_ok=True)
             return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(url))
         if url.startswith("sqlite:///"):

@@ -32,8 +32,9 @@ def take_trials(prepared: Prepared) -> None:
     import optuna
     from optuna.trial import TrialState
 
+    optuna.logging.set_verbosity(optuna.logging.WARNING)  # a line of ours per trial instead of Optuna's
     study = prepared.study()
-    objective = Objective(prepared.settings, prepared.space, prepared.fixed, prepared.runner, say=_say)
+    objective = Objective(prepared.settings, prepared.space, prepared.fixed, prepared.runner)
     failures: list[str] = []
     counted = (TrialState.COMPLETE, TrialState.PRUNED, TrialState.RUNNING, TrialState.WAITING)
 

@@ -1,0 +1,264 @@
+"""`experiments tune` as a user runs it: a quick study end to end, its continuation, workers sharing
+one storage, Ctrl-C in a trial, `train.py --params`, the refusals; the metrics computed by hand."""
+
+import json
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import numpy as np
+import optuna
+import pytest
+from helpers import ENV, REPO, assert_refused, call
+from PIL import Image
+
+from dqfd_bc_keras.core.methods import METHODS, Method
+from dqfd_bc_keras.core.search_space import SHARED, Choice, Span, method_space
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.seeds import TUNE_SEED
+from dqfd_bc_keras.tuning.objective import score
+from dqfd_bc_keras.tuning.space import read_space, study_space
+
+LAB = "dqfd_bc_keras.experiments"
+
+
+def tune(tmp_path, *args, name="quick", trials=3):
+    """`tune --task cartpole --trials N --quick` on a SQLite file of the test's, in this process."""
+    storage = f"sqlite:///{tmp_path / 'shared.db'}"
+    return call(
+        LAB, "tune", "--task", "cartpole", "--trials", trials, "--quick", "--workers", 1,
+        "--storage", storage, "--study-name", name, "--out", tmp_path / "study", *args,
+    )  # fmt: skip
+
+
+def trials_of(tmp_path, name="quick"):
+    return optuna.load_study(study_name=name, storage=f"sqlite:///{tmp_path / 'shared.db'}").get_trials()
+
+
+def drawn(path) -> bool:
+    """A PNG with something drawn on it: more than a few colours, not one flat fill."""
+    pixels = np.asarray(Image.open(path).convert("RGB"))
+    return pixels.shape[0] > 100 and len(np.unique(pixels.reshape(-1, 3), axis=0)) > 20
+
+
+# --- the metrics, by hand ---
+
+
+def test_each_metric_scores_a_curve_as_its_definition_says():
+    curve = [(0, -500.0), (1000, -200.0), (2000, -90.0), (3000, -80.0)]
+    # the area under the curve over the 4,000-step budget, the last value held from 3,000 to 4,000
+    area = (1000 * (-500 - 200) / 2 + 1000 * (-200 - 90) / 2 + 1000 * (-90 - 80) / 2 + 1000 * -80) / 4000
+    assert score("auc", curve, -70.0, 4000, 1000, None) == pytest.approx(area)
+    assert score("final", curve, -70.0, 4000, 1000, None) == -70.0
+    assert score("threshold", curve, -70.0, 4000, 1000, -100.0) == 2000.0
+    assert score("threshold", curve, -70.0, 4000, 1000, -50.0) == 5000.0  # never: the grid point after the budget
+    # while the run goes on: the area so far, the last return, the earliest it could still reach it
+    assert score("auc", curve[:2], None, 4000, 1000, None) == pytest.approx((-500 - 200) / 2)
+    assert score("final", curve[:2], None, 4000, 1000, None) == -200.0
+    assert score("threshold", curve[:2], None, 4000, 1000, -100.0) == 2000.0
+
+
+# --- the search space ---
+
+
+def test_every_method_searches_the_shared_fields_that_apply_and_its_own_reads():
+    for method in METHODS.values():
+        space = method_space(method)
+        own = set(space) - set(SHARED)
+        assert own <= set(method.reads), method.name
+    assert "lambda_expert" not in method_space(METHODS["none"]) and "priority_eps_demo" not in method_space(METHODS["sqil"])
+    assert {"sigma0_sq", "prior_scale", "bc_dropout", "temperature"} <= set(method_space(METHODS["bayes"]))
+    with pytest.raises(ConfigError, match="'margin', which is not among the fields it reads"):
+        Method("mine", "a method of a user's", space=(("margin", Span(0.1, 1.0)),))
+
+
+def test_a_space_file_ranges_fixes_and_drops_fields(tmp_path):
+    path = tmp_path / "space.json"
+    path.write_text(json.dumps({"learning_rate": {"low": 1e-4, "high": 1e-2, "log": True}, "n_step": 3, "margin": None, "hidden": {"choices": [[32], [64, 64]]}}))
+    dimensions, fixed, dropped = read_space(path)
+    assert dimensions == {"learning_rate": Span(1e-4, 1e-2, True), "hidden": Choice(((32,), (64, 64)))}
+    assert (fixed, dropped) == ({"n_step": 3}, {"margin"})
+    space, fixed = study_space("margin", {"total_steps": 600}, path)
+    assert "margin" not in space and "n_step" not in space and space["learning_rate"] == Span(1e-4, 1e-2, True)
+    assert fixed == {"total_steps": 600, "n_step": 3}
+
+
+# --- the command ---
+
+
+def test_a_quick_study_runs_end_to_end_and_a_second_invocation_continues_it(tmp_path):
+    done = tune(tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("\ntrial ") + done.stdout.startswith("trial ") == 3, done.stdout
+    first = trials_of(tmp_path)
+    assert [t.state.name for t in first] == ["COMPLETE"] * 3  # the median pruner waits for 5 trials
+    out = tmp_path / "study"
+    best = json.loads((out / "best.json").read_text())
+    top = max(first, key=lambda t: t.value)
+    assert (best["trial"], best["value"], best["params"]) == (top.number, top.value, top.user_attrs["params"])
+    assert best["study"] == "quick" and best["storage"] == f"sqlite:///{tmp_path / 'shared.db'}"
+    for trial in first:  # each trial an ordinary, complete run directory, its value the metric of its run
+        record = json.loads((out / "trials" / f"trial-{trial.number:04d}" / "trial.json").read_text())
+        run = out / "trials" / f"trial-{trial.number:04d}" / f"seed{TUNE_SEED}"
+        assert record["state"] == "COMPLETE" and record["value"] == trial.value
+        assert (run / "complete.json").is_file() and json.loads((run / "config.json").read_text())["seed"] == TUNE_SEED
+        assert {k: json.loads((run / "config.json").read_text())[k] for k in record["params"]} == {
+            k: list(v) if isinstance(v, tuple) else v for k, v in record["params"].items()
+        }
+    for figure in ("history.png", "importances.png", "parallel.png"):
+        assert drawn(out / "figures" / figure), figure
+
+    again = tune(tmp_path, trials=4)
+    assert again.returncode == 0, again.stderr
+    second = trials_of(tmp_path)
+    assert len(second) == 4 and [t.params for t in second[:3]] == [t.params for t in first]
+    assert "4 complete" in again.stdout
+    # the same study for the same question; for another task, refused in one line
+    refused = tune(tmp_path, "--steps", 700)
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1
+    assert "study 'quick' in sqlite:///" in refused.stderr and "tunes something else" in refused.stderr
+    assert len(trials_of(tmp_path)) == 4
+
+
+def test_train_takes_the_best_params_and_a_later_set_wins(tmp_path):
+    best = tmp_path / "best.json"
+    best.write_text(json.dumps({"params": {"learning_rate": 0.0005, "n_step": 3, "hidden": [32, 32]}, "tunes": {"task": "cartpole"}}))
+    done = call("train.py", "--quick", "--quiet", "--params", best, "--set", "n_step=4", "--out", tmp_path / "run")
+    assert done.returncode == 0, done.stderr
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert (config["learning_rate"], config["n_step"], config["hidden"]) == (0.0005, 4, [32, 32])
+    best.write_text(json.dumps({"params": {"learning_rat": 0.1}}))
+    assert_refused(
+        call("train.py", "--quick", "--params", best, "--out", tmp_path / "other"),
+        f"error: {best}: unknown Config field 'learning_rat'; did you mean learning_rate?",
+    )
+    assert not (tmp_path / "other").exists()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("--storage", "nosuchdb://x"), "error: --storage nosuchdb://x: "),
+        (("--storage", "study.txt"), "error: --storage study.txt: expected a database URL"),
+        (("--set", "lerning_rate=0.1"), "unknown Config field 'lerning_rate'; did you mean learning_rate?"),
+        (("--metric", "threshold", "--env", "Acrobot-v1"), "Acrobot-v1 sets no solved return: --metric threshold needs --threshold R"),
+    ],
+)
+def test_a_bad_storage_or_field_is_one_line_and_exit_2(tmp_path, args, message):
+    done = call(LAB, "tune", "--quick", "--out", tmp_path / "study", *args)
+    assert done.returncode == 2 and done.stdout == "" and done.stderr.count("\n") == 1, done.stderr
+    assert message is None or message in done.stderr
+
+
+def test_a_misspelt_field_of_the_space_file_gets_a_suggestion(tmp_path):
+    space = tmp_path / "space.json"
+    space.write_text(json.dumps({"sigma0sq": {"low": 0.1, "high": 1.0}}))
+    done = call(LAB, "tune", "--quick", "--space", space, "--out", tmp_path / "study")
+    assert_refused(done, f"error: --space {space}: unknown Config field 'sigma0sq'; did you mean sigma0_sq?")
+    space.write_text(json.dumps({"learning_rate": {"low": -1.0, "high": 1.0}}))
+    done = call(LAB, "tune", "--quick", "--space", space, "--out", tmp_path / "study")
+    assert done.returncode == 2 and "the space's learning_rate=-1.0: learning_rate" in done.stderr
+
+
+def test_a_pruned_trial_says_so_in_its_run_directory(tmp_path):
+    from dqfd_bc_keras.tuning import study as studies
+    from dqfd_bc_keras.tuning.objective import Objective
+
+    class Always(optuna.pruners.BasePruner):
+        def prune(self, study, trial):
+            return len(trial.intermediate_values) >= 2
+
+    settings = studies.TuneSettings(out=tmp_path, quick=True, workers=1)
+    space, fixed = study_space("bayes", settings.run_fields(), None)
+    study = optuna.create_study(pruner=Always(), direction="maximize")
+    study.optimize(Objective(settings, space, fixed, "test"), n_trials=1)
+    [trial] = study.trials
+    assert trial.state.name == "PRUNED" and sorted(trial.intermediate_values) == [0, 1]
+    pruned = json.loads((tmp_path / "trials" / "trial-0000" / f"seed{TUNE_SEED}" / "pruned.json").read_text())
+    assert pruned["step"] == 1 and pruned["value"] == trial.intermediate_values[1]
+    assert json.loads((tmp_path / "trials" / "trial-0000" / "trial.json").read_text())["state"] == "PRUNED"
+    assert not (tmp_path / "trials" / "trial-0000" / f"seed{TUNE_SEED}" / "complete.json").exists()
+
+
+# --- processes: workers sharing a study, Ctrl-C ---
+
+
+def start(tmp_path, *args, trials=4, workers=1):
+    return subprocess.Popen(
+        [sys.executable, "-m", LAB, "tune", "--task", "cartpole", "--quick", "--trials", str(trials),
+         "--workers", str(workers), "--storage", f"sqlite:///{tmp_path / 'shared.db'}", "--study-name", "shared",
+         "--out", str(tmp_path / "study"), *args],
+        cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_two_commands_and_a_pool_of_workers_share_one_study(tmp_path):
+    pool, single = start(tmp_path, workers=2, trials=5), start(tmp_path, trials=5)
+    for process in (pool, single):
+        _, err = process.communicate(timeout=600)
+        assert process.returncode == 0, err
+    trials = trials_of(tmp_path, "shared")
+    assert 5 <= len(trials) <= 5 + 2  # a worker that checks the count as another starts may add one
+    assert {t.state.name for t in trials} == {"COMPLETE"}
+    numbers = sorted(t.number for t in trials)
+    assert numbers == list(range(len(trials)))
+    # each trial ran once: one directory and one run each, its value the one the storage holds
+    for trial in trials:
+        record = json.loads((tmp_path / "study" / "trials" / f"trial-{trial.number:04d}" / "trial.json").read_text())
+        assert record["value"] == trial.value
+    db = sqlite3.connect(tmp_path / "shared.db")
+    assert db.execute("select count(*) from trials where state = 'RUNNING'").fetchone() == (0,)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("workers", [1, 2])
+def test_ctrl_c_in_a_trial_marks_it_failed_and_exits_130_within_seconds(tmp_path, workers):
+    process = start(tmp_path, "--set", "total_steps=20000", "--set", "checkpoint_every=300", workers=workers)
+    deadline = time.time() + 240
+    while time.time() < deadline and process.poll() is None:
+        latest = list((tmp_path / "study" / "trials").glob("trial-*/seed*/checkpoints/latest.json"))
+        if len(latest) >= workers and all(p.read_text().strip() and "ckpt-0" not in p.read_text() for p in latest):
+            break
+        time.sleep(0.1)
+    sent = time.time()
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=120)
+    seconds = time.time() - sent
+    assert process.returncode == 130, err
+    assert seconds < 30, seconds
+    assert err.strip().splitlines()[-1].startswith("interrupted (Ctrl-C)")
+    trials = trials_of(tmp_path, "shared")
+    assert [t.state.name for t in trials] == ["FAIL"] * workers  # never left RUNNING
+    for trial in trials:
+        directory = tmp_path / "study" / "trials" / f"trial-{trial.number:04d}"
+        assert (directory / f"seed{TUNE_SEED}" / "checkpoints" / "latest.json").is_file()  # resumable
+    # the same command goes on: the failed trials stay, new ones are run
+    again = start(tmp_path, trials=1 + workers)
+    _, err = again.communicate(timeout=600)
+    assert again.returncode == 0, err
+    assert [t.state.name for t in trials_of(tmp_path, "shared")].count("COMPLETE") >= 1
+
+
+@pytest.mark.slow
+def test_tune_and_the_params_it_finds_from_a_python_script(tmp_path):
+    script = tmp_path / "mine.py"
+    script.write_text(
+        "import dqfd_bc_keras\n"
+        "from dqfd_bc_keras import DQfD\n"
+        "from dqfd_bc_keras.core.params import read_params\n"
+        "from dqfd_bc_keras.tuning import tune\n"
+        "dqfd_bc_keras.configure()\n"
+        f"found = tune('cartpole', out={str(tmp_path / 'study')!r}, trials=2, quick=True, workers=1, sampler='random')\n"
+        "params = read_params(found.best_file, 'cartpole')\n"
+        "assert params == found.params, (params, found.params)\n"
+        "model = DQfD('cartpole', total_steps=300, pretrain_steps=10, bc_epochs=1, demo_episodes=1, **params)\n"
+        "assert all(getattr(model.config, k) == (tuple(v) if isinstance(v, list) else v) for k, v in params.items())\n"
+        "print(len(found.study.trials), found.trial)\n"
+    )
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split()[0] == "2"
