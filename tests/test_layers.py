@@ -25,6 +25,7 @@ LAYERS = [
     ("runs", ["runs"]),
     ("interfaces", ["model", "arguments", "commands", "__init__"]),
     ("lab", ["experiments"]),
+    ("tuning", ["tuning"]),
 ]
 """Lowest first; each entry names the top-level modules and folders of `dqfd_bc_keras/` in it. Above
 them all, outside the package, `studies/`: it may import any layer, and no layer may import it."""

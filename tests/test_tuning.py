@@ -68,7 +68,9 @@ def test_every_method_searches_the_shared_fields_that_apply_and_its_own_reads():
         space = method_space(method)
         own = set(space) - set(SHARED)
         assert own <= set(method.reads), method.name
-    assert "lambda_expert" not in method_space(METHODS["none"]) and "priority_eps_demo" not in method_space(METHODS["sqil"])
+    assert "lambda_expert" not in method_space(METHODS["none"]) and "priority_eps_demo" not in method_space(
+        METHODS["sqil"]
+    )
     assert {"sigma0_sq", "prior_scale", "bc_dropout", "temperature"} <= set(method_space(METHODS["bayes"]))
     with pytest.raises(ConfigError, match="'margin', which is not among the fields it reads"):
         Method("mine", "a method of a user's", space=(("margin", Span(0.1, 1.0)),))
@@ -76,7 +78,16 @@ def test_every_method_searches_the_shared_fields_that_apply_and_its_own_reads():
 
 def test_a_space_file_ranges_fixes_and_drops_fields(tmp_path):
     path = tmp_path / "space.json"
-    path.write_text(json.dumps({"learning_rate": {"low": 1e-4, "high": 1e-2, "log": True}, "n_step": 3, "margin": None, "hidden": {"choices": [[32], [64, 64]]}}))
+    path.write_text(
+        json.dumps(
+            {
+                "learning_rate": {"low": 1e-4, "high": 1e-2, "log": True},
+                "n_step": 3,
+                "margin": None,
+                "hidden": {"choices": [[32], [64, 64]]},
+            }
+        )
+    )
     dimensions, fixed, dropped = read_space(path)
     assert dimensions == {"learning_rate": Span(1e-4, 1e-2, True), "hidden": Choice(((32,), (64, 64)))}
     assert (fixed, dropped) == ({"n_step": 3}, {"margin"})
@@ -124,7 +135,11 @@ def test_a_quick_study_runs_end_to_end_and_a_second_invocation_continues_it(tmp_
 
 def test_train_takes_the_best_params_and_a_later_set_wins(tmp_path):
     best = tmp_path / "best.json"
-    best.write_text(json.dumps({"params": {"learning_rate": 0.0005, "n_step": 3, "hidden": [32, 32]}, "tunes": {"task": "cartpole"}}))
+    best.write_text(
+        json.dumps(
+            {"params": {"learning_rate": 0.0005, "n_step": 3, "hidden": [32, 32]}, "tunes": {"task": "cartpole"}}
+        )
+    )
     done = call("train.py", "--quick", "--quiet", "--params", best, "--set", "n_step=4", "--out", tmp_path / "run")
     assert done.returncode == 0, done.stderr
     config = json.loads((tmp_path / "run" / "config.json").read_text())
@@ -143,7 +158,10 @@ def test_train_takes_the_best_params_and_a_later_set_wins(tmp_path):
         (("--storage", "nosuchdb://x"), "error: --storage nosuchdb://x: "),
         (("--storage", "study.txt"), "error: --storage study.txt: expected a database URL"),
         (("--set", "lerning_rate=0.1"), "unknown Config field 'lerning_rate'; did you mean learning_rate?"),
-        (("--metric", "threshold", "--env", "Acrobot-v1"), "Acrobot-v1 sets no solved return: --metric threshold needs --threshold R"),
+        (
+            ("--metric", "threshold", "--env", "Acrobot-v1"),
+            "Acrobot-v1 sets no solved return: --metric threshold needs --threshold R",
+        ),
     ],
 )
 def test_a_bad_storage_or_field_is_one_line_and_exit_2(tmp_path, args, message):
@@ -252,13 +270,41 @@ def test_tune_and_the_params_it_finds_from_a_python_script(tmp_path):
         "from dqfd_bc_keras.core.params import read_params\n"
         "from dqfd_bc_keras.tuning import tune\n"
         "dqfd_bc_keras.configure()\n"
-        f"found = tune('cartpole', out={str(tmp_path / 'study')!r}, trials=2, quick=True, workers=1, sampler='random')\n"
+        f"found = tune('cartpole', out={str(tmp_path / 'study')!r}, trials=2, quick=True, workers=1,\n"
+        "             sampler='random')\n"
         "params = read_params(found.best_file, 'cartpole')\n"
         "assert params == found.params, (params, found.params)\n"
         "model = DQfD('cartpole', total_steps=300, pretrain_steps=10, bc_epochs=1, demo_episodes=1, **params)\n"
         "assert all(getattr(model.config, k) == (tuple(v) if isinstance(v, list) else v) for k, v in params.items())\n"
         "print(len(found.study.trials), found.trial)\n"
     )
-    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=600
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.split()[0] == "2"
+
+
+@pytest.mark.slow
+def test_the_fresh_seed_check_runs_both_arms_and_reports_the_rule(tmp_path):
+    best = tmp_path / "best.json"
+    tunes = {"task": "cartpole", "demos": None, "expert_loss": "bayes", "metric": "threshold", "threshold": 475.0}
+    found = {"params": {"n_step": 3}, "value": 1.0, "trial": 0, "study": "s", "storage": "x", "metric": "threshold"}
+    best.write_text(json.dumps({**found, "tunes": {**tunes, "seeds": [TUNE_SEED], "fixed": {"total_steps": 600}}}))
+    done = subprocess.run(
+        [sys.executable, "-m", "studies.tuned", str(best), "--quick", "--out", str(tmp_path / "runs"),
+         "--report", str(tmp_path / "TUNED.md")],
+        cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir() if p.is_dir()) == [
+        "cartpole-bootstrap-bayes-defaults",
+        "cartpole-bootstrap-bayes-tuned",
+    ]
+    tuned = json.loads((tmp_path / "runs" / "cartpole-bootstrap-bayes-tuned" / "seed1" / "config.json").read_text())
+    defaults = json.loads(
+        (tmp_path / "runs" / "cartpole-bootstrap-bayes-defaults" / "seed1" / "config.json").read_text()
+    )
+    assert (tuned["n_step"], defaults["n_step"], tuned["seed"]) == (3, 10, 1)  # fresh seeds, never the tuning ones
+    text = (tmp_path / "TUNED.md").read_text()
+    assert "| defaults | 2 |" in text and "| tuned | 2 |" in text and "Mann–Whitney p =" in text

@@ -340,4 +340,3 @@ def unknown_field(key: str) -> str:
     near = difflib.get_close_matches(key, [f.name for f in dataclasses.fields(Config)], n=1)
     hint = f"did you mean {near[0]}?" if near else "Config's fields are listed in dqfd_bc_keras/core/config.py"
     return f"unknown Config field {key!r}; {hint}"
-

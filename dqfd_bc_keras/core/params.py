@@ -27,7 +27,9 @@ def read_params(path: str | os.PathLike, task: str | None = None) -> dict[str, A
         raise ConfigError(f"{path}: not a JSON params file ({str(error).splitlines()[0]})") from None
     params = data.get("params", data) if isinstance(data, dict) else data
     if not isinstance(params, dict):
-        raise ConfigError(f"{path}: expected a JSON object of Config fields (or best.json's \"params\"), got {params!r:.80}")
+        raise ConfigError(
+            f'{path}: expected a JSON object of Config fields (or best.json\'s "params"), got {params!r:.80}'
+        )
     for key in params:
         if key == "task":
             raise ConfigError(f"{path}: the task is not a param; it is chosen with --task or --env")

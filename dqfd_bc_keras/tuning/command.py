@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int
 from dqfd_bc_keras.experiments.names import BACKENDS
 from dqfd_bc_keras.seeds import TUNE_SEED
+from dqfd_bc_keras.tuning.space import params_text
+
+if TYPE_CHECKING:
+    from dqfd_bc_keras.tuning import Tuned
 
 SAMPLERS = ("tpe", "random", "cmaes")
 PRUNERS = ("median", "hyperband", "none")
@@ -22,7 +27,10 @@ def tune_arguments(parser: ArgumentParser) -> None:
     parser.add_argument("--expert-loss", default="bayes", metavar="METHOD", help="the method tuned (default: bayes)")
     parser.add_argument("--out", required=True, help="study directory: study.db, trials/, best.json, figures/")
     parser.add_argument(
-        "--trials", type=positive_int, default=20, help="trials the study holds when done, those of earlier runs counted (default 20)"
+        "--trials",
+        type=positive_int,
+        default=20,
+        help="trials the study holds when done, those of earlier runs counted (default 20)",
     )
     parser.add_argument("--study-name", help="default: TASK-METHOD-METRIC")
     parser.add_argument(
@@ -45,7 +53,9 @@ def tune_arguments(parser: ArgumentParser) -> None:
         help="auc: mean return under the evaluation curve (default); final: the final evaluation's return; "
         "threshold: interactions until an evaluation reaches --threshold (minimised)",
     )
-    parser.add_argument("--threshold", type=float, help="the threshold metric's return (default: the task's solved return)")
+    parser.add_argument(
+        "--threshold", type=float, help="the threshold metric's return (default: the task's solved return)"
+    )
     parser.add_argument("--sampler", choices=SAMPLERS, default="tpe", help="default: tpe")
     parser.add_argument(
         "--pruner", choices=PRUNERS, default="median", help="stops a trial early on its evaluations (default: median)"
@@ -55,7 +65,11 @@ def tune_arguments(parser: ArgumentParser) -> None:
     parser.add_argument("--address", help="Ray cluster to join (ray backend); default: a local Ray instance")
     parser.add_argument("--space", help="a JSON file over the method's search space (docs/TUNING.md)")
     parser.add_argument(
-        "--set", action="append", default=[], metavar="KEY=VALUE", help="a Config field every trial keeps (out of the search)"
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a Config field every trial keeps (out of the search)",
     )
     parser.add_argument("--quick", action="store_true", help="train.py --quick's budget for every run (tests)")
 
@@ -94,7 +108,7 @@ def tune_command(args: argparse.Namespace, parser: ArgumentParser) -> int:
     return 0
 
 
-def summary(found) -> str:
+def summary(found: Tuned) -> str:
     """The study's last lines: its trials by state, the best one and where best.json is."""
     from collections import Counter
 
@@ -102,8 +116,9 @@ def summary(found) -> str:
     counts = ", ".join(f"{n} {state}" for state, n in sorted(states.items()))
     if found.params is None:
         return f"study {found.study.study_name}: {counts}; no trial is complete yet"
-    params = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in found.params.items())
+    assert found.best_file is not None and found.value is not None  # with the params
     return (
-        f"study {found.study.study_name}: {counts}; best {found.value:.6g} (trial {found.trial}): {params}\n"
-        f"wrote {found.best_file} (train.py --params {found.best_file}) and figures in {found.best_file.parent / 'figures'}"
+        f"study {found.study.study_name}: {counts}; best {found.value:.6g} (trial {found.trial}): "
+        f"{params_text(found.params)}\nwrote {found.best_file} (train.py --params {found.best_file}) and "
+        f"figures in {found.best_file.parent / 'figures'}"
     )

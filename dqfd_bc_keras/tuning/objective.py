@@ -25,7 +25,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -43,8 +43,7 @@ Curve = list[tuple[int, float]]
 
 @dataclass(frozen=True)
 class Metric:
-    direction: str
-    """maximize or minimize."""
+    direction: Literal["maximize", "minimize"]
     doc: str
 
 

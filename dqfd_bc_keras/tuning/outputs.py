@@ -60,7 +60,7 @@ def _most_important(study: optuna.Study) -> list[str] | None:
 def write_outputs(study: optuna.Study, settings: TuneSettings) -> list[Path]:
     """best.json and the figures under `settings.out` (atomically); the files written. A figure
     Optuna cannot draw yet (importances need two complete trials whose params differ) is skipped."""
-    written = []
+    written: list[Path] = []
     found = best(study, settings)
     if found is None:
         return written

@@ -72,9 +72,7 @@ def _dimension(where: str, entry: dict) -> Dimension:
     )
 
 
-def study_space(
-    expert_loss: str, fixed: dict[str, Any], space_file: str | Path | None
-) -> tuple[Space, dict[str, Any]]:
+def study_space(expert_loss: str, fixed: dict[str, Any], space_file: str | Path | None) -> tuple[Space, dict[str, Any]]:
     """The space a study searches and the fields it fixes: the method's space less the fields
     `fixed` (the command's `--set` and flags) names, then `space_file`'s entries over it."""
     space = {name: dimension for name, dimension in method_space(get_method(expert_loss)).items() if name not in fixed}
@@ -129,3 +127,8 @@ def suggest(trial: optuna.Trial, space: Space) -> dict[str, Any]:
 def as_json(space: Space) -> dict[str, dict]:
     """The space as `--space` writes it (a study records the space it searched)."""
     return {field: dimension.as_json() for field, dimension in space.items()}
+
+
+def params_text(params: dict[str, Any]) -> str:
+    """Params on one line, floats to 4 significant digits: `learning_rate=0.001126, n_step=2`."""
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in params.items())

@@ -140,8 +140,10 @@ def open_storage(url: str) -> optuna.storages.BaseStorage:
         )
     try:
         if "://" not in url:
+            from optuna.storages.journal import JournalFileBackend
+
             Path(url).parent.mkdir(parents=True, exist_ok=True)
-            return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(url))
+            return optuna.storages.JournalStorage(JournalFileBackend(url))
         if url.startswith("sqlite:///"):
             Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
         engine = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
@@ -189,7 +191,10 @@ class Prepared:
         config = Config.for_task(s.task, **self.fixed)
         steps = s.seeds * (config.total_steps // config.eval_every + 1)
         return optuna.load_study(
-            study_name=s.name, storage=open_storage(s.storage_url), sampler=sampler(s.sampler), pruner=pruner(s.pruner, steps)
+            study_name=s.name,
+            storage=open_storage(s.storage_url),
+            sampler=sampler(s.sampler),
+            pruner=pruner(s.pruner, steps),
         )
 
 
@@ -212,7 +217,11 @@ def prepare(settings: TuneSettings) -> Prepared:
     if recorded is None:
         study.set_user_attr("tunes", identity)
     elif recorded != _as_stored(identity):
-        differ = [f"{k}: the study's {recorded.get(k)!r}, asked {v!r}" for k, v in _as_stored(identity).items() if recorded.get(k) != v]
+        differ = [
+            f"{k}: the study's {recorded.get(k)!r}, asked {v!r}"
+            for k, v in _as_stored(identity).items()
+            if recorded.get(k) != v
+        ]
         raise ConfigError(
             f"study {settings.name!r} in {settings.storage_url} tunes something else ({'; '.join(differ)}): "
             "choose another --study-name, or ask what it tunes"

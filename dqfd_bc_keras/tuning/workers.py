@@ -19,6 +19,7 @@ from dqfd_bc_keras.commands.cli import EXIT_USAGE, Terminated
 from dqfd_bc_keras.errors import ConfigError, DqfdError
 from dqfd_bc_keras.experiments.sweep import STOP_GRACE, ray_session
 from dqfd_bc_keras.tuning.objective import Objective
+from dqfd_bc_keras.tuning.space import params_text
 from dqfd_bc_keras.tuning.study import FAILURES_IN_A_ROW, Prepared, open_storage
 
 if TYPE_CHECKING:
@@ -53,7 +54,7 @@ def progress_line(study: optuna.Study, trial: optuna.trial.FrozenTrial, seconds:
     from optuna.trial import TrialState
 
     took = f", {seconds:.0f} s" if seconds is not None else ""
-    params = ", ".join(f"{k}={_short(v)}" for k, v in trial.user_attrs.get("params", trial.params).items())
+    params = params_text(trial.user_attrs.get("params", trial.params))
     if trial.state == TrialState.COMPLETE:
         best = study.best_trial
         what = f"{trial.value:.6g} (best {best.value:.6g}, trial {best.number})"
@@ -63,10 +64,6 @@ def progress_line(study: optuna.Study, trial: optuna.trial.FrozenTrial, seconds:
     else:
         what = f"failed: {trial.user_attrs.get('error', 'see above')}"
     return f"trial {trial.number}: {what}{took}; {params}"
-
-
-def _short(value: object) -> str:
-    return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
 def _say(line: str) -> None:
