@@ -159,9 +159,10 @@ def test_train_takes_the_best_params_and_a_later_set_wins(tmp_path):
         (("--storage", "study.txt"), "error: --storage study.txt: expected a database URL"),
         (("--set", "lerning_rate=0.1"), "unknown Config field 'lerning_rate'; did you mean learning_rate?"),
         (
-            ("--metric", "threshold", "--env", "Acrobot-v1"),
-            "Acrobot-v1 sets no solved return: --metric threshold needs --threshold R",
+            ("--metric", "threshold", "--env", "CliffWalking-v1"),
+            "CliffWalking-v1 sets no solved return: --metric threshold needs --threshold R",
         ),
+        (("--env", "Acrobot-v1"), "Acrobot-v1 has no scripted imperfect expert"),
     ],
 )
 def test_a_bad_storage_or_field_is_one_line_and_exit_2(tmp_path, args, message):
@@ -308,3 +309,26 @@ def test_the_fresh_seed_check_runs_both_arms_and_reports_the_rule(tmp_path):
     assert (tuned["n_step"], defaults["n_step"], tuned["seed"]) == (3, 10, 1)  # fresh seeds, never the tuning ones
     text = (tmp_path / "TUNED.md").read_text()
     assert "| defaults | 2 |" in text and "| tuned | 2 |" in text and "Mann–Whitney p =" in text
+
+
+@pytest.mark.slow
+def test_a_third_party_env_from_pypi_is_tuned_with_a_rule_of_the_users(tmp_path):
+    pytest.importorskip("flappy_bird_gymnasium")  # requirements-extras.txt, which the test command installs
+    (tmp_path / "my_rules.py").write_text("def flap(obs):\n    return int(obs[9] > obs[2] - 0.1)\n")
+    done = call(
+        LAB, "tune", "--env", "flappy_bird_gymnasium:FlappyBird-v0", "--env-kwargs", "use_lidar=false",
+        "--max-steps", 1000, "--expert", "my_rules:flap", "--metric", "final", "--trials", 2, "--quick",
+        "--set", "total_steps=200", "--set", "eval_every=200", "--workers", 1, "--out", tmp_path / "study",
+        cwd=tmp_path, path=[tmp_path],
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    for run in sorted((tmp_path / "study" / "trials").glob("trial-*/seed*")):
+        config = json.loads((run / "config.json").read_text())
+        assert (config["env_kwargs"], config["expert"], config["max_steps"]) == (
+            {"use_lidar": False},
+            "my_rules:flap",
+            1000,
+        )
+        assert (run / "complete.json").is_file()
+    best = json.loads((tmp_path / "study" / "best.json").read_text())
+    assert best["tunes"]["task"] == "flappy_bird_gymnasium:FlappyBird-v0" and best["metric"] == "final"

@@ -16,11 +16,13 @@ A trial's value is the mean over its seeds. Its intermediate value at evaluation
 k·evaluations-per-run + j) is that mean over the seeds done and seed k's value as it stands then:
 the return at j (`final`), the area so far (`auc`), or the interactions it has reached the threshold
 at, else the earliest it still could (`threshold`). Every trial runs the same seeds, so the pruner
-compares like with like.
+compares like with like. A run has budget/E + 1 steps; the evaluations past them (dynamic
+demonstrations' roll-outs count interactions beyond the env-step budget) are scored, not reported.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from dataclasses import dataclass, field
@@ -109,6 +111,8 @@ class Objective:
             raise optuna.TrialPruned() from None
         except BaseException as error:
             record.update(state="FAIL", error=f"{type(error).__name__}: {error}".rstrip(": "))
+            with contextlib.suppress(Exception):  # the storage may be what failed
+                trial.set_user_attr("error", record["error"])
             raise
         finally:
             self.seconds[trial.number] = record["seconds"] = round(time.perf_counter() - started, 1)
@@ -136,6 +140,8 @@ class Objective:
             if not isinstance(row, EvalRow):
                 return
             curve.append((row.interactions, row.mean_return))
+            if len(curve) > per_run:  # past the budget's grid (roll-outs' interactions): the next seed's steps
+                return
             value = float(np.mean([*done, score(s.metric, curve, None, budget, period, s.threshold)]))
             step = k * per_run + len(curve) - 1
             trial.report(value, step)

@@ -208,7 +208,8 @@ def prepare(settings: TuneSettings) -> Prepared:
     check_space(settings.task, space, {**fixed, "expert_loss": settings.expert_loss, **_demonstrator(settings.demos)})
     if not space:
         raise ConfigError("the search space is empty: every field is fixed")
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    _check_runs(settings, fixed)
+    optuna.logging.set_verbosity(optuna.logging.ERROR)  # a line of ours per trial says what Optuna would
     storage = open_storage(settings.storage_url)
     identity = settings.identity(fixed)
     direction = METRICS[settings.metric].direction
@@ -228,6 +229,18 @@ def prepare(settings: TuneSettings) -> Prepared:
         )
     study.set_user_attr("space", as_json(space))
     return Prepared(settings, space, fixed, uuid.uuid4().hex[:12])
+
+
+def _check_runs(settings: TuneSettings, fixed: dict[str, Any]) -> None:
+    """What every trial makes, made once and dropped before any trial: a `DQfD` of the study's fixed
+    settings (its env, its demonstrator answering, its demonstrations read). A study whose every
+    trial would fail the same way is refused here, in one line."""
+    import keras
+
+    from dqfd_bc_keras.model import DQfD
+
+    DQfD(settings.task, settings.demos, expert_loss=settings.expert_loss, seed=TUNE_SEED, **fixed)
+    keras.backend.clear_session()
 
 
 def _demonstrator(demos: str | None) -> dict[str, str]:

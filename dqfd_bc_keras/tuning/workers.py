@@ -33,7 +33,7 @@ def take_trials(prepared: Prepared) -> None:
     import optuna
     from optuna.trial import TrialState
 
-    optuna.logging.set_verbosity(optuna.logging.WARNING)  # a line of ours per trial instead of Optuna's
+    optuna.logging.set_verbosity(optuna.logging.ERROR)  # a line of ours per trial instead of Optuna's
     study = prepared.study()
     objective = Objective(prepared.settings, prepared.space, prepared.fixed, prepared.runner)
     failures: list[str] = []
@@ -62,7 +62,7 @@ def progress_line(study: optuna.Study, trial: optuna.trial.FrozenTrial, seconds:
         pruned_at = max(trial.intermediate_values, default=None)
         what = f"pruned at step {pruned_at}" if pruned_at is not None else "pruned"
     else:
-        what = f"failed: {trial.user_attrs.get('error', 'see above')}"
+        what = f"failed: {trial.user_attrs.get('error', 'stopped before it ran')}"
     return f"trial {trial.number}: {what}{took}; {params}"
 
 
