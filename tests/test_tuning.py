@@ -18,7 +18,7 @@ from dqfd_bc_keras.core.methods import METHODS, Method
 from dqfd_bc_keras.core.search_space import SHARED, Choice, Span, method_space
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.seeds import TUNE_SEED
-from dqfd_bc_keras.tuning.objective import score
+from dqfd_bc_keras.tuning.objective import intermediate, score
 from dqfd_bc_keras.tuning.space import read_space, study_space
 
 LAB = "dqfd_bc_keras.experiments"
@@ -54,10 +54,17 @@ def test_each_metric_scores_a_curve_as_its_definition_says():
     assert score("final", curve, -70.0, 4000, 1000, None) == -70.0
     assert score("threshold", curve, -70.0, 4000, 1000, -100.0) == 2000.0
     assert score("threshold", curve, -70.0, 4000, 1000, -50.0) == 5000.0  # never: the grid point after the budget
-    # while the run goes on: the area so far, the last return, the earliest it could still reach it
+    # while the run goes on: the area so far, the last return, the step it reached it at or "never"
     assert score("auc", curve[:2], None, 4000, 1000, None) == pytest.approx((-500 - 200) / 2)
     assert score("final", curve[:2], None, 4000, 1000, None) == -200.0
-    assert score("threshold", curve[:2], None, 4000, 1000, -100.0) == 2000.0
+    assert score("threshold", curve[:2], None, 4000, 1000, -100.0) == 5000.0
+    assert score("threshold", curve[:3], None, 4000, 1000, -100.0) == 2000.0
+
+
+def test_a_trials_intermediate_value_counts_the_seeds_not_yet_run_as_never_for_the_threshold():
+    # seed 0 done at 2,000, seed 1 running and not there yet, seed 2 to come; never = 5,000
+    assert intermediate("threshold", [2000.0], 5000.0, 1, 5000.0) == pytest.approx((2000 + 5000 + 5000) / 3)
+    assert intermediate("auc", [-100.0], -300.0, 1, 5000.0) == -200.0  # the seeds run so far only
 
 
 # --- the search space ---
@@ -130,6 +137,7 @@ def test_a_quick_study_runs_end_to_end_and_a_second_invocation_continues_it(tmp_
     refused = tune(tmp_path, "--steps", 700)
     assert refused.returncode == 2 and refused.stderr.count("\n") == 1
     assert "study 'quick' in sqlite:///" in refused.stderr and "tunes something else" in refused.stderr
+    assert "(fixed total_steps: the study's 600, asked 700)" in refused.stderr
     assert len(trials_of(tmp_path)) == 4
 
 
@@ -236,7 +244,8 @@ def test_two_commands_and_a_pool_of_workers_share_one_study(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_ctrl_c_in_a_trial_marks_it_failed_and_exits_130_within_seconds(tmp_path, workers):
-    process = start(tmp_path, "--set", "total_steps=20000", "--set", "checkpoint_every=300", workers=workers)
+    budget = ("--set", "total_steps=3000", "--set", "checkpoint_every=300")
+    process = start(tmp_path, *budget, workers=workers)
     deadline = time.time() + 240
     while time.time() < deadline and process.poll() is None:
         latest = list((tmp_path / "study" / "trials").glob("trial-*/seed*/checkpoints/latest.json"))
@@ -256,7 +265,7 @@ def test_ctrl_c_in_a_trial_marks_it_failed_and_exits_130_within_seconds(tmp_path
         directory = tmp_path / "study" / "trials" / f"trial-{trial.number:04d}"
         assert (directory / f"seed{TUNE_SEED}" / "checkpoints" / "latest.json").is_file()  # resumable
     # the same command goes on: the failed trials stay, new ones are run
-    again = start(tmp_path, trials=1 + workers)
+    again = start(tmp_path, *budget, trials=1 + workers)
     _, err = again.communicate(timeout=600)
     assert again.returncode == 0, err
     assert [t.state.name for t in trials_of(tmp_path, "shared")].count("COMPLETE") >= 1

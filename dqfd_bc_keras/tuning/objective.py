@@ -14,10 +14,12 @@ The metrics are the lab's measures on a run's evaluation curve (the greedy evalu
 
 A trial's value is the mean over its seeds. Its intermediate value at evaluation j of seed k (step
 k·evaluations-per-run + j) is that mean over the seeds done and seed k's value as it stands then:
-the return at j (`final`), the area so far (`auc`), or the interactions it has reached the threshold
-at, else the earliest it still could (`threshold`). Every trial runs the same seeds, so the pruner
-compares like with like. A run has budget/E + 1 steps; the evaluations past them (dynamic
-demonstrations' roll-outs count interactions beyond the env-step budget) are scored, not reported.
+the return at j (`final`), the area so far (`auc`), or the interactions it reached the threshold at,
+else the budget plus a period, as if it never will, the seeds not yet run counted so too
+(`threshold`: the value falls as runs reach it, since a pruner judges a trial by its best value so
+far). Every trial runs the same seeds, so the pruner compares like with like. A run has budget/E + 1
+steps; the evaluations past them (dynamic demonstrations' roll-outs count interactions beyond the
+env-step budget) are scored, not reported.
 """
 
 from __future__ import annotations
@@ -69,9 +71,16 @@ def score(metric: str, curve: Curve, final: float | None, budget: int, period: i
         return float(np.sum((steps[1:] - steps[:-1]) * (means[1:] + means[:-1]) / 2) / end)
     assert threshold is not None  # the study refuses the metric without one
     reached = next((step for step, mean in curve if mean >= threshold), None)
-    if reached is not None:
-        return float(reached)
-    return float(budget + period if final is not None else curve[-1][0] + period)
+    return float(budget + period if reached is None else reached)
+
+
+def intermediate(metric: str, done: list[float], current: float, remaining: int, never: float) -> float:
+    """A trial's value as it stands: the mean over its seeds done and the running one's `current`
+    value; for `threshold`, with the `remaining` seeds not yet run counted as `never` reaching it,
+    so the value is the trial's if nothing more reaches the threshold, and it only falls as runs go
+    on (the pruners judge a trial by its best value so far)."""
+    values = [*done, current, *([never] * remaining if metric == "threshold" else [])]
+    return float(np.mean(values))
 
 
 class Pruned(Exception):
@@ -142,7 +151,8 @@ class Objective:
             curve.append((row.interactions, row.mean_return))
             if len(curve) > per_run:  # past the budget's grid (roll-outs' interactions): the next seed's steps
                 return
-            value = float(np.mean([*done, score(s.metric, curve, None, budget, period, s.threshold)]))
+            current = score(s.metric, curve, None, budget, period, s.threshold)
+            value = intermediate(s.metric, done, current, s.seeds - k - 1, budget + period)
             step = k * per_run + len(curve) - 1
             trial.report(value, step)
             if trial.should_prune():

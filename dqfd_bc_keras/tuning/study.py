@@ -13,6 +13,7 @@ running, and its run directories keep their last checkpoints.
 from __future__ import annotations
 
 import json
+import time
 import uuid
 import warnings
 from dataclasses import dataclass, field
@@ -138,20 +139,32 @@ def open_storage(url: str) -> optuna.storages.BaseStorage:
             f"--storage {url}: expected a database URL (sqlite:///study.db, postgresql://…) or a journal "
             "file's path ending in .log"
         )
-    try:
-        if "://" not in url:
-            from optuna.storages.journal import JournalFileBackend
+    if "://" not in url:
+        from optuna.storages.journal import JournalFileBackend
 
-            Path(url).parent.mkdir(parents=True, exist_ok=True)
-            return optuna.storages.JournalStorage(JournalFileBackend(url))
-        if url.startswith("sqlite:///"):
-            Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
-        engine = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)  # the heartbeat, Optuna's since 2.9
-            return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=30, grace_period=120)
-    except Exception as error:  # sqlalchemy's and the drivers' errors have no common base a user would know
-        raise ConfigError(f"--storage {url}: {one_line(error)}") from None
+        Path(url).parent.mkdir(parents=True, exist_ok=True)
+        return optuna.storages.JournalStorage(JournalFileBackend(url))
+    if url.startswith("sqlite:///"):
+        Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+    engine = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
+    attempt = 1
+    while True:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter(
+                    "ignore", optuna.exceptions.ExperimentalWarning
+                )  # the heartbeat, since Optuna 2.9
+                return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=30, grace_period=120)
+        except Exception as error:  # sqlalchemy's and the drivers' errors have no common base a user would know
+            if type(error).__name__ != "IntegrityError" or attempt == CREATE_ATTEMPTS:
+                raise ConfigError(f"--storage {url}: {one_line(error)}") from None
+        time.sleep(0.5 * attempt)  # another process made the tables first: they are there now
+        attempt += 1
+
+
+CREATE_ATTEMPTS = 5
+"""Processes that open a new database at once race to create Optuna's tables; the losers (an
+IntegrityError) open it again once the winner has."""
 
 
 def sampler(name: str) -> optuna.samplers.BaseSampler:
@@ -218,11 +231,7 @@ def prepare(settings: TuneSettings) -> Prepared:
     if recorded is None:
         study.set_user_attr("tunes", identity)
     elif recorded != _as_stored(identity):
-        differ = [
-            f"{k}: the study's {recorded.get(k)!r}, asked {v!r}"
-            for k, v in _as_stored(identity).items()
-            if recorded.get(k) != v
-        ]
+        differ = _differences(recorded, _as_stored(identity))
         raise ConfigError(
             f"study {settings.name!r} in {settings.storage_url} tunes something else ({'; '.join(differ)}): "
             "choose another --study-name, or ask what it tunes"
@@ -250,6 +259,18 @@ def _demonstrator(demos: str | None) -> dict[str, str]:
     if demos is None:
         return {}
     return {"expert": f"{GIVEN}{demos}" if demos.endswith(".npz") or demos.startswith("minari:") else demos}
+
+
+def _differences(theirs: dict[str, Any], ours: dict[str, Any], prefix: str = "") -> list[str]:
+    """What a study tunes against what a command asks, key by key (into the fixed fields)."""
+    said = []
+    for key in sorted(set(theirs) | set(ours)):
+        a, b = theirs.get(key), ours.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            said += _differences(a, b, f"{prefix}{key} ")
+        elif a != b:
+            said.append(f"{prefix}{key}: the study's {a!r}, asked {b!r}")
+    return said
 
 
 def _as_stored(value: Any) -> Any:
