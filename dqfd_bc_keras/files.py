@@ -12,14 +12,16 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import json
 import os
 import re
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
-from dqfd_bc_keras.errors import DirectoryInUseError, OutputExistsError, RunDirectoryError
+from dqfd_bc_keras.errors import ConfigError, DirectoryInUseError, OutputExistsError, RunDirectoryError
 
 
 def _sync(path: Path) -> None:
@@ -255,3 +257,14 @@ def _same_file(fd: int, path: Path) -> bool:
         return os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
     except FileNotFoundError:
         return False
+
+
+def read_json(path: str | os.PathLike, what: str) -> Any:
+    """The JSON value a user's file holds; a file missing, unreadable or not JSON is a one-line
+    ConfigError naming it as `what` (`--space FILE.json`, `params file`)."""
+    try:
+        return json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such {what}") from None
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise ConfigError(f"{path}: not a JSON {what} ({str(error).splitlines()[0]})") from None

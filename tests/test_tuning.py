@@ -139,6 +139,11 @@ def test_a_quick_study_runs_end_to_end_and_a_second_invocation_continues_it(tmp_
     assert "study 'quick' in sqlite:///" in refused.stderr and "tunes something else" in refused.stderr
     assert "(fixed total_steps: the study's 600, asked 700)" in refused.stderr
     assert len(trials_of(tmp_path)) == 4
+    other = tune(tmp_path, name="other")  # its trials would be named as this one's
+    assert_refused(
+        other, f"error: {tmp_path / 'study'} holds the trials of study 'quick' (storage "
+        f"sqlite:///{tmp_path / 'shared.db'}); give this study its own --out",
+    )  # fmt: skip
 
 
 def test_train_takes_the_best_params_and_a_later_set_wins(tmp_path):
@@ -341,3 +346,18 @@ def test_a_third_party_env_from_pypi_is_tuned_with_a_rule_of_the_users(tmp_path)
         assert (run / "complete.json").is_file()
     best = json.loads((tmp_path / "study" / "best.json").read_text())
     assert best["tunes"]["task"] == "flappy_bird_gymnasium:FlappyBird-v0" and best["metric"] == "final"
+
+
+@pytest.mark.slow
+def test_ray_workers_take_the_trials_of_one_study(tmp_path):
+    pytest.importorskip("ray")  # requirements-ray.txt, which the test command installs
+    done = subprocess.run(
+        [sys.executable, "-m", LAB, "tune", "--task", "cartpole", "--quick", "--trials", "3", "--workers", "2",
+         "--backend", "ray", "--out", str(tmp_path / "study")],
+        cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    study = optuna.load_study(study_name="cartpole-bayes-auc", storage=f"sqlite:///{tmp_path / 'study' / 'study.db'}")
+    assert len(study.trials) in (3, 4) and {t.state.name for t in study.trials} == {"COMPLETE"}
+    assert {t.user_attrs["runner"] for t in study.trials} == {study.trials[0].user_attrs["runner"]}
+    assert (tmp_path / "study" / "best.json").is_file() and "best" in done.stdout

@@ -3,14 +3,13 @@ user wrote, as `train.py --params FILE` and `DQfD(task, **read_params(FILE))` ta
 
 from __future__ import annotations
 
-import json
 import os
 import warnings
-from pathlib import Path
 from typing import Any
 
 from dqfd_bc_keras.core.config import Config, unknown_field
 from dqfd_bc_keras.errors import ConfigError, DqfdWarning
+from dqfd_bc_keras.files import read_json
 
 
 def read_params(path: str | os.PathLike, task: str | None = None) -> dict[str, Any]:
@@ -19,12 +18,7 @@ def read_params(path: str | os.PathLike, task: str | None = None) -> dict[str, A
     one's name; the task is not a param); the values are checked with the rest of the Config they
     go into. `train.py --params FILE` and `DQfD(task, **read_params(FILE))` read it; given the
     `task` they go to, a best.json tuned on another task says so (a warning: params may transfer)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such params file") from None
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise ConfigError(f"{path}: not a JSON params file ({str(error).splitlines()[0]})") from None
+    data = read_json(path, "params file")
     params = data.get("params", data) if isinstance(data, dict) else data
     if not isinstance(params, dict):
         raise ConfigError(

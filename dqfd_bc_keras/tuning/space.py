@@ -18,6 +18,7 @@ from dqfd_bc_keras.core.config import Config, unknown_field
 from dqfd_bc_keras.core.methods import get_method
 from dqfd_bc_keras.core.search_space import Choice, Dimension, Space, Span, method_space
 from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.files import read_json
 
 if TYPE_CHECKING:
     import optuna
@@ -26,12 +27,7 @@ if TYPE_CHECKING:
 def read_space(path: str | Path) -> tuple[Space, dict[str, Any], set[str]]:
     """`--space FILE.json` as (dimensions, fixed values, fields taken out), each field checked as
     `--set` checks a key (a misspelt one gets the nearest field's name)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"--space {path}: no such file") from None
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise ConfigError(f"--space {path}: not a JSON file ({str(error).splitlines()[0]})") from None
+    data = read_json(path, "space file")
     if not isinstance(data, dict):
         raise ConfigError(f"--space {path}: expected a JSON object of fields, got {data!r:.80}")
     dimensions: Space = {}

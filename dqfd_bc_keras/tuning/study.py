@@ -24,6 +24,7 @@ from dqfd_bc_keras.core.config import QUICK, Config
 from dqfd_bc_keras.envs.make import get_task, task_slug
 from dqfd_bc_keras.errors import ConfigError, one_line
 from dqfd_bc_keras.experiments.names import BACKENDS
+from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import TUNE_SEED
 from dqfd_bc_keras.tuning.command import PRUNERS, SAMPLERS
 from dqfd_bc_keras.tuning.objective import METRICS
@@ -222,6 +223,7 @@ def prepare(settings: TuneSettings) -> Prepared:
     if not space:
         raise ConfigError("the search space is empty: every field is fixed")
     _check_runs(settings, fixed)
+    _claim_out(settings)
     optuna.logging.set_verbosity(optuna.logging.ERROR)  # a line of ours per trial says what Optuna would
     storage = open_storage(settings.storage_url)
     identity = settings.identity(fixed)
@@ -238,6 +240,30 @@ def prepare(settings: TuneSettings) -> Prepared:
         )
     study.set_user_attr("space", as_json(space))
     return Prepared(settings, space, fixed, uuid.uuid4().hex[:12])
+
+
+STUDY_FILE = "study.json"
+"""In `--out`: the study whose trials the directory holds (its name, and its storage as given)."""
+
+
+def _claim_out(settings: TuneSettings) -> None:
+    """`--out` holds one study's trials (their directories are named by trial number): a command
+    for another study there is refused; the first one records itself."""
+    mine = {"study": settings.name, "storage": settings.storage}
+    marker = settings.out / STUDY_FILE
+    if marker.is_file():
+        try:
+            theirs = json.loads(marker.read_text())
+        except (OSError, UnicodeDecodeError, ValueError) as error:
+            raise ConfigError(f"{marker}: not a study file ({one_line(error)}); is {settings.out} a study's?") from None
+        if theirs != mine:
+            raise ConfigError(
+                f"{settings.out} holds the trials of study {theirs.get('study')!r} (storage "
+                f"{theirs.get('storage') or 'its study.db'}); give this study its own --out"
+            )
+        return
+    settings.out.mkdir(parents=True, exist_ok=True)
+    write_text(marker, json.dumps(mine) + "\n")
 
 
 def _check_runs(settings: TuneSettings, fixed: dict[str, Any]) -> None:
