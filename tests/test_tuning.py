@@ -361,3 +361,21 @@ def test_ray_workers_take_the_trials_of_one_study(tmp_path):
     assert len(study.trials) in (3, 4) and {t.state.name for t in study.trials} == {"COMPLETE"}
     assert {t.user_attrs["runner"] for t in study.trials} == {study.trials[0].user_attrs["runner"]}
     assert (tmp_path / "study" / "best.json").is_file() and "best" in done.stdout
+
+
+def test_the_committed_example_regenerates_from_its_data():
+    """docs/TUNING.md's fresh-seed table and verdict, as studies.tuned computes them from the committed runs."""
+    from studies.tuned import report
+
+    text = report(REPO / "docs" / "data" / "tuning-acrobot-best.json", REPO / "docs" / "data" / "tuned-acrobot.tar.xz")
+    table = [line for line in text.splitlines() if line.startswith(("| ", "Tuned against", "Defaults ÷"))]
+    assert len(table) == 6
+    doc = (REPO / "docs" / "TUNING.md").read_text().splitlines()
+    assert [line for line in table if line not in doc] == []
+    best = json.loads((REPO / "docs" / "data" / "tuning-acrobot-best.json").read_text())
+    study = optuna.load_study(
+        study_name=best["study"], storage=f"sqlite:///{REPO / 'docs' / 'data' / 'tuning-acrobot.db'}"
+    )
+    states = [t.state.name for t in study.trials]
+    assert (len(states), states.count("COMPLETE"), states.count("PRUNED")) == (50, 31, 19)
+    assert (study.best_trial.number, study.best_value) == (best["trial"], best["value"])

@@ -238,7 +238,8 @@ def prepare(settings: TuneSettings) -> Prepared:
             f"study {settings.name!r} in {settings.storage_url} tunes something else ({'; '.join(differ)}): "
             "choose another --study-name, or ask what it tunes"
         )
-    study.set_user_attr("space", as_json(space))
+    if study.user_attrs.get("space") != _as_stored(as_json(space)):  # a study read again is left as it was
+        study.set_user_attr("space", as_json(space))
     return Prepared(settings, space, fixed, uuid.uuid4().hex[:12])
 
 
