@@ -55,6 +55,7 @@ def test_importers_reads_the_import_tree():
         (("train.py", "--help"), "--expert-loss METHOD"),
         ((*LAB, "--help"), "efficiency"),
         ((*LAB, "run", "--help"), "--backend {local,ray}"),
+        ((*LAB, "tune", "--help"), "--pruner {median,hyperband,none}"),
     ],
 )
 def test_help_answers_before_tensorflow_is_imported(args, expected):

@@ -9,14 +9,12 @@ from typing import TYPE_CHECKING
 from dqfd_bc_keras.commands.cli import ArgumentParser, add_task_arguments, chosen_task, env_settings, positive_int
 from dqfd_bc_keras.experiments.names import BACKENDS
 from dqfd_bc_keras.seeds import TUNE_SEED
+from dqfd_bc_keras.tuning.objective import METRICS
 from dqfd_bc_keras.tuning.space import params_text
+from dqfd_bc_keras.tuning.study import PRUNERS, SAMPLERS
 
 if TYPE_CHECKING:
     from dqfd_bc_keras.tuning import Tuned
-
-SAMPLERS = ("tpe", "random", "cmaes")
-PRUNERS = ("median", "hyperband", "none")
-METRIC_NAMES = ("auc", "final", "threshold")
 
 
 def tune_arguments(parser: ArgumentParser) -> None:
@@ -48,7 +46,7 @@ def tune_arguments(parser: ArgumentParser) -> None:
     parser.add_argument("--steps", type=positive_int, help="each run's env-step budget (default: the task's)")
     parser.add_argument(
         "--metric",
-        choices=METRIC_NAMES,
+        choices=tuple(METRICS),
         default="auc",
         help="auc: mean return under the evaluation curve (default); final: the final evaluation's return; "
         "threshold: interactions until an evaluation reaches --threshold (minimised)",

@@ -26,13 +26,14 @@ from dqfd_bc_keras.errors import ConfigError, one_line
 from dqfd_bc_keras.experiments.names import BACKENDS
 from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import TUNE_SEED
-from dqfd_bc_keras.tuning.command import PRUNERS, SAMPLERS
 from dqfd_bc_keras.tuning.objective import METRICS
 from dqfd_bc_keras.tuning.space import as_json, check_space, study_space
 
 if TYPE_CHECKING:
     import optuna
 
+SAMPLERS = ("tpe", "random", "cmaes")
+PRUNERS = ("median", "hyperband", "none")
 FAILURES_IN_A_ROW = 3
 """Trials failed one after the other before a worker gives up: a failure that is not the params'
 (a missing file, a broken env) fails every trial alike."""
