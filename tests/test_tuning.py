@@ -297,7 +297,9 @@ def test_tune_and_the_params_it_finds_from_a_python_script(tmp_path):
         [sys.executable, str(script)], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=600
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split()[0] == "2"
+    lines = done.stdout.splitlines()
+    assert [line.split(":")[0] for line in lines[:2]] == ["trial 0", "trial 1"]  # a line per trial, as the CLI's
+    assert lines[-1].split()[0] == "2"
 
 
 @pytest.mark.slow
