@@ -24,7 +24,7 @@ from dqfd_bc_keras.core.config import QUICK, Config
 from dqfd_bc_keras.envs.make import get_task, task_slug
 from dqfd_bc_keras.errors import ConfigError, one_line
 from dqfd_bc_keras.experiments.names import BACKENDS
-from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.files import read_json, write_text
 from dqfd_bc_keras.seeds import TUNE_SEED
 from dqfd_bc_keras.tuning.objective import METRICS
 from dqfd_bc_keras.tuning.space import as_json, check_space, study_space
@@ -158,12 +158,18 @@ def open_storage(url: str) -> optuna.storages.BaseStorage:
                 )  # the heartbeat, since Optuna 2.9
                 return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=30, grace_period=120)
         except Exception as error:  # sqlalchemy's and the drivers' errors have no common base a user would know
+            if isinstance(error, ImportError):  # the URL's driver, which no requirement installs
+                raise ConfigError(f"--storage {url}: {one_line(error)} ({DRIVERS})") from None
             if type(error).__name__ != "IntegrityError" or attempt == CREATE_ATTEMPTS:
                 raise ConfigError(f"--storage {url}: {one_line(error)}") from None
         time.sleep(0.5 * attempt)  # another process made the tables first: they are there now
         attempt += 1
 
 
+DRIVERS = (
+    "a server's URL needs its driver: pip install 'psycopg[binary]' for postgresql://, psycopg2-binary for "
+    "postgresql+psycopg2://, PyMySQL for mysql+pymysql://"
+)
 CREATE_ATTEMPTS = 5
 """Processes that open a new database at once race to create Optuna's tables; the losers (an
 IntegrityError) open it again once the winner has."""
@@ -224,7 +230,7 @@ def prepare(settings: TuneSettings) -> Prepared:
     if not space:
         raise ConfigError("the search space is empty: every field is fixed")
     _check_runs(settings, fixed)
-    _claim_out(settings)
+    claimed = _check_out(settings)
     optuna.logging.set_verbosity(optuna.logging.ERROR)  # a line of ours per trial says what Optuna would
     storage = open_storage(settings.storage_url)
     identity = settings.identity(fixed)
@@ -239,6 +245,9 @@ def prepare(settings: TuneSettings) -> Prepared:
             f"study {settings.name!r} in {settings.storage_url} tunes something else ({'; '.join(differ)}): "
             "choose another --study-name, or ask what it tunes"
         )
+    if not claimed:  # once the study is there: a refused command leaves --out as it was
+        settings.out.mkdir(parents=True, exist_ok=True)
+        write_text(settings.out / STUDY_FILE, json.dumps(_out_record(settings)) + "\n")
     if study.user_attrs.get("space") != _as_stored(as_json(space)):  # a study read again is left as it was
         study.set_user_attr("space", as_json(space))
     return Prepared(settings, space, fixed, uuid.uuid4().hex[:12])
@@ -248,24 +257,27 @@ STUDY_FILE = "study.json"
 """In `--out`: the study whose trials the directory holds (its name, and its storage as given)."""
 
 
-def _claim_out(settings: TuneSettings) -> None:
+def _check_out(settings: TuneSettings) -> bool:
     """`--out` holds one study's trials (their directories are named by trial number): a command
-    for another study there is refused; the first one records itself."""
-    mine = {"study": settings.name, "storage": settings.storage}
+    for another study there is refused. True if `--out` holds this study's already."""
     marker = settings.out / STUDY_FILE
-    if marker.is_file():
-        try:
-            theirs = json.loads(marker.read_text())
-        except (OSError, UnicodeDecodeError, ValueError) as error:
-            raise ConfigError(f"{marker}: not a study file ({one_line(error)}); is {settings.out} a study's?") from None
-        if theirs != mine:
-            raise ConfigError(
-                f"{settings.out} holds the trials of study {theirs.get('study')!r} (storage "
-                f"{theirs.get('storage') or 'its study.db'}); give this study its own --out"
-            )
-        return
-    settings.out.mkdir(parents=True, exist_ok=True)
-    write_text(marker, json.dumps(mine) + "\n")
+    if not marker.is_file():
+        return False
+    try:
+        theirs = read_json(marker, "study file")
+    except ConfigError as error:
+        raise ConfigError(f"{error}; is {settings.out} a study's?") from None
+    if theirs != _out_record(settings):
+        raise ConfigError(
+            f"{settings.out} holds the trials of study {theirs.get('study')!r} (storage "
+            f"{theirs.get('storage') or 'its study.db'}); give this study its own --out"
+        )
+    return True
+
+
+def _out_record(settings: TuneSettings) -> dict[str, Any]:
+    """What --out/study.json says: the study's name and its storage as given (None: --out's study.db)."""
+    return {"study": settings.name, "storage": settings.storage}
 
 
 def _check_runs(settings: TuneSettings, fixed: dict[str, Any]) -> None:
