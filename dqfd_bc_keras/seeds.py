@@ -44,6 +44,6 @@ def episode_seed(seed: int, episode: int, stream: int = TRAIN) -> int:
 TUNE_SEED = 1_000_000
 """The first run seed of a hyperparameter search (`experiments tune --seeds K`: TUNE_SEED … TUNE_SEED
 + K − 1, the same K for every trial). Evaluations and studies use seeds from 0 up (the lab's arms
-0 … 49, `replicate`'s fresh ones a few hundred at most): what a search is tuned on is never what
+0 … 89 at most, `replicate`'s fresh ones a few hundred): what a search is tuned on is never what
 its result is judged on. Every seed a tuning run derives stays apart too (demonstrations from
 10⁹, evaluations from 10⁹ + 10⁴) and below MAX_SEED."""
