@@ -71,7 +71,7 @@ def demonstrator(demos: DemosLike, expert: object) -> DemosLike:
             f"DQfD(demos={_short(demos)}, expert={_short(expert)}): demos gives the demonstrations (or who "
             "records them) and expert would record them: give one"
         )
-    if isinstance(expert, demo_io.DemoDataset) or _is_demo_source(expert):
+    if isinstance(expert, demo_io.DemoDataset) or is_demo_source(expert):
         raise ConfigError(
             f"DQfD(expert={_short(expert)}): expert is who demonstrates ({DEMONSTRATORS}); "
             "demonstrations themselves are given as demos="
@@ -81,7 +81,7 @@ def demonstrator(demos: DemosLike, expert: object) -> DemosLike:
     return expert
 
 
-def _is_demo_source(demos: object) -> bool:
+def is_demo_source(demos: object) -> bool:
     """A .npz file or a Minari dataset's id: demonstrations to load, not a demonstrator."""
     return isinstance(demos, (str, Path)) and (str(demos).endswith(".npz") or str(demos).startswith("minari:"))
 
@@ -93,7 +93,7 @@ def demonstrations(
     config's `expert`), None where it gives nothing; `settings` make the task's preset."""
     if isinstance(demos, demo_io.DemoDataset):
         return demos, "python", None, demo_io.given_expert("a Python DemoDataset", demos)
-    if _is_demo_source(demos):
+    if is_demo_source(demos):
         preset = Config.for_task(task, **settings)
         dataset = demo_io.load_source(str(demos), task, preset.timeout, preset.env_kwargs, preset.demo_capacity)
         return dataset, demo_io.given_source(dataset), None, demo_io.given_expert(str(demos), dataset)

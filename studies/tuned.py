@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dqfd_bc_keras.arguments import is_demo_source
 from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
 from dqfd_bc_keras.core.config import QUICK, Config
 from dqfd_bc_keras.core.params import read_params
@@ -52,7 +53,7 @@ def arms(best: Path, seeds: int, quick: bool) -> list[Arm]:
     if not isinstance(tunes, dict) or "task" not in tunes:
         raise ConfigError(f'{best}: not a best.json of `experiments tune` (no "tunes" record of what it tuned)')
     demos = tunes.get("demos")
-    if demos is not None and (demos.endswith(".npz") or demos.startswith("minari:")):
+    if demos is not None and is_demo_source(demos):
         raise ConfigError(f"{best}: the study learnt from a dataset ({demos}); a sweep records its demonstrations")
     fixed = {**tunes["fixed"], **({"expert": demos} if demos else {}), **(QUICK if quick else {})}
     params = read_params(best, tunes["task"])

@@ -245,7 +245,8 @@ class Terminated(KeyboardInterrupt):
     its last checkpoint at any moment)."""
 
 
-def _terminate(signum: int, frame: object) -> None:
+def raise_terminated(signum: int, frame: object) -> None:
+    """The SIGTERM handler of every process of ours: SIGTERM stops it as Ctrl-C does."""
     raise Terminated
 
 
@@ -271,7 +272,7 @@ def run(
     failure a user can meet into one line on stderr: a user error or an OS error (full disk,
     read-only path, a directory where a file belongs) exits 2, Ctrl-C 130 and SIGTERM 143 (saying
     `interrupted`: what the interruption left)."""
-    signal.signal(signal.SIGTERM, _terminate)
+    signal.signal(signal.SIGTERM, raise_terminated)
     warnings.showwarning = _show_warning
     try:
         runtime.configure()

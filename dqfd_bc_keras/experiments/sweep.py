@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from dqfd_bc_keras import runtime
-from dqfd_bc_keras.commands.cli import Terminated
+from dqfd_bc_keras.commands.cli import Terminated, raise_terminated
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.data import SWEEP_LOG
@@ -75,12 +75,34 @@ class _Worker:
     def end_by(self, deadline: float) -> bool:
         """Wait for the process until `deadline` (`time.monotonic()`), then kill it; True if it
         had to be killed."""
-        self.process.join(max(0.0, deadline - time.monotonic()))
-        if not self.process.is_alive():
-            return False
-        self.process.kill()
-        self.process.join()
-        return True
+        return end_by(self.process, deadline)
+
+
+def end_by(process: BaseProcess, deadline: float) -> bool:
+    """Wait for `process` until `deadline` (`time.monotonic()`), then kill it; True if it had to be killed."""
+    process.join(max(0.0, deadline - time.monotonic()))
+    if not process.is_alive():
+        return False
+    process.kill()
+    process.join()
+    return True
+
+
+def stop_processes(processes: Sequence[BaseProcess]) -> list[bool]:
+    """SIGTERM each of `processes` (a run stops at its next safe point), wait for them all against
+    one deadline, `STOP_GRACE` from now, and kill those still running then; which were killed."""
+    for process in processes:
+        process.terminate()
+    deadline = time.monotonic() + STOP_GRACE
+    return [end_by(process, deadline) for process in processes]
+
+
+def as_worker() -> None:
+    """Set up a worker process: its TensorFlow as a command's (`runtime.configure`: one core, one
+    run per core); Ctrl-C is the parent's to relay, as SIGTERM, which stops the run as Ctrl-C would."""
+    runtime.configure()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, raise_terminated)
 
 
 def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WORKER) -> Iterator[Outcome]:
@@ -130,11 +152,8 @@ def _local(jobs: Sequence[Job], workers: int, runs_per_worker: int = RUNS_PER_WO
 def _stop_all(workers: list[_Worker]) -> None:
     """SIGTERM each running worker (its run stops at its next safe point), wait for them all
     against one deadline, `STOP_GRACE` from now, and kill those still running then."""
-    for worker in workers:
-        worker.process.terminate()
-    deadline = time.monotonic() + STOP_GRACE
-    for worker in workers:
-        if worker.end_by(deadline):
+    for worker, killed in zip(workers, stop_processes([w.process for w in workers]), strict=True):
+        if killed:
             assert worker.job is not None  # a running worker's
             print(
                 f"warning: {worker.job.directory}: the run had not stopped {STOP_GRACE:g} s after SIGTERM; "
@@ -149,9 +168,7 @@ def _serve(jobs, outcomes) -> None:
     already, and skipping the interpreter's teardown spares a stopping worker the seconds (and
     the hangs TensorFlow's teardown is known for) that it would add to the sweep's stop. Its
     TensorFlow runs as a command's does, on one core (`DQFD_TF_THREADS` or 1: one run per core)."""
-    runtime.configure()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _stop)
+    as_worker()
     try:
         while (job := jobs.recv()) is not None:
             outcomes.send(run_job(job))
@@ -160,10 +177,6 @@ def _serve(jobs, outcomes) -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)
-
-
-def _stop(signum: int, frame: object) -> None:
-    raise Terminated
 
 
 def _ray(jobs: Sequence[Job], workers: int, address: str | None, runs_per_worker: int) -> Iterator[Outcome]:

@@ -9,6 +9,7 @@ keeps its preset's default).
 
 from __future__ import annotations
 
+import functools
 import json
 import typing
 from pathlib import Path
@@ -97,6 +98,7 @@ def check_space(task: str, space: Space, fixed: dict[str, Any]) -> None:
                 raise ConfigError(f"the space's {field}={value!r}: {error}") from None
 
 
+@functools.cache
 def _is_int(field: str) -> bool:
     kind = typing.get_type_hints(Config)[field]
     return kind is int or kind == (int | None)

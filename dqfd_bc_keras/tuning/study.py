@@ -294,11 +294,12 @@ def _check_runs(settings: TuneSettings, fixed: dict[str, Any]) -> None:
 
 def _demonstrator(demos: str | None) -> dict[str, str]:
     """The `expert` field a run of `demos` gets: who demonstrates, or where given demonstrations came from."""
+    from dqfd_bc_keras.arguments import is_demo_source
     from dqfd_bc_keras.demos import GIVEN
 
     if demos is None:
         return {}
-    return {"expert": f"{GIVEN}{demos}" if demos.endswith(".npz") or demos.startswith("minari:") else demos}
+    return {"expert": f"{GIVEN}{demos}" if is_demo_source(demos) else demos}
 
 
 def _differences(theirs: dict[str, Any], ours: dict[str, Any], prefix: str = "") -> list[str]:

@@ -9,7 +9,6 @@ still running `STOP_GRACE` seconds later is killed, and its trial is marked fail
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import time
 from typing import TYPE_CHECKING
@@ -17,7 +16,7 @@ from typing import TYPE_CHECKING
 from dqfd_bc_keras import runtime
 from dqfd_bc_keras.commands.cli import EXIT_USAGE, Terminated
 from dqfd_bc_keras.errors import ConfigError, DqfdError
-from dqfd_bc_keras.experiments.sweep import STOP_GRACE, ray_session
+from dqfd_bc_keras.experiments.sweep import as_worker, ray_session, stop_processes
 from dqfd_bc_keras.tuning.objective import Objective
 from dqfd_bc_keras.tuning.space import params_text
 from dqfd_bc_keras.tuning.study import FAILURES_IN_A_ROW, Prepared, open_storage
@@ -95,14 +94,7 @@ def _local(prepared: Prepared) -> None:
         for process in processes:
             process.join()
     except BaseException:
-        for process in processes:
-            process.terminate()
-        deadline = time.monotonic() + STOP_GRACE
-        for process in processes:
-            process.join(max(0.0, deadline - time.monotonic()))
-            if process.is_alive():
-                process.kill()
-                process.join()
+        stop_processes(processes)  # a trial still running after the grace: failed by `fail_left_running`
         raise
     failed = [p.exitcode for p in processes if p.exitcode]
     if failed:
@@ -110,11 +102,8 @@ def _local(prepared: Prepared) -> None:
 
 
 def _worker(prepared: Prepared) -> None:
-    """A worker process: its TensorFlow on one core as a command's; Ctrl-C is the parent's to relay
-    (as SIGTERM, which stops the trial under way as Ctrl-C stops a run)."""
-    runtime.configure()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _stop)
+    """A worker process (`sweep.as_worker`: SIGTERM stops the trial under way as Ctrl-C stops a run)."""
+    as_worker()
     code = 0
     try:
         take_trials(prepared)
@@ -126,10 +115,6 @@ def _worker(prepared: Prepared) -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
-
-
-def _stop(signum: int, frame: object) -> None:
-    raise Terminated
 
 
 def _ray(prepared: Prepared) -> None:
@@ -159,6 +144,8 @@ def fail_left_running(prepared: Prepared) -> None:
     from optuna.trial import TrialState
 
     storage = open_storage(prepared.settings.storage_url)
-    for trial in prepared.study().get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+    for trial in storage.get_all_trials(
+        storage.get_study_id_from_name(prepared.settings.name), states=(TrialState.RUNNING,)
+    ):
         if trial.user_attrs.get("runner") == prepared.runner:
             storage.set_trial_state_values(trial._trial_id, TrialState.FAIL)  # as Optuna's own stale-trial check does
