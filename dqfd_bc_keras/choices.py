@@ -13,8 +13,11 @@ TARGETS = ("dqn", "double")
 """The bootstrap targets (`Config.target`, losses.bootstrap_value)."""
 TD_LOSSES = ("squared", "huber")
 """The per-sample TD losses (`Config.td_loss`, losses.td_loss)."""
-UNCERTAINTIES = ("mc_dropout", "ensemble", "distance")
-"""The estimators of σ²(s) (`Config.uncertainty`, uncertainty.py)."""
+ESTIMATORS = ("mc_dropout", "ensemble", "distance")
+"""The estimators of the BC model's epistemic variance v(s) (uncertainty.py), which the lab compares."""
+UNCERTAINTIES = (*ESTIMATORS, "local")
+"""What `Config.uncertainty` may name: an estimator, σ²(s) = σ0² + v(s); or `local`, the distance
+estimator's v(s) read as σ²(s) = σ0²/(1 − v(s)/v_max) (`bayes_local`, ALGORITHM.md §8)."""
 PRIOR_CENTERS = ("pretrained", "zero")
 """θ_prior of the Bayesian loss (`Config.prior_center`)."""
 DYNAMIC_MODES = ("episodes", "rollouts", "off")

@@ -70,7 +70,12 @@ def expert_loss_by_hand(loss, q, b, theta, prior, n) -> float | None:
         return np.mean(w * ((q + 0.8 * (np.arange(2) != a_e[:, None])).max(1) - q[rows, a_e]))
     if loss == "ce":
         return np.mean(w * -(pi * np.log(p_q)).sum(1))
-    if loss == "bayes":
+    if loss == "ce_decay":  # w_E = 0.3, as assert_assembles_the_total_loss sets it
+        return 0.3 * np.mean(w * -(pi * np.log(p_q)).sum(1))
+    if loss == "qfilter":
+        kept = q[rows, pi.argmax(1)] + 0.8 >= q.max(1)
+        return np.mean(w * kept * -(pi * np.log(p_q)).sum(1))
+    if loss in ("bayes", "bayes_local"):
         return np.mean(w * ((p_q - pi) ** 2).sum(1) / (2 * sigma_sq)) + sum(
             ((t - p) ** 2).sum() for t, p in zip(theta, prior, strict=True)
         ) / (2 * 1.0**2 * n)
@@ -84,6 +89,7 @@ def assert_assembles_the_total_loss(loss, target, demos, bc_models):
     (each term has its hand-worked test in test_losses.py)."""
     agent = agent_for(loss, demos, bc_models, target=target, lambda_n=0.5, lambda_expert=2.0, lambda_l2=1e-3)
     agent.pretrain(5, steps_per_call=5)  # some non-trivial weights; θ_prior captured
+    agent.expert_scale.assign(0.3)  # w_E, which only a method with a decay reads
     for w in agent.target_network.weights:  # a target network different from the online one
         w.assign(w * 0.9)
     b = batch_of(agent)

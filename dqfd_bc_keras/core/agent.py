@@ -29,6 +29,9 @@ from dqfd_bc_keras.errors import ConfigError
 if TYPE_CHECKING:
     from dqfd_bc_keras.demos.dataset import DemoDataset
 
+WEIGHED_ROWS = 4096
+"""The most rows of D_demo, and of D_replay, whose imitation weights are averaged after each episode."""
+
 
 class MeanVector(keras.metrics.Metric):
     """Running means of named scalars in two variables: one update is two ops, where a
@@ -72,6 +75,7 @@ class DQfDAgent(keras.Model):
         self.config = config
         self.method = config.method
         self.expert_term = self.method.expert_term()
+        self.imitation_weight = self.method.weight_term()
         self.net_input = as_input(net_input)
         self.obs_dim, self.n_actions = self.net_input.dim, int(n_actions)
         self.q_network = build_q_network(self.net_input, n_actions, config.hidden, obs_scale)
@@ -89,6 +93,9 @@ class DQfDAgent(keras.Model):
             tf.Variable(tf.zeros_like(w), trainable=False, name="prior") for w in self.q_network.trainable_weights
         ]
         self.train_steps = tf.Variable(0, dtype=tf.int64, trainable=False, name="train_steps")
+        self.expert_scale = tf.Variable(1.0, trainable=False, name="expert_scale")
+        """w_E of a method with a `decay` (methods.py), set after each episode from the run's
+        returns (`expert_terms.next_expert_scale`; TrainingState keeps it); 1 for the others."""
         self.loss_means = MeanVector(LOSS_TERMS, name="losses")
         self.expert_view = tf.function(
             self.expert_targets,
@@ -155,25 +162,32 @@ class DQfDAgent(keras.Model):
         return self.bc_model.predictive(obs)
 
     def imitation_weights(self) -> tuple[float | None, float | None]:
-        """The weight 1/(2σ²) of the Bayesian likelihood (losses.bayes_likelihood_loss) averaged over
-        D_demo's rows and over D_replay's, with σ² as the rows hold it for the loss: how much more
-        the loss imitates on demonstrated states than on the agent's own (rows not settled yet, NaN,
-        left out). None for a method that reads no σ², and for an empty replay."""
-        if "sigma0_sq" not in self.method.reads:
+        """The imitation weight J_E puts on a row (`Method.weight`: 1/(2σ²) for the Bayesian
+        likelihood, the Q-filter's 0 or 1, w_E) averaged over D_demo's rows and over D_replay's, as
+        the rows hold them for the loss: how much more the loss imitates on demonstrated states than
+        on the agent's own (rows not settled yet, NaN, left out). A region of more than
+        `WEIGHED_ROWS` rows is read at that many evenly spaced rows. None for a method without a
+        weight, and for an empty replay."""
+        if self.imitation_weight is None:
             return None, None
         (on_demos, n_demos), (on_agents, n_agents) = self._mean_imitation_weights()
         return (float(on_demos) if n_demos else None), (float(on_agents) if n_agents else None)
 
     @tf.function(input_signature=[], autograph=False)
     def _mean_imitation_weights(self) -> tuple[tuple[tf.Tensor, tf.Tensor], tuple[tf.Tensor, tf.Tensor]]:
-        """(mean 1/(2σ²), rows counted) over D_demo and over D_replay, in one graph call: it comes
+        """(mean weight, rows counted) over D_demo and over D_replay, in one graph call: it comes
         after every episode, and MinAtar's first episodes last a dozen steps."""
-        r = self.replay
+        r, imitation_weight = self.replay, self.imitation_weight
+        assert imitation_weight is not None, "imitation_weights() asks only a method with a weight"
 
         def mean_weight(start: tf.Tensor, size: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
-            sigma_sq = r.table[start : start + size, r.SIGMA_SQ]
-            sigma_sq = tf.boolean_mask(sigma_sq, tf.logical_not(tf.math.is_nan(sigma_sq)))
-            return tf.reduce_mean(0.5 / sigma_sq), tf.size(sigma_sq)
+            count, size = tf.cast(tf.minimum(size, WEIGHED_ROWS), tf.int64), tf.cast(size, tf.int64)
+            spaced = tf.range(count) * size // tf.maximum(count, 1)
+            batch = r.rows_as_batch(start + tf.cast(spaced, tf.int32))
+            settled = tf.logical_not(tf.math.is_nan(batch.sigma_sq))
+            weight = imitation_weight(self, self.q_network(batch.obs), batch)
+            weight = tf.boolean_mask(weight, settled)
+            return tf.reduce_mean(weight), tf.size(weight)
 
         return mean_weight(tf.constant(0), r.demo_size), mean_weight(tf.constant(r.demo_capacity), r.agent_size)
 

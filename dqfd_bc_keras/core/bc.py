@@ -90,7 +90,7 @@ class BCModel(keras.Model):
                 name="nearest_demo_variance",
                 length=None if self.net_input.image else 1.0,
             )
-            if estimator.uncertainty == "distance"
+            if estimator.nearest_demo
             else None
         )
         # N of the prior's 1/N scaling: the size of the dataset being fitted (set by `fit_demos`).
@@ -212,20 +212,23 @@ class BCModel(keras.Model):
         return {m.name: m.result() for m in self.metrics}
 
     def predictive(self, obs: tf.Tensor) -> tuple[tf.Tensor, tf.Tensor]:
-        """(π̄_bc (B, A), σ² (B,)), σ² = σ0² + the estimator's epistemic variance, in one graph:
+        """(π̄_bc (B, A), σ² (B,)), σ² from σ0² and the estimator's epistemic variance v
+        (`VarianceEstimator.sigma_sq`: σ0² + v but for `local`), in one graph:
 
         mc_dropout  the mean and variance of K dropout passes;
         ensemble    the mean and variance of the K members;
-        distance    one deterministic pass, and the nearest-demonstration variance.
+        distance    one deterministic pass, and the nearest-demonstration variance;
+        local       the same pass and variance, σ² = σ0²/(1 − v/v_max).
         Without dropout (the MLE model) every MC pass is the same: π̄_bc = π_bc and σ² = σ0²; so
         it is with `mc_dropout=False`.
         """
         sigma0_sq, passes = self.estimator.sigma0_sq, self.estimator.mc_passes
         if self.ensemble:
             probs = tf.nn.softmax(self.member_logits(obs))
-            return tf.reduce_mean(probs, axis=0), sigma0_sq + policy_variance(probs)
+            return tf.reduce_mean(probs, axis=0), self.estimator.sigma_sq(policy_variance(probs), self.n_actions)
         if self.distance is not None:
-            return tf.nn.softmax(self(obs)), sigma0_sq + self.distance(self.distance_view(obs))
+            variance = self.distance(self.distance_view(obs))
+            return tf.nn.softmax(self(obs)), self.estimator.sigma_sq(variance, self.n_actions)
         if self.network.dropout == 0.0 or not self.estimator.mc_dropout:
             probs = tf.nn.softmax(self(obs, training=False))
             return probs, tf.fill(tf.shape(probs)[:1], tf.constant(sigma0_sq, probs.dtype))
@@ -233,7 +236,7 @@ class BCModel(keras.Model):
         # The body has no dropout: its features are computed once and the K passes share them.
         logits = self.head_logits(tf.tile(self.features(obs), [passes, 1]), training=True)
         probs = tf.reshape(tf.nn.softmax(logits), [passes, batch, self.n_actions])
-        return tf.reduce_mean(probs, axis=0), sigma0_sq + policy_variance(probs)
+        return tf.reduce_mean(probs, axis=0), self.estimator.sigma_sq(policy_variance(probs), self.n_actions)
 
     def fit_demos(
         self, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int = 64, seed: int = 0

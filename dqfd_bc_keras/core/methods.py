@@ -60,6 +60,8 @@ BAYES_FIELDS = (
     "ensemble_members",
 )
 """Config fields of the Bayesian expert loss and its MAP BC model (§3)."""
+LOCAL_FIELDS = tuple(f for f in BAYES_FIELDS if f not in ("mc_passes", "mc_dropout", "uncertainty", "ensemble_members"))
+"""What `bayes_local` reads of them: its estimator is fixed (`local`), one pass, no MC dropout."""
 
 
 class TermAgent(Protocol):
@@ -81,6 +83,10 @@ class TermAgent(Protocol):
     @property
     def demo_size(self) -> int | tf.Tensor | tf.Variable:
         """N = |D_demo|, the demonstrated transitions (the prior's 1/N)."""
+
+    @property
+    def expert_scale(self) -> float | tf.Tensor | tf.Variable:
+        """w_E, the teacher-relative weight of a method with a `decay` (1 for the others)."""
 
 
 class TermBatch(Protocol):
@@ -143,12 +149,24 @@ class Method:
     half from each replay, uniformly (Reddy et al. 2020)."""
     q_learning: bool = True
     """False for behavioural cloning alone: π_bc is the policy and no Q-network is trained."""
+    weight: Term | str | None = None
+    """The imitation weight J_E puts on each row, term(agent, q, batch) → (B,) (or "module:function"):
+    what a run logs as `imitation_weight_demo` and `imitation_weight_agent`, averaged over D_demo's
+    rows and D_replay's. None: J_E weighs every row alike, and nothing is logged."""
+    uncertainty: str | None = None
+    """The σ² estimator the method always uses (`choices.UNCERTAINTIES`); None: `Config.uncertainty`."""
+    decay: float | None = None
+    """ρ of a teacher-relative expert weight w_E (`expert_terms.next_expert_scale`): after each
+    episode w_E ← ρ·w_E while the agent's last W returns average at least the teacher's, and
+    w_E ← min(1, w_E/ρ) while they do not. None: no such weight (w_E = 1)."""
 
     def __post_init__(self) -> None:
         if self.bc_fit not in BC_FITS:
             raise ConfigError(f"method {self.name!r}: bc_fit={self.bc_fit!r} is not one of {BC_FITS}")
         if self.reference is not None and self.term is None:
             raise ConfigError(f"method {self.name!r}: a reference without a term (J_E = 0) checks nothing")
+        if self.decay is not None and not 0.0 < self.decay < 1.0:
+            raise ConfigError(f"method {self.name!r}: decay={self.decay!r} must lie in (0, 1)")
         check_own(self.name, self.space, self.reads)
 
     @property
@@ -163,6 +181,10 @@ class Method:
         """The callable reference formula of J_E (a "module:function" imported now)."""
         return self._imported(self.reference, "reference")
 
+    def weight_term(self) -> Term | None:
+        """The callable per-row imitation weight (a "module:function" imported now)."""
+        return self._imported(self.weight, "weight")
+
     def _imported(self, term: Term | str | None, field: str) -> Term | None:
         if not isinstance(term, str):
             return term
@@ -175,6 +197,12 @@ _BC_SPACE: tuple[tuple[str, Dimension], ...] = (
     ("dynamic_demos", Choice(DYNAMIC_MODES)),
 )
 """What every method with a BC model varies of it: its fit, and how D_demo grows (§5)."""
+_BAYES_SPACE: tuple[tuple[str, Dimension], ...] = (
+    ("sigma0_sq", Span(0.05, 5.0, log=True)),
+    ("prior_scale", Span(0.1, 10.0, log=True)),
+    ("bc_dropout", Span(0.05, 0.5)),
+)
+"""What the Bayesian methods vary of the likelihood, the prior and the MAP BC model."""
 _TERMS = "dqfd_bc_keras.core.expert_terms"
 _REFERENCE = "dqfd_bc_keras.core.reference"
 _METHOD = "dqfd_bc_keras.core.methods.Method"
@@ -213,14 +241,43 @@ METHODS: dict[str, Method] = {
             bc_fit="map",
             term=f"{_TERMS}:bayes",
             reference=f"{_REFERENCE}:bayes",
+            weight=f"{_TERMS}:likelihood_weight",
             reads=("temperature", *BAYES_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
-            space=(
-                ("temperature", Span(0.1, 10.0, log=True)),
-                ("sigma0_sq", Span(0.05, 5.0, log=True)),
-                ("prior_scale", Span(0.1, 10.0, log=True)),
-                ("bc_dropout", Span(0.05, 0.5)),
-                *_BC_SPACE,
-            ),
+            space=(("temperature", Span(0.1, 10.0, log=True)), *_BAYES_SPACE, *_BC_SPACE),
+        ),
+        # Past the teacher (ALGORITHM.md §8): each lets the agent leave π_bc where its own Q says so.
+        Method(
+            "qfilter",
+            "ce only where Q(s, a_bc) + l ≥ max_a Q(s, a): where the agent does not prefer another action "
+            "by the margin (the Q-filter of Nair et al. 2018)",
+            bc_fit="mle",
+            term=f"{_TERMS}:qfilter",
+            reference=f"{_REFERENCE}:qfilter",
+            weight=f"{_TERMS}:qfilter_weight",
+            reads=("temperature", "margin", *BC_FIELDS, *DYNAMIC_FIELDS),
+            space=(("temperature", Span(0.1, 10.0, log=True)), ("margin", Span(0.0, 2.0)), *_BC_SPACE),
+        ),
+        Method(
+            "ce_decay",
+            "ce weighted by w_E, which decays while the agent's own returns reach the teacher's",
+            bc_fit="mle",
+            term=f"{_TERMS}:ce_decay",
+            reference=f"{_REFERENCE}:ce_decay",
+            weight=f"{_TERMS}:decay_weight",
+            reads=("temperature", *BC_FIELDS, *DYNAMIC_FIELDS),
+            space=(("temperature", Span(0.1, 10.0, log=True)), *_BC_SPACE),
+            decay=0.9,
+        ),
+        Method(
+            "bayes_local",
+            "the Bayesian loss with σ²(s) = σ0²/k(s), k the kernel of the distance to the nearest demonstration",
+            bc_fit="map",
+            term=f"{_TERMS}:bayes",
+            reference=f"{_REFERENCE}:bayes",
+            weight=f"{_TERMS}:likelihood_weight",
+            reads=("temperature", *LOCAL_FIELDS, *BC_FIELDS, *DYNAMIC_FIELDS),
+            space=(("temperature", Span(0.1, 10.0, log=True)), *_BAYES_SPACE, *_BC_SPACE),
+            uncertainty="local",
         ),
         Method("none", "plain DQN: no demonstrations, no expert loss", needs_demos=False),
         Method(

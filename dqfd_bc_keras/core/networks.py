@@ -73,8 +73,14 @@ def build_q_network(
 
 
 def normalization(mean: npt.ArrayLike, std: npt.ArrayLike) -> keras.layers.Normalization:
-    """A fixed (non-trainable) standardisation (s − mean)/std; std is floored at 1e-3."""
-    std = np.maximum(np.asarray(std, np.float32), 1e-3)
+    """A fixed (non-trainable) standardisation (s − mean)/std; std is floored at 1e-3, and a
+    feature the demonstrations never vary (std 0) is centred, not scaled (std 1), as scikit-learn's
+    `StandardScaler` does. Why: floored at 1e-3, such a feature multiplied any change off the
+    demonstrations by 1,000 (MiniGrid: 135 of 151 features are constant along a rule's path, and a
+    state off it reached the network as inputs of ±10,000, which drove the greedy policy away from
+    the rule; docs/TASKS.md)."""
+    std = np.asarray(std, np.float32)
+    std = np.where(std > 0, np.maximum(std, 1e-3), 1.0)
     return keras.layers.Normalization(mean=np.asarray(mean, np.float32), variance=std**2, name="standardize")
 
 

@@ -141,7 +141,9 @@ class ReferenceLearner:
         if config.method.sqil_rewards or config.td_loss != "squared":
             raise ConfigError("the reference has neither SQIL nor the Huber TD loss")
         self.j_e = expert_reference(config.method)
-        self.config, self.mu, self.sigma = config, *(np.float32(x) for x in obs_scale)
+        self.config, self.mu, sigma = config, *(np.float32(x) for x in obs_scale)
+        self.sigma = np.where(sigma > 0, np.maximum(sigma, 1e-3), 1).astype(np.float32)  # 0: centred only
+        self.expert_scale = 1.0  # w_E of a method with a decay, set by the caller (§8)
         self.theta = [tf.Variable(np.float32(w)) for w in theta]
         self.target = [tf.identity(w) for w in self.theta]  # θ'
         self.prior_weights = [tf.zeros_like(w) for w in self.theta]  # θ_prior is 0 while pre-training
@@ -266,3 +268,18 @@ def bayes(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
     theta, prior = agent.theta, agent.prior_weights
     squared = tf.add_n([tf.reduce_sum(tf.square(t - p)) for t, p in zip(theta, prior, strict=True)])
     return likelihood + squared / (2 * c.prior_scale**2 * float(agent.demo_size))
+
+
+def qfilter(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
+    """mean_s 1[Q(s, a_bc) + l ≥ max_a Q(s, a)]·H(π_bc, p_Q),  a_bc = argmax_a π̄_bc(a|s), l the
+    margin; the filter is a constant of θ."""
+    q_now, a_bc = q.numpy(), np.asarray(batch.pi_bc).argmax(1)
+    kept = np.float32(q_now[np.arange(len(a_bc)), a_bc] + agent.config.margin >= q_now.max(1))
+    log_p_q = tf.nn.log_softmax(q / agent.config.temperature)
+    return tf.reduce_mean(batch.weights * kept * -tf.reduce_sum(batch.pi_bc * log_p_q, 1))
+
+
+def ce_decay(agent: TermAgent, q: tf.Tensor, batch: TermBatch) -> tf.Tensor:
+    """w_E·H(π_bc, p_Q), w_E the agent's teacher-relative weight."""
+    log_p_q = tf.nn.log_softmax(q / agent.config.temperature)
+    return float(agent.expert_scale) * tf.reduce_mean(batch.weights * -tf.reduce_sum(batch.pi_bc * log_p_q, 1))

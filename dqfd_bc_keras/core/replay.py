@@ -264,6 +264,10 @@ class PrioritizedReplay(tf.Module):
         )
         return self._batch(indices, tf.ones([batch_size]))
 
+    def rows_as_batch(self, indices: tf.Tensor) -> Batch:
+        """Stored rows `indices` as a batch of weights 1, to read them as the loss does (no sampling)."""
+        return self._batch(indices, tf.ones(tf.shape(indices)))
+
     def _batch(self, indices: tf.Tensor, weights: tf.Tensor) -> Batch:
         """The stored rows `indices` as a batch with these importance weights."""
         row = tf.gather(self.table, indices)

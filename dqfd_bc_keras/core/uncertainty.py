@@ -7,9 +7,16 @@
                 policies. Trained at once: each layer holds the K members' kernels, (K, in, out).
     distance    grows with the distance d(s) from s to the nearest demonstrated state, in the
                 demonstrations' standardised space (`NearestDemoVariance`).
+    local       the distance estimator's kernel k(s) = exp(−d(s)²/ℓ²), read as how much of σ0²'s
+                confidence is left at s: σ²(s) = σ0²/k(s) (the `bayes_local` method). Ours.
 
-All three return the same quantity, mean_a Var[π_bc(a|s)], so their σ² are on one scale. Its
-largest value is (1 − 1/A)/A (members certain of actions spread evenly): 1/4 with two actions.
+All of them estimate the same quantity, v(s) = mean_a Var[π_bc(a|s)], so their σ² are on one scale.
+Its largest value is v_max = (1 − 1/A)/A (members certain of actions spread evenly): 1/4 with two
+actions. The first three add it to the floor, σ²(s) = σ0² + v(s) (the paper's form): the weight
+1/(2σ²) of the likelihood then never falls below 1/(2(σ0² + v_max)), 0.73 of its full value with
+σ0² = 0.5 and four actions, which is why `bayes` imitates the teacher about as hard on the agent's
+own states as on the demonstrations (docs/MINATAR.md). `local` divides instead, σ²(s) =
+σ0²/(1 − v(s)/v_max): full weight on the demonstrations, none where the BC model has seen nothing.
 A BC model is given its estimator as a `VarianceEstimator` (`VarianceEstimator.from_config`).
 """
 
@@ -53,6 +60,19 @@ class VarianceEstimator:
     def ensemble(self) -> bool:
         return self.uncertainty == "ensemble"
 
+    @property
+    def nearest_demo(self) -> bool:
+        """The estimator reads the distance to the nearest demonstrated state (`NearestDemoVariance`)."""
+        return self.uncertainty in ("distance", "local")
+
+    def sigma_sq(self, variance: tf.Tensor, n_actions: int) -> tf.Tensor:
+        """σ²(s) from the estimator's v(s): σ0² + v(s), or for `local` σ0²/(1 − v(s)/v_max), the
+        fraction kept at least `LOCAL_FLOOR` so that σ² stays finite (a weight of 1e-6 is none)."""
+        if self.uncertainty != "local":
+            return self.sigma0_sq + variance
+        kept = tf.maximum(1.0 - variance / max_policy_variance(n_actions), LOCAL_FLOOR)
+        return self.sigma0_sq / kept
+
     @classmethod
     def from_saved(cls, saved: dict) -> VarianceEstimator:
         """The estimator of a saved BC model's config, its keys taken out of `saved`; a model saved
@@ -67,9 +87,10 @@ class VarianceEstimator:
 
     @classmethod
     def from_config(cls, config: Config) -> VarianceEstimator:
-        """The estimator `config` asks for: `config.uncertainty` for the bayes loss; MC dropout for
-        the others, whose MLE model has no dropout, so that its passes agree and σ² is σ0²."""
-        uncertainty = config.uncertainty if config.bayesian_bc else "mc_dropout"
+        """The estimator `config` asks for: the one its method fixes (`bayes_local`'s `local`), or
+        `config.uncertainty` for the bayes loss; MC dropout for the others, whose MLE model has no
+        dropout, so that its passes agree and σ² is σ0²."""
+        uncertainty = (config.method.uncertainty or config.uncertainty) if config.bayesian_bc else "mc_dropout"
         return cls(
             uncertainty=uncertainty,
             sigma0_sq=float(config.sigma0_sq),
@@ -81,6 +102,8 @@ class VarianceEstimator:
 
 MC_DROPOUT = VarianceEstimator()
 """The paper's estimator: 10 MC-dropout passes, σ0² = 0.5."""
+LOCAL_FLOOR = 1e-6
+"""The least fraction of σ0²'s confidence `local` keeps: σ² ≤ 10⁶·σ0²."""
 
 
 def max_policy_variance(n_actions: int) -> float:

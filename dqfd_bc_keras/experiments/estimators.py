@@ -30,7 +30,7 @@ import keras
 import numpy as np
 import tensorflow as tf
 
-from dqfd_bc_keras.choices import UNCERTAINTIES
+from dqfd_bc_keras.choices import ESTIMATORS
 from dqfd_bc_keras.core.bc import build_bc_model
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.core.uncertainty import max_policy_variance
@@ -79,7 +79,7 @@ def measure(task: str, seed: int, episodes: int, bc_epochs: int | None = None) -
     demos = record(task, config.expert, config.demo_episodes, seed=demo_seed(seed))
     sets = state_sets(task, demos, episodes, seed)
     result = {}
-    for uncertainty in UNCERTAINTIES:
+    for uncertainty in ESTIMATORS:
         c = Config.for_task(task, seed=seed, uncertainty=uncertainty)
         keras.utils.set_random_seed(seed)
         bc = build_bc_model(c, demos.meta.obs_dim, demos.meta.n_actions, demos.obs_scale())
@@ -108,7 +108,7 @@ def calibrate(
         n_actions = summary["n_actions"][task] = actions_of(env)
         env.close()
         table = {}
-        for uncertainty in UNCERTAINTIES:
+        for uncertainty in ESTIMATORS:
             means = {name: float(np.mean([run[uncertainty][name] for run in runs])) for name in STATE_SETS}
             on = means["held-out demos"]
             table[uncertainty] = {
@@ -134,7 +134,7 @@ def best_other(summary: dict) -> str:
         ratios = [summary["tasks"][t][uncertainty]["ratio"][name] for t in summary["tasks"] for name in OFF_DEMO]
         return float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
 
-    return max((u for u in UNCERTAINTIES if u != "mc_dropout"), key=score)
+    return max((u for u in ESTIMATORS if u != "mc_dropout"), key=score)
 
 
 def table(summary: dict) -> list[str]:
@@ -163,13 +163,13 @@ def figure(summary: dict, path: Path) -> None:
         for ax, task in zip(axes[0], tasks, strict=True):
             colors, width = _colors(), 0.8 / len(STATE_SETS)
             for i, name in enumerate(STATE_SETS):
-                values = [max(summary["tasks"][task][u]["mean"][name], 1e-6) for u in UNCERTAINTIES]
-                ax.bar(np.arange(len(UNCERTAINTIES)) + (i - 1.5) * width, values, width, label=name, color=next(colors))
+                values = [max(summary["tasks"][task][u]["mean"][name], 1e-6) for u in ESTIMATORS]
+                ax.bar(np.arange(len(ESTIMATORS)) + (i - 1.5) * width, values, width, label=name, color=next(colors))
             ax.axhline(
                 max_policy_variance(summary["n_actions"][task]), color="grey", ls="--", lw=1, label="largest possible"
             )
             ax.set_yscale("log")
-            ax.set_xticks(range(len(UNCERTAINTIES)), UNCERTAINTIES)
+            ax.set_xticks(range(len(ESTIMATORS)), ESTIMATORS)
             ax.set_title(f"{task}: σ² − σ0² by kind of state ({summary['seeds']} fits each)")
         axes[0][0].set_ylabel("mean σ²(s) − σ0²")
         axes[0][-1].legend(fontsize=8)

@@ -35,6 +35,7 @@ import tensorflow as tf
 from dqfd_bc_keras.core.agent import DQfDAgent, make_agent
 from dqfd_bc_keras.core.bc import BCModel, build_bc_model
 from dqfd_bc_keras.core.config import Config
+from dqfd_bc_keras.core.expert_terms import next_expert_scale
 from dqfd_bc_keras.demos.dataset import DemoDataset
 from dqfd_bc_keras.envs.make import checked_spaces, make_task
 from dqfd_bc_keras.envs.wrappers import CountInteractions, Tally
@@ -139,6 +140,12 @@ class Learner:
     @property
     def interactions(self) -> int:
         return self.tally.count
+
+    @property
+    def teacher_return(self) -> float:
+        """The teacher's mean return: that of D_demo's episodes as given."""
+        assert self.demos is not None, "a method with a teacher-relative weight learns from demonstrations"
+        return float(np.mean(self.demos.meta.episode_returns))
 
     def extend(self, total_steps: int) -> None:
         """Raise the step budget to `total_steps`: the run goes on, ε's schedule stretched to the new budget."""
@@ -249,6 +256,7 @@ def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode
     `on_eval` evaluates at exactly every `eval_every` interactions."""
     c, agent, interaction = learner.config, learner.agent, learner.interaction
     steps = lambda: int(interaction.env_steps.numpy())
+    agent.expert_scale.assign(state.expert_scale)  # w_E (§8) as the run left it
     while steps() < c.total_steps and not state.stopped_early:
         started = time.perf_counter()
         obs, done = interaction.obs, False  # an episode an exception stopped between two graph calls goes on
@@ -266,6 +274,11 @@ def train_episodes(learner: Learner, state: TrainingState, on_episode: OnEpisode
         losses = {name: float(value) for name, value in agent.take_losses().items()}
         check_finite(losses, f"episode {state.episode + 1} (env step {steps()})")
         state.returns.append(stats.ret)
+        if c.method.decay is not None:  # w_E of the next learning steps (§8)
+            state.expert_scale = next_expert_scale(
+                state.expert_scale, state.returns, learner.teacher_return, c.dynamic_window, c.method.decay
+            )
+            agent.expert_scale.assign(state.expert_scale)
         state.episode += 1
         state.wall_time += time.perf_counter() - started
         on_demos, off_demos = agent.imitation_weights()

@@ -46,6 +46,8 @@ class TrainingState:
     bc_fits: int = 0
     wall_time: float = 0.0
     stopped_early: bool = False
+    expert_scale: float = 1.0
+    """w_E of a method with a `decay` (methods.py), after the last episode; 1 for the others."""
 
     def to_dict(self) -> dict[str, Any]:
         """state.json's object: the records as their files spell them."""
@@ -109,6 +111,7 @@ VALUES: dict[str, tuple[str, Callable[[Any], bool]]] = {
     "bc_fits": ("an integer ≥ 0", _count),
     "wall_time": ("a finite number ≥ 0", lambda v: _number(v) and 0 <= v < math.inf),
     "stopped_early": ("true or false", lambda v: isinstance(v, bool)),
+    "expert_scale": ("a number in [0, 1]", lambda v: _number(v) and 0 <= v <= 1),
 }
 """What each of state.json's values (its records aside) must be, in words and as a test."""
 
