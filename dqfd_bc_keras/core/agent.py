@@ -29,7 +29,7 @@ from dqfd_bc_keras.errors import ConfigError
 if TYPE_CHECKING:
     from dqfd_bc_keras.demos.dataset import DemoDataset
 
-WEIGHED_ROWS = 4096
+WEIGHED_ROWS = 1024
 """The most rows of D_demo, and of D_replay, whose imitation weights are averaged after each episode."""
 
 
