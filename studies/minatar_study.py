@@ -84,8 +84,8 @@ Seeds = dict[int, list[tuple[float, float]]]
 """Seed → its (interactions, mean greedy return) evaluations."""
 
 
-def arms(quick: bool = False) -> list[Arm]:
-    """Our arms, game by game (with `quick`: on tiny budgets)."""
+def arms(quick: bool = False, losses: Sequence[str] = LOSSES) -> list[Arm]:
+    """Our arms of `losses`, game by game (with `quick`: on tiny budgets)."""
     if quick:
         budget = {
             "total_steps": QUICK_STEPS["ours"],
@@ -93,8 +93,8 @@ def arms(quick: bool = False) -> list[Arm]:
             "checkpoint_every": QUICK_STEPS["every"],
         }
         settings = tuple({**QUICK, **budget}.items())
-        return [Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in LOSSES]
-    return [arm(game, "bootstrap", loss, SEEDS, total_steps=BUDGET, **PROTOCOL) for game in GAMES for loss in LOSSES]
+        return [Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in losses]
+    return [arm(game, "bootstrap", loss, SEEDS, total_steps=BUDGET, **PROTOCOL) for game in GAMES for loss in losses]
 
 
 def sb3_jobs(seeds: int, out: Path, quick: bool = False) -> list[Sb3Job]:
@@ -129,9 +129,11 @@ def measure(
     archive: Path | None = None,
     quick: bool = False,
     progress: Callable[[str], None] = print,
+    losses: Sequence[str] = LOSSES,
+    sb3: bool = True,
 ) -> None:
-    """Run what is missing, seed by seed: every arm of ours on every game, then SB3's; with `archive`,
-    start from what it holds and export the study there after each finished run."""
+    """Run what is missing, seed by seed: every arm of ours (`losses`) on every game, then SB3's (unless
+    not `sb3`); with `archive`, start from what it holds and export the study there after each finished run."""
     seeds = 1 if quick else seeds
     if archive is not None:
         unpack_missing(archive, out)
@@ -140,7 +142,7 @@ def measure(
         if archive is not None:
             export_archive(out, archive)
 
-    ours, theirs = arms(quick), sb3_jobs(seeds, out, quick)
+    ours, theirs = arms(quick, losses), sb3_jobs(seeds, out, quick) if sb3 else []
     for seed in range(seeds):
         progress(f"minatar study: seed {seed} of 0–{seeds - 1}")
         jobs = [job for job in sweep_jobs(ours, seed + 1, out) if job.seed == seed]
@@ -184,12 +186,13 @@ def normalised(game: str, value: float | np.ndarray) -> float | np.ndarray:
     return (value - random) / (teacher - random)
 
 
-def collect(out: Path, seeds: int, quick: bool = False) -> Study:
-    """The runs under `out` that reached the budget: ours (complete runs of the arms) and SB3's (current files)."""
+def collect(out: Path, seeds: int, quick: bool = False, losses: Sequence[str] = LOSSES) -> Study:
+    """The runs under `out` that reached the budget: ours (complete runs of the arms of `losses`) and SB3's
+    (current files)."""
     budget = QUICK_STEPS["ours"] if quick else BUDGET
     runs: dict[tuple[str, str], Seeds] = {}
     commits = set()
-    for a in arms(quick):
+    for a in arms(quick, losses):
         for seed in range(seeds):
             directory = out / a.name / f"seed{seed}"
             for finished in load_runs(directory) if directory.is_dir() else []:  # none while it is still finishing
@@ -205,6 +208,30 @@ def collect(out: Path, seeds: int, quick: bool = False) -> Study:
                 (e["interactions"], e["mean_return"]) for e in evaluations
             ]
     return Study(runs, budget, seeds, tuple(sorted(commits)))
+
+
+def run_or_read(
+    out: Path,
+    seeds: int,
+    quick: bool,
+    no_run: bool,
+    archive: Path | None = None,
+    workers: int = 2,
+    losses: Sequence[str] = LOSSES,
+    sb3: bool = True,
+) -> Study:
+    """The study under `out` as the command's flags ask: an archive is read (never run into); a directory
+    gets what it lacks run first (unless `no_run`), starting from `archive` and exporting to it."""
+    if str(out).endswith(ARCHIVE_SUFFIX):
+        if not no_run:
+            raise ConfigError(f"--out {out}: an archive is read, never run into: add --no-run")
+        with open_suite(out) as directory:
+            return collect(directory, seeds, quick, losses)
+    if archive is not None and not str(archive).endswith(ARCHIVE_SUFFIX):
+        raise ConfigError(f"--archive {archive}: expected a {ARCHIVE_SUFFIX} file")
+    if not no_run:
+        measure(seeds, workers, out, archive, quick, losses=losses, sb3=sb3)
+    return collect(out, seeds, quick, losses)
 
 
 def steps_to_teacher(study: Study, game: str, method: str) -> dict[int, float]:
@@ -500,18 +527,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--report", type=Path, help="write the markdown report to this file")
     parser.add_argument("--figures", type=Path, help="write the report's figures (minatar_*.png) into this directory")
     args = parser.parse_args(argv)
-    seeds = 1 if args.quick else args.seeds
-    if str(args.out).endswith(ARCHIVE_SUFFIX):
-        if not args.no_run:
-            raise ConfigError(f"--out {args.out}: an archive is read, never run into: add --no-run")
-        with open_suite(args.out) as directory:
-            study = collect(directory, seeds, args.quick)
-    else:
-        if args.archive is not None and not str(args.archive).endswith(ARCHIVE_SUFFIX):
-            raise ConfigError(f"--archive {args.archive}: expected a {ARCHIVE_SUFFIX} file")
-        if not args.no_run:
-            measure(seeds, args.workers, args.out, args.archive, args.quick)
-        study = collect(args.out, seeds, args.quick)
+    study = run_or_read(args.out, 1 if args.quick else args.seeds, args.quick, args.no_run, args.archive, args.workers)
     text = report(study, args.figures)
     print(text)
     if args.report is not None:

@@ -1,0 +1,194 @@
+"""Past the teacher (issue W; rules: docs/PREREGISTRATION.md §14): the pilot that picks the new arm
+among the methods of ALGORITHM.md §8, and that arm's runs on the five MinAtar games, beside §13's
+`bayes`, `ce`, DQN and SB3 runs (docs/data/minatar.tar.xz).
+
+The pilot: `qfilter`, `ce_decay` and `bayes_local` on Breakout and Freeway, tuning seeds, 100,000
+interactions, each run as `train.py --task GAME --expert-loss METHOD --seed SEED` runs it. The new
+arm is the method with the highest mean normalised score at the budget; within CLOSE of the best,
+the one that imitates least on the agent's own states (mean `imitation_weight_agent` over the last
+10% of its episodes).
+
+    python -m studies.past_teacher --pilot docs/data/past-teacher-pilot.tar.xz   # the choice, from the data
+    python -m studies.past_teacher --out runs/past-teacher --archive runs/past-teacher.tar.xz
+    python -m studies.past_teacher --out docs/data/past-teacher.tar.xz --no-run --report docs/PAST_TEACHER.md
+    python -m studies.past_teacher --out /tmp/past-teacher --quick   # seconds: tiny budgets
+
+Writes only under --out, into --archive, and, with --report, that file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.errors import ConfigError
+from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, load_runs, open_suite
+from dqfd_bc_keras.experiments.run_files import FinishedRun
+from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.seeds import TUNE_SEED
+from studies.minatar_study import ANCHORS, BUDGET, GAMES, SEEDS, Study, collect, normalised, run_or_read
+
+CANDIDATES = ("qfilter", "ce_decay", "bayes_local")
+"""The methods of ALGORITHM.md §8 the pilot chooses among."""
+PILOT_GAMES = ("minatar-breakout", "minatar-freeway")
+PILOT_SEEDS = (TUNE_SEED, TUNE_SEED + 1)
+CLOSE = 0.05
+"""Mean normalised scores within this of the best are a tie, broken by the lower weight on the agent's states."""
+LAST = 0.10
+"""The share of a run's last episodes whose `imitation_weight_agent` is averaged."""
+NEW_ARM = "ce_decay"
+"""The pilot's choice (§14), which tests/test_past_teacher_study.py recomputes from the committed pilot."""
+BASELINE = Path(__file__).resolve().parents[1] / "docs" / "data" / "minatar.tar.xz"
+"""§13's runs of bayes, ce, DQN and SB3, which stand for those arms (§14's reuse check)."""
+
+
+def agent_weight(run: FinishedRun) -> float:
+    """The mean weight J_E put on the agent's own states over the last LAST of the run's episodes (NaN: none logged)."""
+    weights = run.column("imitation_weight_agent")
+    tail = weights[-max(1, int(np.ceil(LAST * weights.size))) :]
+    return float(np.nanmean(tail)) if np.isfinite(tail).any() else float("nan")
+
+
+@dataclass(frozen=True)
+class PilotArm:
+    """One candidate's pilot runs."""
+
+    method: str
+    scores: dict[tuple[str, int], float]
+    """(game, seed) → normalised score at the budget."""
+    weights: dict[tuple[str, int], float]
+    """(game, seed) → `agent_weight`."""
+
+    @property
+    def mean_score(self) -> float:
+        return float(np.mean(list(self.scores.values())))
+
+    @property
+    def mean_weight(self) -> float:
+        return float(np.nanmean(list(self.weights.values())))
+
+
+def pilot_arms(source: str | Path) -> list[PilotArm]:
+    """Each candidate's pilot runs in `source` (a directory of train.py runs, or its archive); every one of
+    the pilot's runs must be there, each at the budget."""
+    found: dict[str, PilotArm] = {m: PilotArm(m, {}, {}) for m in CANDIDATES}
+    for finished in load_runs(source):
+        c = finished.config
+        if c.expert_loss in found and c.task in PILOT_GAMES and c.seed in PILOT_SEEDS:
+            last = finished.evals[-1]
+            if last.interactions < BUDGET:
+                raise ConfigError(f"{finished.path}: stopped at {last.interactions:,} interactions, before {BUDGET:,}")
+            found[c.expert_loss].scores[c.task, c.seed] = float(normalised(c.task, last.mean_return))
+            found[c.expert_loss].weights[c.task, c.seed] = agent_weight(finished)
+    missing = [(m, g, s) for m in CANDIDATES for g in PILOT_GAMES for s in PILOT_SEEDS if (g, s) not in found[m].scores]
+    if missing:
+        raise ConfigError(f"{source}: the pilot lacks {len(missing)} run(s), the first {missing[0]}")
+    return list(found.values())
+
+
+def choose(arms: Sequence[PilotArm]) -> str:
+    """§14's rule: the highest mean normalised score; within CLOSE of it, the lowest mean weight on the
+    agent's states."""
+    best = max(arm.mean_score for arm in arms)
+    close = [arm for arm in arms if arm.mean_score >= best - CLOSE]
+    return min(close, key=lambda arm: (arm.mean_weight, -arm.mean_score)).method
+
+
+def pilot_report(arms: Sequence[PilotArm]) -> str:
+    """The pilot's runs, a row per candidate, and the choice."""
+    lines = [
+        "| method | "
+        + " | ".join(f"{g.removeprefix('minatar-')} seed {s}" for g in PILOT_GAMES for s in PILOT_SEEDS)
+        + " | mean normalised score | mean weight on the agent's states (last 10% of episodes) |",
+        "| --- | " + " | ".join("---" for _ in PILOT_GAMES for _ in PILOT_SEEDS) + " | --- | --- |",
+    ]
+    for arm in arms:
+        cells = [f"{arm.scores[g, s]:.2f} (w {arm.weights[g, s]:.2f})" for g in PILOT_GAMES for s in PILOT_SEEDS]
+        lines.append(f"| {arm.method} | {' | '.join(cells)} | {arm.mean_score:.3f} | {arm.mean_weight:.3f} |")
+    return "\n".join([*lines, "", f"The new arm by §14's rule: **{choose(arms)}**."])
+
+
+def agent_weights(source: str | Path, methods: Sequence[str]) -> dict[tuple[str, str], list[float]]:
+    """(game, method) → each finished run's `agent_weight`, for the runs of `methods` in `source`."""
+    weights: dict[tuple[str, str], list[float]] = {}
+    for finished in load_runs(source):
+        if finished.config.expert_loss in methods and finished.config.task in GAMES:
+            weights.setdefault((finished.config.task, finished.config.expert_loss), []).append(agent_weight(finished))
+    return weights
+
+
+def interim_report(study: Study, baseline: Study, weights: dict[tuple[str, str], list[float]]) -> str:
+    """What has run of the new arm, beside §13's arms: medians at the budget, described (§14: no verdict
+    before every seed of every game)."""
+    finished = sum(len(study.runs.get((g, NEW_ARM), {})) for g in GAMES)
+    lines = [
+        "# Past the teacher: the new arm on the five MinAtar games",
+        "",
+        "Generated by `python -m studies.past_teacher --out docs/data/past-teacher.tar.xz --no-run --report "
+        "docs/PAST_TEACHER.md` (rules: docs/PREREGISTRATION.md §14).",
+        "",
+        f"**Interim: {finished} of {SEEDS * len(GAMES)} runs of `{NEW_ARM}` finished. Described only: the "
+        "pre-registered verdicts are read once every arm has every seed on every game.**",
+        "",
+        f"Runs' code: {', '.join(study.commits) or 'none yet'}; §13's arms: {', '.join(baseline.commits)}.",
+        "",
+        "| game | teacher | arm | runs | median return at the budget | normalised | weight on the agent's states |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for game in GAMES:
+        for method, source in ((NEW_ARM, study), ("bayes", baseline), ("ce", baseline), ("none", baseline)):
+            final = list(source.final(game, method).values())
+            median = f"{np.median(final):.2f}" if final else "not run"
+            score = f"{normalised(game, np.median(final)):.2f}" if final else ""
+            logged = [w for w in weights.get((game, method), []) if np.isfinite(w)]
+            weight = f"{np.median(logged):.3f}" if logged else ""
+            lines.append(f"| {game} | {ANCHORS[game][1]:g} | {method} | {len(final)} | {median} | {score} | {weight} |")
+    return "\n".join(
+        [
+            *lines,
+            "",
+            "The weight on the agent's states: the median over runs of the mean `imitation_weight_agent` over a "
+            "run's last 10% of episodes (the weight J_E puts on D_replay's rows: 1/(2σ²) for bayes, the Q-filter's "
+            "share of rows kept, w_E; §13's bayes runs logged the mean over every row, today's code reads 1,024).",
+        ]
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m studies.past_teacher", description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--pilot", type=Path, help="report the pilot's runs in this directory or archive, and its choice"
+    )
+    parser.add_argument("--out", type=Path, help="directory of the new arm's runs (or its archive, with --no-run)")
+    parser.add_argument(
+        "--archive", type=Path, help=f"start from this {ARCHIVE_SUFFIX} archive and export to it as runs finish"
+    )
+    parser.add_argument("--seeds", type=positive_int, default=SEEDS, help="seeds per game (default %(default)s)")
+    parser.add_argument("--workers", type=positive_int, default=2, help="parallel runs (default %(default)s)")
+    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs")
+    parser.add_argument("--no-run", action="store_true", help="report the runs under --out, run nothing")
+    parser.add_argument("--report", type=Path, help="write the markdown report to this file")
+    args = parser.parse_args(argv)
+    if args.pilot is not None:
+        text = pilot_report(pilot_arms(args.pilot))
+    elif args.out is None:
+        raise ConfigError("give --pilot PATH, or --out DIR for the new arm's runs")
+    else:
+        seeds = 1 if args.quick else args.seeds
+        study = run_or_read(args.out, seeds, args.quick, args.no_run, args.archive, args.workers, (NEW_ARM,), False)
+        with open_suite(BASELINE) as directory:
+            baseline, weights = collect(directory, SEEDS), agent_weights(directory, ("bayes",))
+        ours = agent_weights(args.out, (NEW_ARM,)) if args.out.exists() else {}
+        text = interim_report(study, baseline, {**weights, **ours})
+    print(text)
+    if args.report is not None:
+        write_text(args.report, text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(run(main))
