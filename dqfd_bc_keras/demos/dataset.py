@@ -122,6 +122,11 @@ class DemoDataset:
             for i, (a, b) in enumerate(zip(starts, ends, strict=True))
         ]
 
+    @property
+    def mean_return(self) -> float:
+        """The demonstrator's mean episode return (the run's rewards): the teacher's level."""
+        return float(np.mean(self.meta.episode_returns))
+
     def obs_scale(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(mean, std) of the demonstrated states, per feature: the networks' input scaling; None
         for frames, which the networks scale to [0, 1] themselves."""

@@ -32,7 +32,7 @@ class DynamicDemos:
     def __init__(self, config: Config, data: DemoDataset, env: gym.Env) -> None:
         self.config, self.env = config, env
         self.episodes = data.episodes()
-        self.demo_average = float(np.mean(data.meta.episode_returns))
+        self.demo_average = data.mean_return
         self.recent: list[DemoDataset] = []
         """`episodes` mode: the agent's training episodes since the last update (at most W)."""
 

@@ -145,7 +145,7 @@ class Learner:
     def teacher_return(self) -> float:
         """The teacher's mean return: that of D_demo's episodes as given."""
         assert self.demos is not None, "a method with a teacher-relative weight learns from demonstrations"
-        return float(np.mean(self.demos.meta.episode_returns))
+        return self.demos.mean_return
 
     def extend(self, total_steps: int) -> None:
         """Raise the step budget to `total_steps`: the run goes on, ε's schedule stretched to the new budget."""
