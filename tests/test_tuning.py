@@ -18,6 +18,7 @@ from dqfd_bc_keras.core.methods import METHODS, Method
 from dqfd_bc_keras.core.search_space import SHARED, Choice, Span, method_space
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.seeds import TUNE_SEED
+from dqfd_bc_keras.tuning import study
 from dqfd_bc_keras.tuning.objective import intermediate, score
 from dqfd_bc_keras.tuning.space import read_space, study_space
 
@@ -253,6 +254,60 @@ def test_two_commands_and_a_pool_of_workers_share_one_study(tmp_path, journal):
     if not journal:
         db = sqlite3.connect(tmp_path / "shared.db")
         assert db.execute("select count(*) from trials where state = 'RUNNING'").fetchone() == (0,)
+
+
+def test_a_process_that_loses_the_race_to_create_the_tables_opens_them_after_the_winner(tmp_path, monkeypatch):
+    """The loser's error, made for real (SQLite refusing a table that exists), on the first attempt:
+    open_storage waits and opens the database the winner made, where it used to exit 2."""
+    import sqlalchemy
+
+    engine = sqlalchemy.create_engine(f"sqlite:///{tmp_path / 'other.db'}")
+    with engine.connect() as connection:
+        connection.execute(sqlalchemy.text("create table studies (id integer)"))
+        with pytest.raises(sqlalchemy.exc.OperationalError) as lost:
+            connection.execute(sqlalchemy.text("create table studies (id integer)"))
+    assert "already exists" in str(lost.value)
+    opened, attempts = optuna.storages.RDBStorage, []
+
+    def racing(*args, **kwargs):
+        attempts.append(args[0])
+        if len(attempts) == 1:
+            raise lost.value
+        return opened(*args, **kwargs)
+
+    monkeypatch.setattr(optuna.storages, "RDBStorage", racing)
+    monkeypatch.setattr(time, "sleep", lambda seconds: None)
+    url = f"sqlite:///{tmp_path / 'new.db'}"
+    storage = study.open_storage(url)
+    assert attempts == [url, url]
+    monkeypatch.undo()
+    assert optuna.create_study(study_name="after", storage=storage).study_name == "after"
+
+
+def test_processes_opening_one_new_database_at_once_all_open_it(tmp_path):
+    """SQLAlchemy checks for Optuna's tables, then creates them: processes that start together on a
+    new SQLite file race, and a loser sees "table ... already exists" (9 of 24 opens failed so)."""
+    url = f"sqlite:///{tmp_path / 'new.db'}"
+    at = time.time() + 8  # every process imported and waiting before the first opens
+    opener = (
+        "import sys, time\n"
+        "from dqfd_bc_keras.tuning.study import open_storage\n"
+        "while time.time() < float(sys.argv[2]): pass\n"
+        "open_storage(sys.argv[1]); print('opened')\n"
+    )
+    processes = [
+        subprocess.Popen(
+            [sys.executable, "-c", opener, url, str(at)],
+            env=ENV,
+            text=True,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        for _ in range(4)
+    ]
+    for process in processes:
+        out, err = process.communicate(timeout=120)
+        assert (process.returncode, out.strip()) == (0, "opened"), err
 
 
 @pytest.mark.slow

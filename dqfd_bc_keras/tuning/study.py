@@ -160,7 +160,7 @@ def open_storage(url: str) -> optuna.storages.BaseStorage:
         except Exception as error:  # sqlalchemy's and the drivers' errors have no common base a user would know
             if isinstance(error, ImportError):  # the URL's driver, which no requirement installs
                 raise ConfigError(f"--storage {url}: {one_line(error)} ({DRIVERS})") from None
-            if type(error).__name__ != "IntegrityError" or attempt == CREATE_ATTEMPTS:
+            if not lost_the_race(error) or attempt == CREATE_ATTEMPTS:
                 raise ConfigError(f"--storage {url}: {one_line(error)}") from None
         time.sleep(0.5 * attempt)  # another process made the tables first: they are there now
         attempt += 1
@@ -171,8 +171,16 @@ DRIVERS = (
     "postgresql+psycopg2://, PyMySQL for mysql+pymysql://"
 )
 CREATE_ATTEMPTS = 5
-"""Processes that open a new database at once race to create Optuna's tables; the losers (an
-IntegrityError) open it again once the winner has."""
+"""Processes that open a new database at once race to create Optuna's tables; the losers open it
+again once the winner has."""
+
+
+def lost_the_race(error: Exception) -> bool:
+    """Whether opening a new database failed because another process was creating its tables:
+    SQLAlchemy's create_all checks, then creates, so a loser sees an IntegrityError (the version row)
+    or an OperationalError "table ... already exists"."""
+    kind = type(error).__name__
+    return kind == "IntegrityError" or (kind == "OperationalError" and "already exists" in str(error))
 
 
 def sampler(name: str) -> optuna.samplers.BaseSampler:
