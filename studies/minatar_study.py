@@ -159,6 +159,10 @@ class Study:
     seeds: int
     commits: tuple[str, ...] = ()
     """The code commits our runs were made by (their provenance.json): one, if the study keeps its rule."""
+    methods: tuple[str, ...] = METHODS
+    """The arms, in the report's order."""
+    dqfd: tuple[str, ...] = DQFD
+    """The arms that learn from demonstrations: the ones the questions judge (the others are described)."""
 
     def final(self, game: str, method: str) -> dict[int, float]:
         """Seed → the mean greedy return at the budget (the run's last grid point)."""
@@ -178,7 +182,7 @@ class Study:
 
     @property
     def complete(self) -> bool:
-        return all(len(self.runs.get((g, m), {})) >= self.seeds for g in GAMES for m in METHODS)
+        return all(len(self.runs.get((g, m), {})) >= self.seeds for g in GAMES for m in self.methods)
 
 
 def normalised(game: str, value: float | np.ndarray) -> float | np.ndarray:
@@ -264,7 +268,7 @@ def teacher_rows(study: Study, judged: bool) -> list[str]:
     ]
     for game in GAMES:
         random, teacher = ANCHORS[game]
-        for method in METHODS:
+        for method in study.methods:
             final = list(study.final(game, method).values())
             if not final:
                 lines.append(f"| {game} | {random:g} | {teacher:g} | {_label(method)} | 0 | not run | | |")
@@ -272,7 +276,7 @@ def teacher_rows(study: Study, judged: bool) -> list[str]:
             median, low, high, verdict = teacher_verdict(final, teacher)
             verdict = "does not beat it" if verdict == "does not" else verdict
             verdict = ONE_SEED if len(final) < 2 else verdict
-            if method not in DQFD:
+            if method not in study.dqfd:
                 verdict = f"({verdict}; described, not judged)"
             elif not judged:
                 verdict = f"interim: {verdict}"
@@ -290,7 +294,7 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
         "across games |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
-    for method in METHODS:
+    for method in study.methods:
         scores = study.scores(method)
         if scores.size == 0:
             lines.append(f"| {_label(method)} | 0 | no seed on all five games yet | | | |")
@@ -300,7 +304,9 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
         verdict = "beats its teachers" if low > 1 else "below its teachers" if high < 1 else "inconclusive"
         verdict = ONE_SEED if scores.shape[0] < 2 else verdict
         verdict = (
-            verdict if method in DQFD and judged else f"({verdict}; {'interim' if method in DQFD else 'described'})"
+            verdict
+            if method in study.dqfd and judged
+            else f"({verdict}; {'interim' if method in study.dqfd else 'described'})"
         )
         lines.append(
             f"| {_label(method)} | {scores.shape[0]} | {iqm(scores.reshape(-1)):.2f} {_interval(low, high)} | "
@@ -311,25 +317,27 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
 
 def sooner_rows(study: Study, judged: bool) -> list[str]:
     """Q2, per game: interactions to the teacher's return; each DQfD arm against DQN and SB3 (Mann–Whitney,
-    never reached ranked last, Holm over the 20 comparisons)."""
+    never reached ranked last, Holm over every DQfD arm × 2 × 5 games: §13's 20 comparisons)."""
     steps_of = {
-        (g, m): np.array(list(steps_to_teacher(study, g, m).values()), dtype=float) for g in GAMES for m in METHODS
+        (g, m): np.array(list(steps_to_teacher(study, g, m).values()), dtype=float)
+        for g in GAMES
+        for m in study.methods
     }
     tests = {
         (game, method, other): mann_whitney(steps_of[game, method], steps_of[game, other])[1]
         for game in GAMES
-        for method in DQFD
+        for method in study.dqfd
         for other in ("none", SB3_METHOD)
         if steps_of[game, method].size and steps_of[game, other].size
     }
-    adjusted = dict(zip(tests, holm(list(tests.values()), 2 * 2 * len(GAMES)), strict=True))
+    adjusted = dict(zip(tests, holm(list(tests.values()), len(study.dqfd) * 2 * len(GAMES)), strict=True))
     lines = [
         "| game | arm | reached the teacher | median interactions [95% CI] | against DQN (none): Holm p | "
         "against SB3: Holm p |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for game in GAMES:
-        for method in METHODS:
+        for method in study.methods:
             steps = steps_of[game, method]
             if steps.size == 0:
                 lines.append(f"| {game} | {_label(method)} | not run | | | |")
@@ -351,15 +359,16 @@ def sooner_rows(study: Study, judged: bool) -> list[str]:
     return lines
 
 
-def bayes_vs_ce(study: Study, judged: bool) -> list[str]:
-    """Q3: IQM(bayes) − IQM(ce) of normalised scores with its 95% and 90% stratified CIs, against ±MARGIN."""
-    a, b = study.scores("bayes"), study.scores("ce")
+def difference(study: Study, judged: bool, first: str = "bayes", second: str = "ce") -> list[str]:
+    """§13's Q3 rule: IQM(first) − IQM(second) of normalised scores with its 95% and 90% stratified CIs,
+    against ±MARGIN; and per game, Mann–Whitney with Holm over the 5 games."""
+    a, b = study.scores(first), study.scores(second)
     if a.size == 0 or b.size == 0:
         return ["Not run."]
     wide = stratified_bootstrap_diff_ci(a, b, iqm, 0.95, RESAMPLES, RNG_SEED)
     narrow = stratified_bootstrap_diff_ci(a, b, iqm, 0.90, RESAMPLES, RNG_SEED)
     significant = wide[0] > 0 or wide[1] < 0
-    higher = "bayes" if wide[0] > 0 else "ce"
+    higher = first if wide[0] > 0 else second
     if equivalent(narrow, MARGIN):
         verdict = f"equivalent (the 90% CI lies within ±{MARGIN:g})"
         verdict += f"; {higher} is higher by a significant amount inside the margin" if significant else ""
@@ -370,16 +379,16 @@ def bayes_vs_ce(study: Study, judged: bool) -> list[str]:
     else:
         verdict = "inconclusive"
     verdict = ONE_SEED if min(a.shape[0], b.shape[0]) < 2 else verdict
-    difference = iqm(a.reshape(-1)) - iqm(b.reshape(-1))
+    gap = iqm(a.reshape(-1)) - iqm(b.reshape(-1))
     lines = [
-        f"IQM(bayes) − IQM(ce) = {difference:+.3f}, 95% CI {_interval(*wide, 3)}, 90% CI {_interval(*narrow, 3)} "
+        f"IQM({first}) − IQM({second}) = {gap:+.3f}, 95% CI {_interval(*wide, 3)}, 90% CI {_interval(*narrow, 3)} "
         f"({a.shape[0]} and {b.shape[0]} seeds on all five games): "
         f"**{verdict if judged else 'interim, not judged: ' + verdict}**.",
         "",
-        "| game | bayes median | ce median | Mann–Whitney p (Holm over 5 games) |",
+        f"| game | {first} median | {second} median | Mann–Whitney p (Holm over 5 games) |",
         "| --- | --- | --- | --- |",
     ]
-    pairs = [(list(study.final(g, "bayes").values()), list(study.final(g, "ce").values())) for g in GAMES]
+    pairs = [(list(study.final(g, first).values()), list(study.final(g, second).values())) for g in GAMES]
     ps = holm([mann_whitney(x, y)[1] if x and y else 1.0 for x, y in pairs], len(GAMES))
     for game, (x, y), p in zip(GAMES, pairs, ps, strict=True):
         if x and y:
@@ -410,13 +419,13 @@ def _legend(ax) -> None:
         ax.text(0.5, 0.5, "no seed on all five games yet", ha="center", va="center", transform=ax.transAxes)
 
 
-def figures(study: Study, directory: Path) -> list[str]:
+def figures(study: Study, directory: Path, prefix: str = "minatar") -> list[str]:
     """The performance profile and the IQM over interactions (rliable's two pictures), and each game's
-    mean curves; returns the markdown that shows them (paths relative to the report's folder)."""
-    profile, curve, games = (directory / f"minatar_{name}.png" for name in ("profile", "iqm", "games"))
-    colors = dict(zip(METHODS, _colors(), strict=False))
+    mean curves, as PREFIX_*.png; returns the markdown that shows them (paths relative to the report's folder)."""
+    profile, curve, games = (directory / f"{prefix}_{name}.png" for name in ("profile", "iqm", "games"))
+    colors = dict(zip(study.methods, _colors(), strict=False))
     with _figure(profile, figsize=(6, 4)) as (_, ax):
-        for method in METHODS:
+        for method in study.methods:
             scores = study.scores(method)
             if scores.size:
                 band = stratified_bootstrap_ci(
@@ -428,7 +437,7 @@ def figures(study: Study, directory: Path) -> list[str]:
         ax.set(xlabel="normalised score τ (random 0, teacher 1)", ylabel="share of runs with score > τ")
         _legend(ax)
     with _figure(curve, figsize=(6, 4)) as (_, ax):
-        for method in METHODS:
+        for method in study.methods:
             points, cube = grid_scores(study, method)
             if cube.shape[1]:
                 mean = [iqm(c.reshape(-1)) for c in cube]
@@ -440,7 +449,7 @@ def figures(study: Study, directory: Path) -> list[str]:
         _legend(ax)
     with _figure(games, nrows=1, ncols=len(GAMES), figsize=(3 * len(GAMES), 3)) as (_, axes):
         for ax, game in zip(axes, GAMES, strict=True):
-            for method in METHODS:
+            for method in study.methods:
                 seeds = study.runs.get((game, method), {})
                 if seeds:
                     xs = [x for x, _ in next(iter(seeds.values()))]
@@ -456,20 +465,27 @@ def figures(study: Study, directory: Path) -> list[str]:
     ]
 
 
-def report(study: Study, figure_dir: Path | None = None) -> str:
-    """The study as markdown: status, protocol, the three questions, the figures."""
-    judged = study.complete
-    counts = {m: min(len(study.runs.get((g, m), {})) for g in GAMES) for m in METHODS}
-    finished = sum(len(seeds) for seeds in study.runs.values())
-    status = (
-        f"**Complete: {study.seeds} seeds of every arm on every game; the verdicts below are the pre-registered ones.**"
-        if judged
-        else f"**Interim: {finished} of {study.seeds * len(GAMES) * len(METHODS)} runs finished (seeds finished on "
+def status(study: Study) -> str:
+    """Complete (the verdicts are read), or how far the runs are."""
+    if study.complete:
+        return (
+            f"**Complete: {study.seeds} seeds of every arm on every game; the verdicts below are the pre-registered "
+            "ones.**"
+        )
+    counts = {m: min(len(study.runs.get((g, m), {})) for g in GAMES) for m in study.methods}
+    finished = sum(len(study.runs.get((g, m), {})) for g in GAMES for m in study.methods)
+    return (
+        f"**Interim: {finished} of {study.seeds * len(GAMES) * len(study.methods)} runs finished (seeds finished on "
         "all five games: "
-        + ", ".join(f"{_label(m)} {counts[m]}" for m in METHODS)
+        + ", ".join(f"{_label(m)} {counts[m]}" for m in study.methods)
         + f", of {study.seeds}). Numbers are described; no pre-registered verdict is given until every arm has "
         "every seed on every game.**"
     )
+
+
+def report(study: Study, figure_dir: Path | None = None) -> str:
+    """The study as markdown: status, protocol, the three questions, the figures."""
+    judged = study.complete
     anchors = ", ".join(f"{g.removeprefix('minatar-')} {r:g} / {t:g}" for g, (r, t) in ANCHORS.items())
     return "\n".join(
         [
@@ -479,7 +495,7 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
             "--report docs/MINATAR.md --figures docs/figures` from the per-run files in docs/data/minatar.tar.xz "
             "(rules: docs/PREREGISTRATION.md §13).",
             "",
-            status,
+            status(study),
             "",
             f"Our runs' code: {', '.join(study.commits) or 'none yet'} (each run's provenance.json).",
             "",
@@ -503,7 +519,7 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
             "",
             "## Do bayes and ce differ?",
             "",
-            *bayes_vs_ce(study, judged),
+            *difference(study, judged),
             "",
             *(["## Figures", "", *figures(study, figure_dir), ""] if figure_dir is not None else []),
         ]

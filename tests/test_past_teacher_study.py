@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from helpers import REPO
 from helpers import python as run
+from PIL import Image
 
 from studies import past_teacher
 from studies.minatar_study import GAMES
@@ -72,7 +73,9 @@ def test_the_quick_study_exports_each_run_and_reports_byte_for_byte_from_its_arc
         done = run("-m", "studies.past_teacher", "--out", archive, "--no-run", "--quick", "--report", tmp_path / name)
         assert done.returncode == 0, done.stderr
         reports.append((tmp_path / name).read_bytes())
-    assert reports[0] == reports[1] and f"| minatar-breakout | 8.56 | {NEW_ARM} | 1 |" in reports[0].decode()
+    text = reports[0].decode()
+    assert reports[0] == reports[1] and f"| minatar-breakout | 0.37 | 8.56 | {NEW_ARM} | 1 |" in text
+    assert "Holm over the 30 comparisons" in text and f"IQM({NEW_ARM}) − IQM(ce) =" in text
 
 
 def test_the_command_refuses_what_it_cannot_do(tmp_path):
@@ -86,11 +89,15 @@ def test_the_command_refuses_what_it_cannot_do(tmp_path):
 
 @pytest.mark.slow
 def test_the_committed_report_is_what_the_committed_archive_gives(tmp_path):
-    """docs/PAST_TEACHER.md regenerates byte for byte from docs/data/past-teacher.tar.xz and §13's archive."""
+    """docs/PAST_TEACHER.md regenerates byte for byte from docs/data/past-teacher.tar.xz and §13's archive,
+    its figures drawn."""
     docs = REPO / "docs"
     done = run(
         "-m", "studies.past_teacher", "--out", docs / "data" / "past-teacher.tar.xz", "--no-run",
-        "--report", tmp_path / "PAST_TEACHER.md",
+        "--report", tmp_path / "PAST_TEACHER.md", "--figures", tmp_path,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "PAST_TEACHER.md").read_bytes() == (docs / "PAST_TEACHER.md").read_bytes()
+    for name in ("profile", "iqm", "games"):  # drawn, each arm a colour: not asserted byte for byte (CPU-bound fonts)
+        pixels = np.asarray(Image.open(tmp_path / f"past_teacher_{name}.png").convert("RGB"))
+        assert pixels.shape[0] > 100 and len(np.unique(pixels.reshape(-1, 3), axis=0)) > 20, name
