@@ -143,3 +143,33 @@ def test_cli_prints_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(lines) == 2 + sum(len(experts) for experts in EXPERTS.values())
     assert any("| cartpole | strong | CartPole-v1 | 2 | 500.00" in line for line in lines)
     assert any("| mountaincar | imperfect | MountainCar-v0 | 2 |" in line for line in lines)
+
+
+def test_minigrids_teachers_take_the_short_and_the_long_way_round_the_room() -> None:
+    """Empty-8x8, from the top-left corner facing east to the goal in the bottom-right one (a 6×6 floor):
+    turning right at walls is 5 forward, a turn, 5 forward = 11 steps; turning left goes round three
+    walls, 5 + 2 turns + 5 + 1 + 5 + 1 + 5 = 24. MiniGrid pays 1 − 0.9·steps/256 at the goal."""
+    strong = expert_returns("minigrid-empty", "strong", episodes=3, seed=0)
+    imperfect = expert_returns("minigrid-empty", "imperfect", episodes=3, seed=0)
+    np.testing.assert_allclose(strong, 1 - 0.9 * 11 / 256)
+    np.testing.assert_allclose(imperfect, 1 - 0.9 * 24 / 256)
+
+
+def test_a_preset_whose_package_is_missing_says_how_to_install_it(tmp_path) -> None:
+    """train.py as a user runs it on a machine without minigrid: one line and exit 2, nothing written."""
+    import subprocess
+    import sys
+
+    from helpers import ENV, REPO
+
+    code = (
+        "import runpy, sys; sys.modules['minigrid'] = None; "
+        f"sys.argv = ['train.py', '--task', 'minigrid-empty', '--quick', '--out', {str(tmp_path / 'run')!r}]; "
+        "runpy.run_path('train.py', run_name='__main__')"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, env=ENV, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == (
+        "error: task 'minigrid-empty' needs the minigrid package: pip install minigrid"
+    )
+    assert not (tmp_path / "run").exists()

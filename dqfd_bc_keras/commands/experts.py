@@ -25,7 +25,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             r = expert_returns(family, name, args.episodes, args.seed, args.epsilon)
             print(
                 f"| {family} | {name} | {preset.env_id} | {args.episodes} "
-                f"| {r.mean():.2f} ± {r.std():.2f} | {r.min():.0f} | {r.max():.0f} |"
+                f"| {r.mean():.2f} ± {r.std():.2f} | {r.min():g} | {r.max():g} |"  # MiniGrid's are fractions
             )
     return 0
 

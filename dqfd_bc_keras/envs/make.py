@@ -29,6 +29,7 @@ return next to the shaped one; `evaluation` always scores on the plain env itsel
 from __future__ import annotations
 
 import functools
+import importlib
 import inspect
 import json
 from collections.abc import Mapping
@@ -61,8 +62,17 @@ SUPPORTED_SPACES = (
 
 def get_task(name: str) -> TaskSpec:
     """The preset called `name` (or `module:preset`, registered by `module`), else the Gymnasium
-    env with that id (`env_task`)."""
-    return find_preset(name) or env_task(name)
+    env with that id (`env_task`). A preset of a package's env (`minigrid:MiniGrid-…`) imports the
+    package, which registers the id; a one-line `ConfigError` if it is not installed."""
+    spec = find_preset(name)
+    if spec is None:
+        return env_task(name)
+    if (parsed := parse(spec.env_id)) is not None:
+        try:
+            importlib.import_module(parsed[0])
+        except ModuleNotFoundError:
+            raise ConfigError(f"task {name!r} needs the {parsed[0]} package: pip install {parsed[0]}") from None
+    return spec
 
 
 @functools.cache

@@ -239,7 +239,7 @@ class FlattenObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
     """Observations as `layout` flattens them: a float32 Box of `layout.dim` features."""
 
     def __init__(self, env: gym.Env, layout: ObservationLayout) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.utils.RecordConstructorArgs.__init__(self, layout=layout)  # env.spec remakes it (check_env does)
         gym.ObservationWrapper.__init__(self, env)
         self.layout = layout
         flat = gym.spaces.flatten_space(layout.kept)

@@ -1,7 +1,7 @@
 """The registry of task presets: one module per family holds everything about it.
 
 A family module (cartpole.py, mountaincar.py, acrobot.py, lunarlander.py, minatar.py, and
-minatar_asterix.py, minatar_seaquest.py, minatar_space_invaders.py for the other MinAtar games)
+minatar_asterix.py, minatar_seaquest.py, minatar_space_invaders.py for the other MinAtar games, minigrid.py)
 declares, for each of its presets, which plain Gymnasium env it wraps and how (ALGORITHM.md §6), the
 preset's Config defaults and its scripted experts; what the lab judges it by is the lab's (experiments/lab_settings.py).
 Adding a family to the package is one such module (imported below) and its tests. A preset of your
@@ -18,6 +18,7 @@ This package imports neither TensorFlow nor Gymnasium: reading a config.json loa
 # isort: off
 from dqfd_bc_keras.tasks import cartpole, mountaincar, acrobot, lunarlander, minatar  # noqa: F401  (they register, in this order)
 from dqfd_bc_keras.tasks import minatar_asterix, minatar_seaquest, minatar_space_invaders  # noqa: F401  (then these)
+from dqfd_bc_keras.tasks import minigrid  # noqa: F401  (and MiniGrid's room)
 
 # isort: on
 from dqfd_bc_keras.tasks.registry import (
