@@ -7,6 +7,9 @@ its own generated report in docs/. They are not part of the installed package (t
     sb3_pixels.py     SB3's DQN with MinAtar's network and rl-zoo3's Atari schedule: the MinAtar baseline
     minatar_study.py  the five MinAtar games: normalised scores, IQM, profiles (docs/MINATAR.md)
     sigma0.py         the Bayesian loss with σ0² below the variance cap, against ce (docs/SIGMA0.md)
+    tuned.py          a tuning study's params against the preset's defaults on fresh seeds (docs/TUNING.md)
+    past_teacher.py   issue W on the five MinAtar games: the pilot's new arm beside §13's (docs/PAST_TEACHER.md)
+    past_teacher_vector.py  issue W on Acrobot, LunarLander and MiniGrid, and the 10× question (§15)
 
     python -m studies.pixels --out docs/data/pixels.tar.xz --no-run --report docs/PIXELS.md
     python -m studies.minatar_study --out docs/data/minatar.tar.xz --no-run \

@@ -23,8 +23,8 @@ figures `minatar_*.png` in that directory.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +60,7 @@ BUDGET = 100_000
 PROTOCOL = {"eval_every": 5_000, "eval_episodes": 10}
 SEEDS = 10
 """Per arm and game, by power (PREREGISTRATION §13)."""
+NUMBERS = ("no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine", "ten")
 ANCHORS = {
     "minatar-asterix": (0.60, 28.58),
     "minatar-breakout": (0.37, 8.56),
@@ -163,6 +164,27 @@ class Study:
     """The arms, in the report's order."""
     dqfd: tuple[str, ...] = DQFD
     """The arms that learn from demonstrations: the ones the questions judge (the others are described)."""
+    anchors: Mapping[str, tuple[float, float]] = field(default_factory=lambda: ANCHORS)
+    """Task → (uniform random policy, teacher): the tasks, in order, and their normalisation."""
+    unit: str = "game"
+    """What a task is called in the report."""
+
+    @property
+    def games(self) -> tuple[str, ...]:
+        return tuple(self.anchors)
+
+    @property
+    def every_game(self) -> str:
+        """ "all five games": what a complete seed has run on."""
+        count = len(self.games)
+        return (
+            f"both {self.unit}s"
+            if count == 2
+            else f"all {NUMBERS[count] if count < len(NUMBERS) else count} {self.unit}s"
+        )
+
+    def normalised(self, game: str, value: float | np.ndarray) -> float | np.ndarray:
+        return normalised(game, value, self.anchors)
 
     def final(self, game: str, method: str) -> dict[int, float]:
         """Seed → the mean greedy return at the budget (the run's last grid point)."""
@@ -170,23 +192,25 @@ class Study:
 
     def complete_seeds(self, method: str) -> list[int]:
         """The seeds that `method` has finished on every game (the rows of its score matrix)."""
-        have = [set(self.runs.get((game, method), {})) for game in GAMES]
+        have = [set(self.runs.get((game, method), {})) for game in self.games]
         return sorted(set.intersection(*have))
 
     def scores(self, method: str) -> np.ndarray:
         """(complete seeds, games) normalised scores at the budget."""
         seeds = self.complete_seeds(method)
-        return np.array([[normalised(game, self.final(game, method)[s]) for game in GAMES] for s in seeds]).reshape(
-            len(seeds), len(GAMES)
-        )
+        return np.array(
+            [[self.normalised(game, self.final(game, method)[s]) for game in self.games] for s in seeds]
+        ).reshape(len(seeds), len(self.games))
 
     @property
     def complete(self) -> bool:
-        return all(len(self.runs.get((g, m), {})) >= self.seeds for g in GAMES for m in self.methods)
+        return all(len(self.runs.get((g, m), {})) >= self.seeds for g in self.games for m in self.methods)
 
 
-def normalised(game: str, value: float | np.ndarray) -> float | np.ndarray:
-    random, teacher = ANCHORS[game]
+def normalised(
+    game: str, value: float | np.ndarray, anchors: Mapping[str, tuple[float, float]] = ANCHORS
+) -> float | np.ndarray:
+    random, teacher = anchors[game]
     return (value - random) / (teacher - random)
 
 
@@ -240,38 +264,38 @@ def run_or_read(
 
 def steps_to_teacher(study: Study, game: str, method: str) -> dict[int, float]:
     """Seed → the first grid point whose mean greedy return reaches the teacher's (inf: never)."""
-    teacher = ANCHORS[game][1]
+    teacher = study.anchors[game][1]
     return {
         seed: np.inf if (first := first_reaching(evals, teacher)) is None else first
         for seed, evals in study.runs.get((game, method), {}).items()
     }
 
 
-def _number(value: float, digits: int = 2) -> str:
+def number(value: float, digits: int = 2) -> str:
     return "∞" if np.isinf(value) else f"{value:,.{digits}f}"
 
 
 def _interval(low: float, high: float, digits: int = 2) -> str:
-    return f"[{_number(low, digits)}, {_number(high, digits)}]"
+    return f"[{number(low, digits)}, {number(high, digits)}]"
 
 
-def _label(method: str) -> str:
+def arm_label(method: str) -> str:
     return "none (DQN, no demonstrations)" if method == "none" else method
 
 
 def teacher_rows(study: Study, judged: bool) -> list[str]:
     """Q1, per game: each arm's median return at the budget with its 95% CI, against the teacher (§7's rule)."""
     lines = [
-        "| game | random | teacher | arm | runs | median return at the budget [95% CI] | normalised | "
+        f"| {study.unit} | random | teacher | arm | runs | median return at the budget [95% CI] | normalised | "
         "against the teacher |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
-    for game in GAMES:
-        random, teacher = ANCHORS[game]
+    for game in study.games:
+        random, teacher = study.anchors[game]
         for method in study.methods:
             final = list(study.final(game, method).values())
             if not final:
-                lines.append(f"| {game} | {random:g} | {teacher:g} | {_label(method)} | 0 | not run | | |")
+                lines.append(f"| {game} | {random:g} | {teacher:g} | {arm_label(method)} | 0 | not run | | |")
                 continue
             median, low, high, verdict = teacher_verdict(final, teacher)
             verdict = "does not beat it" if verdict == "does not" else verdict
@@ -281,8 +305,8 @@ def teacher_rows(study: Study, judged: bool) -> list[str]:
             elif not judged:
                 verdict = f"interim: {verdict}"
             lines.append(
-                f"| {game} | {random:g} | {teacher:g} | {_label(method)} | {len(final)} | {median:.2f} "
-                f"{_interval(low, high)} | {normalised(game, median):.2f} | {verdict} |"
+                f"| {game} | {random:g} | {teacher:g} | {arm_label(method)} | {len(final)} | {median:.2f} "
+                f"{_interval(low, high)} | {study.normalised(game, median):.2f} | {verdict} |"
             )
     return lines
 
@@ -290,14 +314,14 @@ def teacher_rows(study: Study, judged: bool) -> list[str]:
 def aggregate_rows(study: Study, judged: bool) -> list[str]:
     """Across games: each arm's IQM of normalised scores with its 95% stratified bootstrap CI."""
     lines = [
-        "| arm | seeds on all five games | IQM of normalised scores [95% CI] | mean | runs above the teacher | "
-        "across games |",
+        f"| arm | seeds on {study.every_game} | IQM of normalised scores [95% CI] | mean | runs above the teacher | "
+        f"across {study.unit}s |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for method in study.methods:
         scores = study.scores(method)
         if scores.size == 0:
-            lines.append(f"| {_label(method)} | 0 | no seed on all five games yet | | | |")
+            lines.append(f"| {arm_label(method)} | 0 | no seed on {study.every_game} yet | | | |")
             continue
         low, high = stratified_bootstrap_ci(scores, iqm, 0.95, RESAMPLES, RNG_SEED)
         above = float(score_distribution(scores, [1.0])[0])
@@ -309,7 +333,7 @@ def aggregate_rows(study: Study, judged: bool) -> list[str]:
             else f"({verdict}; {'interim' if method in study.dqfd else 'described'})"
         )
         lines.append(
-            f"| {_label(method)} | {scores.shape[0]} | {iqm(scores.reshape(-1)):.2f} {_interval(low, high)} | "
+            f"| {arm_label(method)} | {scores.shape[0]} | {iqm(scores.reshape(-1)):.2f} {_interval(low, high)} | "
             f"{scores.mean():.2f} | {above:.0%} | {verdict} |"
         )
     return lines
@@ -320,27 +344,27 @@ def sooner_rows(study: Study, judged: bool) -> list[str]:
     never reached ranked last, Holm over every DQfD arm × 2 × 5 games: §13's 20 comparisons)."""
     steps_of = {
         (g, m): np.array(list(steps_to_teacher(study, g, m).values()), dtype=float)
-        for g in GAMES
+        for g in study.games
         for m in study.methods
     }
     tests = {
         (game, method, other): mann_whitney(steps_of[game, method], steps_of[game, other])[1]
-        for game in GAMES
+        for game in study.games
         for method in study.dqfd
         for other in ("none", SB3_METHOD)
         if steps_of[game, method].size and steps_of[game, other].size
     }
-    adjusted = dict(zip(tests, holm(list(tests.values()), len(study.dqfd) * 2 * len(GAMES)), strict=True))
+    adjusted = dict(zip(tests, holm(list(tests.values()), len(study.dqfd) * 2 * len(study.games)), strict=True))
     lines = [
-        "| game | arm | reached the teacher | median interactions [95% CI] | against DQN (none): Holm p | "
+        f"| {study.unit} | arm | reached the teacher | median interactions [95% CI] | against DQN (none): Holm p | "
         "against SB3: Holm p |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
-    for game in GAMES:
+    for game in study.games:
         for method in study.methods:
             steps = steps_of[game, method]
             if steps.size == 0:
-                lines.append(f"| {game} | {_label(method)} | not run | | | |")
+                lines.append(f"| {game} | {arm_label(method)} | not run | | | |")
                 continue
             low, high = bootstrap_ci(steps, np.median, 0.95, RESAMPLES, RNG_SEED)
             cells = []
@@ -353,8 +377,8 @@ def sooner_rows(study: Study, judged: bool) -> list[str]:
                 word = ("sooner" if sooner else "later") if p < 0.05 else "no measurable difference"
                 cells.append(f"{p:.3f}: {word if judged else 'interim: ' + word}")
             lines.append(
-                f"| {game} | {_label(method)} | {int(np.isfinite(steps).sum())}/{steps.size} | "
-                f"{_number(np.median(steps), 0)} {_interval(low, high, 0)} | {' | '.join(cells)} |"
+                f"| {game} | {arm_label(method)} | {int(np.isfinite(steps).sum())}/{steps.size} | "
+                f"{number(np.median(steps), 0)} {_interval(low, high, 0)} | {' | '.join(cells)} |"
             )
     return lines
 
@@ -382,15 +406,16 @@ def difference(study: Study, judged: bool, first: str = "bayes", second: str = "
     gap = iqm(a.reshape(-1)) - iqm(b.reshape(-1))
     lines = [
         f"IQM({first}) − IQM({second}) = {gap:+.3f}, 95% CI {_interval(*wide, 3)}, 90% CI {_interval(*narrow, 3)} "
-        f"({a.shape[0]} and {b.shape[0]} seeds on all five games): "
+        f"({a.shape[0]} and {b.shape[0]} seeds on {study.every_game}): "
         f"**{verdict if judged else 'interim, not judged: ' + verdict}**.",
         "",
-        f"| game | {first} median | {second} median | Mann–Whitney p (Holm over 5 games) |",
+        f"| {study.unit} | {first} median | {second} median | Mann–Whitney p (Holm over {len(study.games)} "
+        f"{study.unit}s) |",
         "| --- | --- | --- | --- |",
     ]
-    pairs = [(list(study.final(g, first).values()), list(study.final(g, second).values())) for g in GAMES]
-    ps = holm([mann_whitney(x, y)[1] if x and y else 1.0 for x, y in pairs], len(GAMES))
-    for game, (x, y), p in zip(GAMES, pairs, ps, strict=True):
+    pairs = [(list(study.final(g, first).values()), list(study.final(g, second).values())) for g in study.games]
+    ps = holm([mann_whitney(x, y)[1] if x and y else 1.0 for x, y in pairs], len(study.games))
+    for game, (x, y), p in zip(study.games, pairs, ps, strict=True):
         if x and y:
             lines.append(f"| {game} | {np.median(x):.2f} | {np.median(y):.2f} | {p:.3f} |")
     return lines
@@ -400,23 +425,23 @@ def grid_scores(study: Study, method: str) -> tuple[np.ndarray, np.ndarray]:
     """The evaluation grid's interactions (as the runs record them), and a (points, complete seeds, games) array
     of normalised scores."""
     seeds = study.complete_seeds(method)
-    points = np.array(sorted({x for game in GAMES for seed in seeds for x, _ in study.runs[game, method][seed]}))
-    cube = np.full((points.size, len(seeds), len(GAMES)), np.nan)
-    for g, game in enumerate(GAMES):
+    points = np.array(sorted({x for game in study.games for seed in seeds for x, _ in study.runs[game, method][seed]}))
+    cube = np.full((points.size, len(seeds), len(study.games)), np.nan)
+    for g, game in enumerate(study.games):
         for s, seed in enumerate(seeds):
             evals = dict(study.runs[game, method][seed])
             for p, point in enumerate(points):
                 if point in evals:
-                    cube[p, s, g] = normalised(game, evals[point])
+                    cube[p, s, g] = study.normalised(game, evals[point])
     return points, cube
 
 
-def _legend(ax) -> None:
+def _legend(ax, study: Study) -> None:
     """A legend where something is drawn; an empty axis (no seed on all games yet) says so."""
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7)
     else:
-        ax.text(0.5, 0.5, "no seed on all five games yet", ha="center", va="center", transform=ax.transAxes)
+        ax.text(0.5, 0.5, f"no seed on {study.every_game} yet", ha="center", va="center", transform=ax.transAxes)
 
 
 def figures(study: Study, directory: Path, prefix: str = "minatar") -> list[str]:
@@ -431,34 +456,34 @@ def figures(study: Study, directory: Path, prefix: str = "minatar") -> list[str]
                 band = stratified_bootstrap_ci(
                     scores, lambda x, axis=None: score_distribution(x, TAUS, axis), 0.95, RESAMPLES, RNG_SEED
                 )
-                ax.plot(TAUS, score_distribution(scores, TAUS), color=colors[method], label=f"{_label(method)}")
+                ax.plot(TAUS, score_distribution(scores, TAUS), color=colors[method], label=f"{arm_label(method)}")
                 ax.fill_between(TAUS, band[0], band[1], color=colors[method], alpha=0.2, linewidth=0)
         ax.axvline(1.0, color="grey", linestyle=":", linewidth=1)
         ax.set(xlabel="normalised score τ (random 0, teacher 1)", ylabel="share of runs with score > τ")
-        _legend(ax)
+        _legend(ax, study)
     with _figure(curve, figsize=(6, 4)) as (_, ax):
         for method in study.methods:
             points, cube = grid_scores(study, method)
             if cube.shape[1]:
                 mean = [iqm(c.reshape(-1)) for c in cube]
                 bands = np.array([stratified_bootstrap_ci(c, iqm, 0.95, 2_000, RNG_SEED) for c in cube])
-                ax.plot(points, mean, color=colors[method], label=_label(method))
+                ax.plot(points, mean, color=colors[method], label=arm_label(method))
                 ax.fill_between(points, bands[:, 0], bands[:, 1], color=colors[method], alpha=0.2, linewidth=0)
         ax.axhline(1.0, color="grey", linestyle=":", linewidth=1)
         ax.set(xlabel="interactions", ylabel="IQM of normalised scores")
-        _legend(ax)
-    with _figure(games, nrows=1, ncols=len(GAMES), figsize=(3 * len(GAMES), 3)) as (_, axes):
-        for ax, game in zip(axes, GAMES, strict=True):
+        _legend(ax, study)
+    with _figure(games, nrows=1, ncols=len(study.games), figsize=(3 * len(study.games), 3)) as (_, axes):
+        for ax, game in zip(axes, study.games, strict=True):
             for method in study.methods:
                 seeds = study.runs.get((game, method), {})
                 if seeds:
                     xs = [x for x, _ in next(iter(seeds.values()))]
                     ys = np.mean([[y for _, y in evals][: len(xs)] for evals in seeds.values()], axis=0)
-                    ax.plot(xs, ys, color=colors[method], label=_label(method))
-            ax.axhline(ANCHORS[game][1], color="grey", linestyle=":", linewidth=1)
+                    ax.plot(xs, ys, color=colors[method], label=arm_label(method))
+            ax.axhline(study.anchors[game][1], color="grey", linestyle=":", linewidth=1)
             ax.set(title=game.removeprefix("minatar-"), xlabel="interactions")
         axes[0].set_ylabel("mean greedy return over seeds\n(dotted: the teacher)")
-        _legend(axes[0])
+        _legend(axes[0], study)
     return [
         f"![{name}](figures/{path.name})"
         for name, path in (("performance profile", profile), ("IQM", curve), ("games", games))
@@ -472,12 +497,12 @@ def status(study: Study) -> str:
             f"**Complete: {study.seeds} seeds of every arm on every game; the verdicts below are the pre-registered "
             "ones.**"
         )
-    counts = {m: min(len(study.runs.get((g, m), {})) for g in GAMES) for m in study.methods}
-    finished = sum(len(study.runs.get((g, m), {})) for g in GAMES for m in study.methods)
+    counts = {m: min(len(study.runs.get((g, m), {})) for g in study.games) for m in study.methods}
+    finished = sum(len(study.runs.get((g, m), {})) for g in study.games for m in study.methods)
     return (
-        f"**Interim: {finished} of {study.seeds * len(GAMES) * len(study.methods)} runs finished (seeds finished on "
-        "all five games: "
-        + ", ".join(f"{_label(m)} {counts[m]}" for m in study.methods)
+        f"**Interim: {finished} of {study.seeds * len(study.games) * len(study.methods)} runs finished (seeds finished "
+        f"on {study.every_game}: "
+        + ", ".join(f"{arm_label(m)} {counts[m]}" for m in study.methods)
         + f", of {study.seeds}). Numbers are described; no pre-registered verdict is given until every arm has "
         "every seed on every game.**"
     )

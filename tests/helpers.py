@@ -32,6 +32,7 @@ from dqfd_bc_keras.experiments.suites import SUITES
 from dqfd_bc_keras.tasks import TASKS
 from studies.minatar_study import main as minatar_study_main
 from studies.past_teacher import main as past_teacher_main
+from studies.past_teacher_vector import main as past_teacher_vector_main
 from studies.pixels import main as pixels_main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -45,6 +46,7 @@ PROGRAMS: dict[str, Callable[[Sequence[str] | None], int]] = {
     "studies.pixels": pixels_main,
     "studies.minatar_study": minatar_study_main,
     "studies.past_teacher": past_teacher_main,
+    "studies.past_teacher_vector": past_teacher_vector_main,
 }
 """Each command by the names a user types it (a script, a console script, a `python -m` module)."""
 PROCESS_CACHES = (make.env_task, make._task_spaces, make._own_limit)

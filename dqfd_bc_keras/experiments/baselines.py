@@ -35,9 +35,14 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from importlib.metadata import version
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Any, NamedTuple, TypedDict
+from typing import Any, NamedTuple, NotRequired, TypedDict, cast
+
+import gymnasium as gym
+import numpy as np
 
 from dqfd_bc_keras.core.config import QUICK
+from dqfd_bc_keras.envs.episodes import play
+from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.evaluation import evaluate
 from dqfd_bc_keras.experiments.arm_config import Arm
 from dqfd_bc_keras.experiments.data import load_runs
@@ -46,6 +51,7 @@ from dqfd_bc_keras.experiments.metrics import first_reaching, solved_return
 from dqfd_bc_keras.experiments.suites import PROTOCOL, SUITES
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_suite
 from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.plugins import load as load_object
 from dqfd_bc_keras.seeds import eval_seed
 
 PARTS = ("ours", "sb3")
@@ -56,12 +62,14 @@ QUICK_PROTOCOL, QUICK_SB3_STEPS = {**PROTOCOL, "eval_every": 300}, 1500
 
 
 class ZooEntry(TypedDict):
-    """An rl-baselines3-zoo entry: the env id, the policy, one `learn()` budget and DQN's keyword arguments."""
+    """An rl-baselines3-zoo entry: the env id, the policy, one `learn()` budget and DQN's keyword arguments,
+    and the observation wrapper rl-zoo3 puts on the env (`module:Class`), if any."""
 
     env: str
     policy: str
     n_timesteps: int
     kwargs: dict[str, Any]
+    env_wrapper: NotRequired[str]
 
 
 # rl-baselines3-zoo's tuned DQN entries, verbatim: hyperparams/dqn.yml of DLR-RM/rl-baselines3-zoo
@@ -126,6 +134,16 @@ ZOO: dict[str, ZooEntry] = {
         }
         for task, env in (("acrobot", "Acrobot-v1"), ("lunarlander", "LunarLander-v3"))
     },
+    # rl-zoo3 has no DQN entry for MiniGrid (its MiniGrid entries are PPO's): its `default` entry, SB3's own
+    # DQN defaults and MlpPolicy, on the wrapper its MiniGrid entries use (hyperparams/ppo.yml: the 7×7×3 view
+    # and the mission, flattened). `n_timesteps` is the budget PREREGISTRATION §15's pilot gives.
+    "minigrid-empty": {
+        "env": "MiniGrid-Empty-8x8-v0",
+        "policy": "MlpPolicy",
+        "n_timesteps": 100_000,
+        "kwargs": {},
+        "env_wrapper": "minigrid.wrappers:FlatObsWrapper",
+    },
 }
 ANCHOR = {"cartpole": 28_000, "mountaincar": 90_000}
 """An independent check of this baseline (one `learn()`, an evaluation callback): SB3's DQN with the
@@ -183,8 +201,13 @@ def sb3_run(task: str, seed: int, budget: int, every: int, path: Path) -> None:
 
         def _evaluate(self) -> None:
             policy = lambda obs: int(self.model.predict(obs, deterministic=True)[0])
-            result = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=eval_seed(seed))
-            self.evals.append((self.num_timesteps, result.mean_return))
+            seeds = range(eval_seed(seed), eval_seed(seed) + PROTOCOL["eval_episodes"])
+            if wrapper is None:
+                mean = evaluate(policy, task, PROTOCOL["eval_episodes"], seed=eval_seed(seed)).mean_return
+            else:  # the plain env as SB3 sees it, through rl-zoo3's wrapper: its rewards and ends untouched
+                with wrapper(gym.make(spec["env"])) as plain:
+                    mean = float(np.mean(play(plain, policy, seeds).returns))
+            self.evals.append((self.num_timesteps, mean))
 
         def _on_training_start(self) -> None:
             self._evaluate()
@@ -195,8 +218,13 @@ def sb3_run(task: str, seed: int, budget: int, every: int, path: Path) -> None:
             return True
 
     torch.set_num_threads(1)
-    spec, grid, started = ZOO[task], Grid(), time.perf_counter()
-    env = make_vec_env(spec["env"], n_envs=1, seed=seed)  # as rl-zoo3: DummyVecEnv of a Monitor
+    spec = ZOO[task]
+    wrapper: Callable[[gym.Env], gym.Env] | None = None
+    if "env_wrapper" in spec:
+        wrapper = cast(Callable[[gym.Env], gym.Env], load_object(spec["env_wrapper"], f"{task}'s env_wrapper"))
+    grid, started = Grid(), time.perf_counter()
+    # as rl-zoo3 makes it: a DummyVecEnv of a Monitor, wrapped in the entry's env_wrapper
+    env = make_vec_env(spec["env"], n_envs=1, seed=seed, wrapper_class=wrapper)
     model = DQN(spec["policy"], env, seed=seed, verbose=0, **spec["kwargs"])
     model.learn(total_timesteps=budget, callback=grid)
     write_text(
@@ -223,7 +251,11 @@ def sb3_settings(task: str, seed: int, budget: int, every: int) -> dict:
         "eval_every": every,
         "eval_episodes": PROTOCOL["eval_episodes"],
         "eval_seed": eval_seed(seed),
-        "hyperparameters": {"policy": spec["policy"], **spec["kwargs"]},
+        "hyperparameters": {
+            "policy": spec["policy"],
+            **spec["kwargs"],
+            **({"env_wrapper": spec["env_wrapper"]} if "env_wrapper" in spec else {}),
+        },
     }
 
 
@@ -239,6 +271,38 @@ class SB3Job(NamedTuple):
         """Its file exists and records the settings asked for (a changed setting reruns it)."""
         wanted = sb3_settings(self.task, self.seed, self.budget, self.every)
         return self.path.is_file() and wanted.items() <= json.loads(self.path.read_text()).items()
+
+
+def _at(step: float | None) -> str:
+    return "never" if step is None else f"{step:,.0f}"
+
+
+def run_sb3(
+    jobs: Sequence[SB3Job],
+    workers: int,
+    progress: Callable[[str], None] = print,
+    finished: Callable[[SB3Job], None] | None = None,
+) -> None:
+    """The jobs whose files are missing or stale, on a process pool; `finished(job)` as each ends."""
+    todo = [job for job in jobs if not job.current]
+    progress(f"SB3 DQN: {len(jobs)} runs, {len(jobs) - len(todo)} complete, {len(todo)} to run on {workers} worker(s)")
+    if not todo:
+        return
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(sb3_run, *job): job for job in todo}
+        for done, future in enumerate(as_completed(futures), start=1):
+            future.result()
+            job = futures[future]
+            run = json.loads(job.path.read_text())
+            threshold = get_task(job.task).solved_return
+            first = None if threshold is None else first_reaching(run["evals"], threshold)
+            reached = "" if threshold is None else f"threshold first reached at {_at(first)}, "
+            progress(
+                f"[{done}/{len(todo)}] sb3 {job.task} seed{job.seed}: {reached}final return "
+                f"{run['evals'][-1][1]:.2f} ({run['seconds']:.0f} s)"
+            )
+            if finished is not None:
+                finished(job)
 
 
 def sb3(
@@ -264,20 +328,7 @@ def sb3(
         for task in tasks
         for seed in range(seeds)
     }
-    todo = [] if complete_only else [job for job in jobs.values() if not job.current]
-    current = sum(job.current for job in jobs.values())
-    progress(f"SB3 DQN: {len(jobs)} runs, {current} complete, {len(todo)} to run on {workers} worker(s)")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(sb3_run, *job): job for job in todo}
-        for done, future in enumerate(as_completed(futures), start=1):
-            future.result()
-            job = futures[future]
-            run = json.loads(job.path.read_text())
-            first = first_reaching(run["evals"], solved_return(job.task))
-            progress(
-                f"[{done}/{len(todo)}] sb3 {job.task} seed{job.seed}: threshold first reached at "
-                f"{'never' if first is None else f'{first:,.0f}'} ({run['seconds']:.0f} s)"
-            )
+    run_sb3([] if complete_only else list(jobs.values()), workers, progress)
     steps = []
     for task in tasks:
         evals = [

@@ -160,7 +160,7 @@ def _steps(value: float) -> str:
     return f"{value:,.0f}" if np.isfinite(value) else "∞"
 
 
-def _times(value: float) -> str:
+def times(value: float) -> str:
     return "undefined" if np.isnan(value) else f"{value:.1f}×" if np.isfinite(value) else "∞"
 
 
@@ -181,8 +181,8 @@ def table(arms: list[ArmSteps]) -> list[str]:
         ratio = goal = "—"
         if "ratio" in row:
             point, low, high = row["ratio"]
-            interval = "CI undefined" if np.isnan(low) else f"{_times(low)}, {_times(high)}"
-            ratio = _times(point) + ("" if np.isnan(point) else f" [{interval}]")
+            interval = "CI undefined" if np.isnan(low) else f"{times(low)}, {times(high)}"
+            ratio = times(point) + ("" if np.isnan(point) else f" [{interval}]")
             goal = f"{arm.target:g}×: " + ("met" if row["target_met"] else "—" if np.isnan(point) else "not met")
             notes.add("undefined" if np.isnan(low) else "open" if high == np.inf else "")
         final = f"{row['above_at_end']}/{row['seeds']} ({np.median(arm.final):.1f}"

@@ -1,0 +1,88 @@
+"""W's study on Acrobot, LunarLander and MiniGrid (PREREGISTRATION §15): the pilot's budget rule by hand,
+the anchors as measured, and the command as a user runs it (quick runs exported as they finish, SB3 on
+MiniGrid through rl-zoo3's wrapper, the report regenerated from the archive byte for byte)."""
+
+import json
+import tarfile
+
+import numpy as np
+import pytest
+from helpers import python as run
+
+from dqfd_bc_keras.demos.recording import expert_returns
+from studies import past_teacher_vector as study
+from studies.past_teacher_vector import ANCHORS, PILOT_SEEDS, pilot_budget
+
+A, B = PILOT_SEEDS
+
+
+def reach(none_a, none_b, sb3_a, sb3_b):
+    return {("none", A): none_a, ("none", B): none_b, ("SB3 DQN (rl-zoo3)", A): sb3_a, ("SB3 DQN (rl-zoo3)", B): sb3_b}
+
+
+def test_the_pilots_budget_is_the_smallest_by_which_one_arm_reached_the_teacher_in_both_runs():
+    assert pilot_budget(reach(19_000, 24_000, np.inf, 3_000)) == 25_000  # DQN, both by 25k
+    assert pilot_budget(reach(19_000, 26_000, np.inf, 3_000)) == 50_000  # neither in both by 25k; DQN by 50k
+    assert pilot_budget(reach(60_000, 26_000, 40_000, 50_000)) == 50_000  # SB3 both by 50k
+    assert pilot_budget(reach(60_000, 26_000, np.inf, 3_000)) == 100_000  # DQN both by 100k only
+    assert pilot_budget(reach(np.inf, np.inf, np.inf, np.inf)) == 100_000  # never: 100k, which the study says
+
+
+@pytest.mark.parametrize("task", list(ANCHORS))
+def test_the_anchors_are_the_random_policys_and_the_teachers_mean_over_100_episodes(task):
+    random, teacher = ANCHORS[task]
+    assert np.mean(expert_returns(task, "imperfect", 100, 0, epsilon=1.0)) == pytest.approx(random, abs=0.01)
+    assert np.mean(expert_returns(task, "imperfect", 100, 0)) == pytest.approx(teacher, abs=0.01)
+
+
+def test_the_study_reuses_only_sevens_bayes_and_sb3_runs():
+    assert set(study.REUSED_ARMS) == {
+        (t, m) for t in ("acrobot", "lunarlander") for m in ("bayes", "SB3 DQN (rl-zoo3)")
+    }
+    new = study.new_runs()
+    assert len(new) == 3 * 5 - 4 and not set(new) & set(study.REUSED_ARMS)
+    # §7's bayes runs keep their names (the efficiency suite's arm): a reused run is found where it was made
+    assert study.ours("acrobot", "bayes").name == "acrobot-bootstrap-bayes"
+
+
+@pytest.mark.slow
+def test_the_quick_study_runs_every_arm_exports_each_run_and_reports_from_its_archive(tmp_path):
+    out, archive = tmp_path / "runs", tmp_path / "vector.tar.xz"
+    done = run("-m", "studies.past_teacher_vector", "--out", out, "--archive", archive, "--quick")
+    assert done.returncode == 0, done.stderr
+    with tarfile.open(archive) as tar:
+        names = tar.getnames()
+    assert sum(name.endswith("/eval.json") for name in names) == 2 * 4  # ours: 4 arms on 2 tasks
+    sb3 = json.loads((out / "sb3-dqn" / "minigrid-empty" / "seed0-quick.json").read_text())
+    assert sb3["hyperparameters"]["env_wrapper"] == "minigrid.wrappers:FlatObsWrapper"
+    assert [x for x, _ in sb3["evals"]] == [0, 100, 200, 300]  # the grid, on SB3's own counter
+    assert all(0.0 <= y <= 1.0 for _, y in sb3["evals"])  # MiniGrid's returns, played through the wrapper
+    reports = []
+    for name in ("a.md", "b.md"):
+        args = ("--out", archive, "--no-run", "--quick", "--report", tmp_path / name)
+        done = run("-m", "studies.past_teacher_vector", *args)
+        assert done.returncode == 0, done.stderr
+        reports.append((tmp_path / name).read_bytes())
+    text = reports[0].decode()
+    assert reports[0] == reports[1] and "| minigrid-empty | 0.0846 | 0.9156 | ce_decay | 1 |" in text
+    assert "Holm over the 12 comparisons" in text and "| acrobot | -100 | ce_decay | " in text
+
+
+@pytest.mark.slow
+def test_the_quick_pilot_runs_dqn_and_sb3_on_minigrid_and_gives_a_budget(tmp_path):
+    done = run("-m", "studies.past_teacher_vector", "--pilot", tmp_path / "pilot", "--quick", "--workers", 1)
+    assert done.returncode == 0, done.stderr
+    assert "MiniGrid's budget by §15's rule: **" in done.stdout
+    assert len(list((tmp_path / "pilot" / "sb3-dqn" / "minigrid-empty").glob("seed*-quick.json"))) == 2
+
+
+def test_the_command_refuses_what_it_cannot_do(tmp_path):
+    done = run("-m", "studies.past_teacher_vector", "--out", tmp_path / "x.tar.xz", "--quick")
+    assert done.returncode == 2 and "an archive is read, never run into: add --no-run" in done.stderr
+    done = run("-m", "studies.past_teacher_vector")
+    assert done.returncode == 2 and "give --pilot DIR for MiniGrid's budget, or --out DIR" in done.stderr
+    done = run("-m", "studies.past_teacher_vector", "--pilot", tmp_path / "none", "--no-run")
+    assert done.returncode == 2 and "the pilot lacks 4 run(s)" in done.stderr
+    if study.MINIGRID_BUDGET is None:  # before the pilot's choice is committed, the study cannot run
+        done = run("-m", "studies.past_teacher_vector", "--out", tmp_path / "runs", "--no-run")
+        assert done.returncode == 2 and "MiniGrid's budget is the pilot's: run --pilot DIR first" in done.stderr
