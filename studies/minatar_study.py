@@ -238,6 +238,14 @@ def collect(out: Path, seeds: int, quick: bool = False, losses: Sequence[str] = 
     return Study(runs, budget, seeds, tuple(sorted(commits)))
 
 
+def check_out(out: Path, archive: Path | None, no_run: bool) -> None:
+    """A study's --out and --archive as it can use them: an archive is only read; --archive is an archive."""
+    if str(out).endswith(ARCHIVE_SUFFIX) and not no_run:
+        raise ConfigError(f"--out {out}: an archive is read, never run into: add --no-run")
+    if archive is not None and not str(archive).endswith(ARCHIVE_SUFFIX):
+        raise ConfigError(f"--archive {archive}: expected a {ARCHIVE_SUFFIX} file")
+
+
 def run_or_read(
     out: Path,
     seeds: int,
@@ -250,13 +258,10 @@ def run_or_read(
 ) -> Study:
     """The study under `out` as the command's flags ask: an archive is read (never run into); a directory
     gets what it lacks run first (unless `no_run`), starting from `archive` and exporting to it."""
+    check_out(out, archive, no_run)
     if str(out).endswith(ARCHIVE_SUFFIX):
-        if not no_run:
-            raise ConfigError(f"--out {out}: an archive is read, never run into: add --no-run")
         with open_suite(out) as directory:
             return collect(directory, seeds, quick, losses)
-    if archive is not None and not str(archive).endswith(ARCHIVE_SUFFIX):
-        raise ConfigError(f"--archive {archive}: expected a {ARCHIVE_SUFFIX} file")
     if not no_run:
         measure(seeds, workers, out, archive, quick, losses=losses, sb3=sb3)
     return collect(out, seeds, quick, losses)
@@ -551,29 +556,39 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m studies.minatar_study", description=__doc__.split("\n\n")[0])
+def study_arguments(parser: ArgumentParser, runs: str, per: str, figures: str, out_required: bool = False) -> None:
+    """The flags a study shares: its runs' directory (or archive) and the archive it exports to, the seeds,
+    workers, --quick and --no-run, the report and its figures (`figures`_*.png)."""
     parser.add_argument(
-        "--out", type=Path, required=True, help="directory of the study's runs (or its archive, with --no-run)"
+        "--out", type=Path, required=out_required, help=f"directory of {runs} (or its archive, with --no-run)"
     )
     parser.add_argument(
         "--archive", type=Path, help=f"start from this {ARCHIVE_SUFFIX} archive and export to it as runs finish"
     )
-    parser.add_argument(
-        "--seeds", type=positive_int, default=SEEDS, help="seeds per arm and game (default %(default)s)"
-    )
+    parser.add_argument("--seeds", type=positive_int, default=SEEDS, help=f"seeds per {per} (default %(default)s)")
     parser.add_argument("--workers", type=positive_int, default=2, help="parallel runs (default %(default)s)")
     parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs")
     parser.add_argument("--no-run", action="store_true", help="report the runs under --out, run nothing")
     parser.add_argument("--report", type=Path, help="write the markdown report to this file")
-    parser.add_argument("--figures", type=Path, help="write the report's figures (minatar_*.png) into this directory")
+    parser.add_argument(
+        "--figures", type=Path, help=f"write the report's figures ({figures}_*.png) into this directory"
+    )
+
+
+def emit(text: str, report_path: Path | None) -> int:
+    """Print a study's report, and write it to `report_path` if asked."""
+    print(text)
+    if report_path is not None:
+        write_text(report_path, text + "\n")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m studies.minatar_study", description=__doc__.split("\n\n")[0])
+    study_arguments(parser, "the study's runs", "arm and game", "minatar", out_required=True)
     args = parser.parse_args(argv)
     study = run_or_read(args.out, 1 if args.quick else args.seeds, args.quick, args.no_run, args.archive, args.workers)
-    text = report(study, args.figures)
-    print(text)
-    if args.report is not None:
-        write_text(args.report, text + "\n")
-    return 0
+    return emit(report(study, args.figures), args.report)
 
 
 if __name__ == "__main__":

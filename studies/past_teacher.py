@@ -26,11 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.commands.cli import ArgumentParser, run
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, load_runs, open_suite
+from dqfd_bc_keras.experiments.data import load_runs, open_suite
 from dqfd_bc_keras.experiments.run_files import FinishedRun
-from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import TUNE_SEED
 from studies.minatar_study import (
     ANCHORS,
@@ -43,11 +42,13 @@ from studies.minatar_study import (
     aggregate_rows,
     collect,
     difference,
+    emit,
     figures,
     normalised,
     run_or_read,
     sooner_rows,
     status,
+    study_arguments,
     teacher_rows,
 )
 
@@ -179,26 +180,7 @@ def report(study: Study, baseline: Study, weights: dict[tuple[str, str], list[fl
             f"stratified-bootstrap intervals. The new arm `{NEW_ARM}` was picked by §14's pilot; `bayes`, `ce`, "
             "`none` (DQN) and SB3's DQN are §13's runs, reused after §14's check.",
             "",
-            "## Q1: does each DQfD arm beat its teacher?",
-            "",
-            *aggregate_rows(both, judged),
-            "",
-            *teacher_rows(both, judged),
-            "",
-            "## Q2: does it reach the teacher's score sooner than DQN and SB3?",
-            "",
-            "Holm over the 30 comparisons (3 DQfD arms × DQN and SB3 × 5 games).",
-            "",
-            *sooner_rows(both, judged),
-            "",
-            "## Q3: do bayes and ce differ?",
-            "",
-            "§13's verdict stands as it was read (docs/MINATAR.md); no new runs of either.",
-            "",
-            f"## Q4: does {NEW_ARM} differ from ce?",
-            "",
-            *difference(both, judged, NEW_ARM, "ce"),
-            "",
+            *questions(both, judged, ["§13's verdict stands as it was read (docs/MINATAR.md); no new runs of either."]),
             "## The weight on the agent's states (described, not judged)",
             "",
             *lines,
@@ -212,39 +194,51 @@ def report(study: Study, baseline: Study, weights: dict[tuple[str, str], list[fl
     )
 
 
+def questions(study: Study, judged: bool, q3: Sequence[str]) -> list[str]:
+    """§14's questions, as §14 and §15 ask them: Q1 and Q2 by §13's rules, Q3 (`q3`, its lines), Q4 (the new arm
+    against ce)."""
+    comparisons = f"{len(study.dqfd)} DQfD arms × DQN and SB3 × {len(study.games)} {study.unit}s"
+    return [
+        "## Q1: does each DQfD arm beat its teacher?",
+        "",
+        *aggregate_rows(study, judged),
+        "",
+        *teacher_rows(study, judged),
+        "",
+        "## Q2: does it reach the teacher's score sooner than DQN and SB3?",
+        "",
+        f"Holm over the {len(study.dqfd) * 2 * len(study.games)} comparisons ({comparisons}).",
+        "",
+        *sooner_rows(study, judged),
+        "",
+        "## Q3: do bayes and ce differ?",
+        "",
+        *q3,
+        "",
+        f"## Q4: does {NEW_ARM} differ from ce?",
+        "",
+        *difference(study, judged, NEW_ARM, "ce"),
+        "",
+    ]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m studies.past_teacher", description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--pilot", type=Path, help="report the pilot's runs in this directory or archive, and its choice"
     )
-    parser.add_argument("--out", type=Path, help="directory of the new arm's runs (or its archive, with --no-run)")
-    parser.add_argument(
-        "--archive", type=Path, help=f"start from this {ARCHIVE_SUFFIX} archive and export to it as runs finish"
-    )
-    parser.add_argument("--seeds", type=positive_int, default=SEEDS, help="seeds per game (default %(default)s)")
-    parser.add_argument("--workers", type=positive_int, default=2, help="parallel runs (default %(default)s)")
-    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs")
-    parser.add_argument("--no-run", action="store_true", help="report the runs under --out, run nothing")
-    parser.add_argument("--report", type=Path, help="write the markdown report to this file")
-    parser.add_argument(
-        "--figures", type=Path, help="write the report's figures (past_teacher_*.png) into this directory"
-    )
+    study_arguments(parser, "the new arm's runs", "game", "past_teacher")
     args = parser.parse_args(argv)
     if args.pilot is not None:
-        text = pilot_report(pilot_arms(args.pilot))
-    elif args.out is None:
+        return emit(pilot_report(pilot_arms(args.pilot)), args.report)
+    if args.out is None:
         raise ConfigError("give --pilot PATH, or --out DIR for the new arm's runs")
-    else:
-        seeds = 1 if args.quick else args.seeds
-        study = run_or_read(args.out, seeds, args.quick, args.no_run, args.archive, args.workers, (NEW_ARM,), False)
-        with open_suite(BASELINE) as directory:
-            baseline, weights = collect(directory, SEEDS), agent_weights(directory, ("bayes",))
-        ours = agent_weights(args.out, (NEW_ARM,)) if args.out.exists() else {}
-        text = report(study, baseline, {**weights, **ours}, args.figures)
-    print(text)
-    if args.report is not None:
-        write_text(args.report, text + "\n")
-    return 0
+    seeds = 1 if args.quick else args.seeds
+    study = run_or_read(args.out, seeds, args.quick, args.no_run, args.archive, args.workers, (NEW_ARM,), False)
+    with open_suite(BASELINE) as directory:
+        baseline, weights = collect(directory, SEEDS), agent_weights(directory, ("bayes",))
+    ours = agent_weights(args.out, (NEW_ARM,)) if args.out.exists() else {}
+    return emit(report(study, baseline, {**weights, **ours}, args.figures), args.report)
 
 
 if __name__ == "__main__":

@@ -27,35 +27,34 @@ from pathlib import Path
 
 import numpy as np
 
-from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.commands.cli import ArgumentParser, run
 from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arm_config import Arm, arm
 from dqfd_bc_keras.experiments.baselines import SB3Job, run_sb3
-from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, export_archive, load_runs, open_suite
+from dqfd_bc_keras.experiments.data import export_archive, load_runs, open_suite
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals, ratio_ci, times
 from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.metrics import first_reaching
 from dqfd_bc_keras.experiments.suites import PROTOCOL
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs
-from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import TUNE_SEED
 from studies.minatar_study import (
     SEEDS,
     Seeds,
     Study,
-    aggregate_rows,
     arm_label,
+    check_out,
     difference,
+    emit,
     figures,
     number,
-    sooner_rows,
     status,
-    teacher_rows,
+    study_arguments,
     unpack_missing,
 )
-from studies.past_teacher import NEW_ARM
+from studies.past_teacher import NEW_ARM, questions
 
 ANCHORS = {
     "acrobot": (-499.96, -112.68),
@@ -281,26 +280,7 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
             "the pilot's. Score: the mean greedy return at the budget, normalised per task (random 0, teacher 1; "
             f"random / teacher: {anchors}); across tasks the IQM with 95% stratified-bootstrap intervals.",
             "",
-            "## Q1: does each DQfD arm beat its teacher?",
-            "",
-            *aggregate_rows(study, judged),
-            "",
-            *teacher_rows(study, judged),
-            "",
-            "## Q2: does it reach the teacher's score sooner than DQN and SB3?",
-            "",
-            f"Holm over the {len(study.dqfd) * 2 * len(study.games)} comparisons.",
-            "",
-            *sooner_rows(study, judged),
-            "",
-            "## Q3: do bayes and ce differ?",
-            "",
-            *difference(study, judged),
-            "",
-            f"## Q4: does {NEW_ARM} differ from ce?",
-            "",
-            *difference(study, judged, NEW_ARM, "ce"),
-            "",
+            *questions(study, judged, difference(study, judged)),
             "## Q5: at least 10× fewer interactions to the threshold than SB3?",
             "",
             *ratio_rows(study),
@@ -318,45 +298,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--pilot", type=Path, help="run (what is missing of) MiniGrid's pilot in this directory, and report its budget"
     )
-    parser.add_argument("--out", type=Path, help="directory of the study's new runs (or its archive, with --no-run)")
-    parser.add_argument(
-        "--archive", type=Path, help=f"start from this {ARCHIVE_SUFFIX} archive and export to it as runs finish"
-    )
-    parser.add_argument(
-        "--seeds", type=positive_int, default=SEEDS, help="seeds per arm and task (default %(default)s)"
-    )
-    parser.add_argument("--workers", type=positive_int, default=2, help="parallel runs (default %(default)s)")
-    parser.add_argument("--quick", action="store_true", help="one seed, tiny budgets: checks the command runs")
-    parser.add_argument("--no-run", action="store_true", help="report the runs under --out (or --pilot), run nothing")
-    parser.add_argument("--report", type=Path, help="write the markdown report to this file")
-    parser.add_argument("--figures", type=Path, help="write the report's figures (past_teacher_vector_*.png) here")
+    study_arguments(parser, "the study's new runs", "arm and task", "past_teacher_vector")
     args = parser.parse_args(argv)
     seeds = 1 if args.quick else args.seeds
     if args.pilot is not None:
         steps = QUICK_STEPS["ours"] if args.quick else PILOT_BUDGETS[-1]
         if not args.no_run:
             run_pairs(PILOT, PILOT_SEEDS, args.pilot, SweepOptions(args.workers), args.quick, steps, "pilot")
-        text = pilot_report(pilot_reach(args.pilot, args.quick))
-    elif args.out is None:
+        return emit(pilot_report(pilot_reach(args.pilot, args.quick)), args.report)
+    if args.out is None:
         raise ConfigError("give --pilot DIR for MiniGrid's budget, or --out DIR for the study's runs")
-    else:
-        budget("minigrid-empty", args.quick)  # refused until the pilot's budget is committed
-        if str(args.out).endswith(ARCHIVE_SUFFIX) and not args.no_run:
-            raise ConfigError(f"--out {args.out}: an archive is read, never run into: add --no-run")
-        if args.archive is not None and not str(args.archive).endswith(ARCHIVE_SUFFIX):
-            raise ConfigError(f"--archive {args.archive}: expected a {ARCHIVE_SUFFIX} file")
-        if not args.no_run:
-            if args.archive is not None:
-                unpack_missing(args.archive, args.out)
-            export = (lambda _: export_archive(args.out, args.archive)) if args.archive is not None else None
-            run_pairs(
-                new_runs(args.quick), range(seeds), args.out, SweepOptions(args.workers, finished=export), args.quick
-            )
-        text = report(collect(args.out, seeds, args.quick), args.figures)
-    print(text)
-    if args.report is not None:
-        write_text(args.report, text + "\n")
-    return 0
+    budget("minigrid-empty", args.quick)  # refused until the pilot's budget is committed
+    check_out(args.out, args.archive, args.no_run)
+    if not args.no_run:
+        if args.archive is not None:
+            unpack_missing(args.archive, args.out)
+        export = (lambda _: export_archive(args.out, args.archive)) if args.archive is not None else None
+        options = SweepOptions(args.workers, finished=export)
+        run_pairs(new_runs(args.quick), range(seeds), args.out, options, args.quick)
+    return emit(report(collect(args.out, seeds, args.quick), args.figures), args.report)
 
 
 if __name__ == "__main__":
