@@ -135,7 +135,7 @@ def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_b
     text = reports[0][0].decode()
     for game in GAMES:
         for method in METHODS:
-            assert f"| {game} |" in text and f"| {study._label(method)} |" in text
+            assert f"| {game} |" in text and f"| {study.arm_label(method)} |" in text
     assert "**Interim" not in text  # --quick is one seed of every arm: complete on its own terms
     assert re.search(r"Our runs' code: [0-9a-f]{7}( \(dirty\))?(, |\s)", text)  # from their provenance.json
 
