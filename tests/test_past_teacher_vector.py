@@ -7,6 +7,7 @@ import tarfile
 
 import numpy as np
 import pytest
+from helpers import REPO
 from helpers import python as run
 
 from dqfd_bc_keras.demos.recording import expert_returns
@@ -82,7 +83,21 @@ def test_the_command_refuses_what_it_cannot_do(tmp_path):
     done = run("-m", "studies.past_teacher_vector")
     assert done.returncode == 2 and "give --pilot DIR for MiniGrid's budget, or --out DIR" in done.stderr
     done = run("-m", "studies.past_teacher_vector", "--pilot", tmp_path / "none", "--no-run")
+    assert done.returncode == 2 and "none: no such suite directory or archive" in done.stderr
+    (tmp_path / "empty").mkdir()
+    done = run("-m", "studies.past_teacher_vector", "--pilot", tmp_path / "empty", "--no-run")
     assert done.returncode == 2 and "the pilot lacks 4 run(s)" in done.stderr
-    if study.MINIGRID_BUDGET is None:  # before the pilot's choice is committed, the study cannot run
-        done = run("-m", "studies.past_teacher_vector", "--out", tmp_path / "runs", "--no-run")
-        assert done.returncode == 2 and "MiniGrid's budget is the pilot's: run --pilot DIR first" in done.stderr
+
+
+def test_the_committed_pilot_gives_the_budget_the_study_runs():
+    pilot = REPO / "docs" / "data" / "past-teacher-vector-pilot.tar.xz"
+    reach = study.pilot_reach(pilot)
+    assert reach == {
+        ("none", A): 16_000,
+        ("none", B): 18_000,
+        ("SB3 DQN (rl-zoo3)", A): 21_000,
+        ("SB3 DQN (rl-zoo3)", B): np.inf,
+    }
+    assert pilot_budget(reach) == study.MINIGRID_BUDGET == 25_000
+    done = run("-m", "studies.past_teacher_vector", "--pilot", pilot, "--no-run")
+    assert done.returncode == 0 and "MiniGrid's budget by §15's rule: **25,000** interactions." in done.stdout
