@@ -281,7 +281,9 @@ def report(study: Study, figure_dir: Path | None = None) -> str:
             "Protocol: each task's preset with §7's (10 episodes of the imperfect teacher, 10 greedy episodes on "
             "the plain env every 1,000 counted interactions); budgets: Acrobot and LunarLander 100,000, MiniGrid "
             "the pilot's. Score: the mean greedy return at the budget, normalised per task (random 0, teacher 1; "
-            f"random / teacher: {anchors}); across tasks the IQM with 95% stratified-bootstrap intervals.",
+            f"random / teacher: {anchors}); across tasks the IQM with 95% stratified-bootstrap intervals. SB3's DQN: "
+            "rl-zoo3's tuned entries on Acrobot and LunarLander; on minigrid-empty, where rl-zoo3 has no DQN entry, "
+            "its default one (SB3's own defaults) on rl-zoo3's MiniGrid wrapper, under the same label.",
             "",
             *questions(study, judged, difference(study, judged)),
             "## Q5: at least 10× fewer interactions to the threshold than SB3?",
