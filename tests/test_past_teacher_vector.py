@@ -12,6 +12,7 @@ from helpers import python as run
 
 from dqfd_bc_keras.demos.recording import expert_returns
 from studies import past_teacher_vector as study
+from studies.minatar_study import Study
 from studies.past_teacher_vector import ANCHORS, PILOT_SEEDS, pilot_budget
 
 A, B = PILOT_SEEDS
@@ -46,6 +47,26 @@ def test_the_study_reuses_only_sevens_bayes_and_sb3_runs():
     assert study.ours("acrobot", "bayes").name == "acrobot-bootstrap-bayes"
 
 
+def curve(reached_at):
+    """An Acrobot evaluation curve that first reaches −100 at `reached_at` (None: never) of 20,000."""
+    return [(x, -90.0 if reached_at is not None and x >= reached_at else -400.0) for x in range(0, 20_001, 1000)]
+
+
+def test_q5_divides_sb3s_median_interactions_to_the_threshold_by_each_arms():
+    runs = {
+        ("acrobot", "ce_decay"): {0: curve(1000), 1: curve(1000), 2: curve(2000)},  # median 1,000
+        ("acrobot", "bayes"): {0: curve(4000), 1: curve(5000), 2: curve(None)},  # median 5,000
+        ("acrobot", "SB3 DQN (rl-zoo3)"): {0: curve(9000), 1: curve(10_000), 2: curve(12_000)},  # median 10,000
+    }
+    found = Study(runs, 20_000, 3, (), study.METHODS, study.DQFD, {"acrobot": ANCHORS["acrobot"]}, unit="task")
+    rows = {row.split(" | ")[2]: row for row in study.ratio_rows(found)[2:]}
+    assert rows["ce_decay"].startswith("| acrobot | -100 | ce_decay | 3/3 | 1,000 | 10.0× [")
+    assert rows["ce_decay"].endswith("| met |")  # 10,000 ÷ 1,000 = 10: §3's rule reads the point estimate
+    assert "| 2/3 | 5,000 | 2.0× [" in rows["bayes"] and rows["bayes"].endswith("| not met: 2.0× |")
+    assert rows["ce"] == "| acrobot | -100 | ce | not run | | | |"
+    assert rows["SB3 DQN (rl-zoo3)"].endswith("| 3/3 | 10,000 | — | — |")
+
+
 @pytest.mark.slow
 def test_the_quick_study_runs_every_arm_exports_each_run_and_reports_from_its_archive(tmp_path):
     out, archive = tmp_path / "runs", tmp_path / "vector.tar.xz"
@@ -53,7 +74,9 @@ def test_the_quick_study_runs_every_arm_exports_each_run_and_reports_from_its_ar
     assert done.returncode == 0, done.stderr
     with tarfile.open(archive) as tar:
         names = tar.getnames()
-    assert sum(name.endswith("/eval.json") for name in names) == 2 * 4  # ours: 4 arms on 2 tasks
+    # ours: the 4 arms on MiniGrid and the 3 new ones on Acrobot (§7's bayes and SB3 are not run again)
+    assert sum(name.endswith("/eval.json") for name in names) == 4 + 3
+    assert not (out / "sb3-dqn" / "acrobot").exists()
     sb3 = json.loads((out / "sb3-dqn" / "minigrid-empty" / "seed0-quick.json").read_text())
     assert sb3["hyperparameters"]["env_wrapper"] == "minigrid.wrappers:FlatObsWrapper"
     assert [x for x, _ in sb3["evals"]] == [0, 100, 200, 300]  # the grid, on SB3's own counter
@@ -67,14 +90,6 @@ def test_the_quick_study_runs_every_arm_exports_each_run_and_reports_from_its_ar
     text = reports[0].decode()
     assert reports[0] == reports[1] and "| minigrid-empty | 0.0846 | 0.9156 | ce_decay | 1 |" in text
     assert "Holm over the 12 comparisons" in text and "| acrobot | -100 | ce_decay | " in text
-
-
-@pytest.mark.slow
-def test_the_quick_pilot_runs_dqn_and_sb3_on_minigrid_and_gives_a_budget(tmp_path):
-    done = run("-m", "studies.past_teacher_vector", "--pilot", tmp_path / "pilot", "--quick", "--workers", 1)
-    assert done.returncode == 0, done.stderr
-    assert "MiniGrid's budget by §15's rule: **" in done.stdout
-    assert len(list((tmp_path / "pilot" / "sb3-dqn" / "minigrid-empty").glob("seed*-quick.json"))) == 2
 
 
 def test_the_command_refuses_what_it_cannot_do(tmp_path):
