@@ -499,8 +499,8 @@ def status(study: Study) -> str:
     """Complete (the verdicts are read), or how far the runs are."""
     if study.complete:
         return (
-            f"**Complete: {study.seeds} seeds of every arm on every game; the verdicts below are the pre-registered "
-            "ones.**"
+            f"**Complete: {study.seeds} seeds of every arm on every {study.unit}; the verdicts below are the "
+            "pre-registered ones.**"
         )
     counts = {m: min(len(study.runs.get((g, m), {})) for g in study.games) for m in study.methods}
     finished = sum(len(study.runs.get((g, m), {})) for g in study.games for m in study.methods)
@@ -509,7 +509,7 @@ def status(study: Study) -> str:
         f"on {study.every_game}: "
         + ", ".join(f"{arm_label(m)} {counts[m]}" for m in study.methods)
         + f", of {study.seeds}). Numbers are described; no pre-registered verdict is given until every arm has "
-        "every seed on every game.**"
+        f"every seed on every {study.unit}.**"
     )
 
 

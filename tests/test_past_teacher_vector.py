@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from helpers import REPO
 from helpers import python as run
+from PIL import Image
 
 from dqfd_bc_keras.demos.recording import expert_returns
 from studies import past_teacher_vector as study
@@ -116,3 +117,19 @@ def test_the_committed_pilot_gives_the_budget_the_study_runs():
     assert pilot_budget(reach) == study.MINIGRID_BUDGET == 25_000
     done = run("-m", "studies.past_teacher_vector", "--pilot", pilot, "--no-run")
     assert done.returncode == 0 and "MiniGrid's budget by §15's rule: **25,000** interactions." in done.stdout
+
+
+@pytest.mark.slow
+def test_the_committed_report_is_what_the_committed_archives_give(tmp_path):
+    """docs/PAST_TEACHER_VECTOR.md regenerates byte for byte from docs/data/past-teacher-vector.tar.xz and §7's
+    archive, its figures drawn (not compared byte for byte: fonts and rounding are the machine's)."""
+    docs = REPO / "docs"
+    done = run(
+        "-m", "studies.past_teacher_vector", "--out", docs / "data" / "past-teacher-vector.tar.xz", "--no-run",
+        "--report", tmp_path / "PAST_TEACHER_VECTOR.md", "--figures", tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "PAST_TEACHER_VECTOR.md").read_bytes() == (docs / "PAST_TEACHER_VECTOR.md").read_bytes()
+    for name in ("profile", "iqm", "games"):
+        pixels = np.asarray(Image.open(tmp_path / f"past_teacher_vector_{name}.png").convert("RGB"))
+        assert pixels.shape[0] > 100 and len(np.unique(pixels.reshape(-1, 3), axis=0)) > 20, name
