@@ -36,6 +36,7 @@ from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, export_archive, load_
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals, teacher_verdict
 from dqfd_bc_keras.experiments.figures import _colors, _figure
 from dqfd_bc_keras.experiments.metrics import first_reaching
+from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.stats import (
     beyond,
     bootstrap_ci,
@@ -214,6 +215,12 @@ def normalised(
     return (value - random) / (teacher - random)
 
 
+def made_by(finished: FinishedRun) -> str:
+    """The short commit of the code a run was made by (its provenance.json), marked if the tree was dirty."""
+    origin = finished.provenance
+    return (origin.code_commit or "unknown")[:7] + " (dirty)" * bool(origin.dirty)
+
+
 def collect(out: Path, seeds: int, quick: bool = False, losses: Sequence[str] = LOSSES) -> Study:
     """The runs under `out` that reached the budget: ours (complete runs of the arms of `losses`) and SB3's
     (current files)."""
@@ -227,8 +234,7 @@ def collect(out: Path, seeds: int, quick: bool = False, losses: Sequence[str] = 
                 evals = interaction_evals(finished)
                 if evals[-1][0] >= budget:
                     runs.setdefault((a.task, a.expert_loss), {})[seed] = evals
-                    origin = finished.provenance
-                    commits.add((origin.code_commit or "unknown")[:7] + " (dirty)" * bool(origin.dirty))
+                    commits.add(made_by(finished))
     for job in sb3_jobs(seeds, out, quick):
         if job.current():
             evaluations = json.loads(job.path.read_text())["evaluations"]

@@ -49,6 +49,7 @@ from studies.minatar_study import (
     difference,
     emit,
     figures,
+    made_by,
     number,
     status,
     study_arguments,
@@ -73,7 +74,7 @@ REUSED = Path(__file__).resolve().parents[1] / "docs" / "data" / "results.tar.xz
 REUSED_ARMS = tuple((task, method) for task in ("acrobot", "lunarlander") for method in ("bayes", SB3_METHOD))
 BUDGET = 100_000
 """Acrobot's and LunarLander's budget (the presets', and rl-zoo3's n_timesteps for both)."""
-MINIGRID_BUDGET: int | None = 25_000
+MINIGRID_BUDGET = 25_000
 """MiniGrid's budget, by the pilot's rule (§15): DQN reached the teacher at 16,000 and 18,000 interactions
 (docs/data/past-teacher-vector-pilot.tar.xz; tests/test_past_teacher_vector.py recomputes it)."""
 PILOT = (("minigrid-empty", "none"), ("minigrid-empty", SB3_METHOD))
@@ -88,11 +89,7 @@ def budget(task: str, quick: bool = False) -> int:
     """The task's budget: §15's (MiniGrid's from its pilot), or `--quick`'s."""
     if quick:
         return QUICK_STEPS["ours"]
-    if task != "minigrid-empty":
-        return BUDGET
-    if MINIGRID_BUDGET is None:
-        raise ConfigError("MiniGrid's budget is the pilot's: run --pilot DIR first and commit its choice")
-    return MINIGRID_BUDGET
+    return MINIGRID_BUDGET if task == "minigrid-empty" else BUDGET
 
 
 def ours(task: str, loss: str, quick: bool = False, steps: int | None = None) -> Arm:
@@ -155,24 +152,16 @@ def read(
     return runs
 
 
-def commits(directory: Path) -> tuple[str, ...]:
-    """The code commits of the runs of ours under `directory` (their provenance.json)."""
-    found = {
-        (f.provenance.code_commit or "unknown")[:7] + " (dirty)" * bool(f.provenance.dirty)
-        for f in load_runs(directory)
-    }
-    return tuple(sorted(found))
-
-
 def collect(out: Path, seeds: int, quick: bool = False) -> Study:
     """The new runs under `out` (a directory or its archive) beside §7's reused ones (none with `quick`)."""
     with open_suite(out) as directory:
-        runs, made_by = read(directory, new_runs(quick), range(seeds), quick), commits(directory)
+        runs = read(directory, new_runs(quick), range(seeds), quick)
+        commits = tuple(sorted({made_by(f) for f in load_runs(directory)}))
     if not quick:
         with open_suite(REUSED) as directory:
             runs.update(read(directory, REUSED_ARMS, range(seeds)))
     anchors = {t: ANCHORS[t] for t in (QUICK_TASKS if quick else TASKS)}
-    return Study(runs, BUDGET, seeds, made_by, METHODS, DQFD, anchors, unit="task")
+    return Study(runs, BUDGET, seeds, commits, METHODS, DQFD, anchors, unit="task")
 
 
 # --- the pilot: MiniGrid's budget ---
@@ -312,7 +301,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return emit(pilot_report(pilot_reach(args.pilot, args.quick)), args.report)
     if args.out is None:
         raise ConfigError("give --pilot DIR for MiniGrid's budget, or --out DIR for the study's runs")
-    budget("minigrid-empty", args.quick)  # refused until the pilot's budget is committed
     check_out(args.out, args.archive, args.no_run)
     if not args.no_run:
         if args.archive is not None:
