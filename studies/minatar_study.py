@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 
 from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
-from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, export_archive, load_runs, open_suite
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals, teacher_verdict
@@ -51,7 +50,7 @@ from dqfd_bc_keras.experiments.stats import (
 from dqfd_bc_keras.experiments.suites import Arm, arm
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs, sweep_jobs
 from dqfd_bc_keras.files import write_text
-from studies.pixels import Sb3Job, run_sb3
+from studies.pixels import QUICK_MAX_STEPS, Sb3Job, quick_settings, run_sb3
 
 GAMES = ("minatar-asterix", "minatar-breakout", "minatar-freeway", "minatar-seaquest", "minatar-space-invaders")
 LOSSES = ("bayes", "ce", "none")
@@ -89,12 +88,7 @@ Seeds = dict[int, list[tuple[float, float]]]
 def arms(quick: bool = False, losses: Sequence[str] = LOSSES) -> list[Arm]:
     """Our arms of `losses`, game by game (with `quick`: on tiny budgets)."""
     if quick:
-        budget = {
-            "total_steps": QUICK_STEPS["ours"],
-            "eval_every": QUICK_STEPS["every"],
-            "checkpoint_every": QUICK_STEPS["every"],
-        }
-        settings = tuple({**QUICK, **budget}.items())
+        settings = quick_settings(QUICK_STEPS["ours"], QUICK_STEPS["every"])
         return [Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in losses]
     return [arm(game, "bootstrap", loss, SEEDS, total_steps=BUDGET, **PROTOCOL) for game in GAMES for loss in losses]
 
@@ -103,9 +97,9 @@ def sb3_jobs(seeds: int, out: Path, quick: bool = False) -> list[Sb3Job]:
     """SB3's runs, seed by seed, one file per game and seed under out/sb3-dqn/GAME/."""
     budget, every = (QUICK_STEPS["sb3"], QUICK_STEPS["every"]) if quick else (BUDGET, PROTOCOL["eval_every"])
     episodes = 2 if quick else PROTOCOL["eval_episodes"]
-    suffix = "-quick" if quick else ""
+    suffix, max_steps = ("-quick", QUICK_MAX_STEPS) if quick else ("", None)
     return [
-        Sb3Job(game, seed, budget, every, episodes, out / "sb3-dqn" / game / f"seed{seed}{suffix}.json")
+        Sb3Job(game, seed, budget, every, episodes, out / "sb3-dqn" / game / f"seed{seed}{suffix}.json", max_steps)
         for seed in range(seeds)
         for game in GAMES
     ]

@@ -60,15 +60,23 @@ QUICK_STEPS = {"ours": 300, "sb3": 500, "every": 150}
 """`--quick`: interactions of our one run and of SB3's, and the evaluation grid: seconds, for the tests."""
 
 
+QUICK_MAX_STEPS = 100
+"""`--quick`: every episode of ours and of SB3's cut at 100 steps (a MinAtar episode can run to 2,500,
+and the tests' quick studies would spend most of their time in evaluations)."""
+
+
+def quick_settings(total_steps: int, every: int) -> tuple[tuple[str, object], ...]:
+    """The settings of a quick MinAtar arm: `train.py --quick`'s, on `total_steps` with an evaluation
+    and a checkpoint every `every`, episodes cut at QUICK_MAX_STEPS."""
+    budget = {"total_steps": total_steps, "eval_every": every, "checkpoint_every": every}
+    return tuple({**QUICK, **budget, "max_steps": QUICK_MAX_STEPS}.items())
+
+
 def arms(quick: bool = False) -> list[Arm]:
     """Our arms of the study (with `quick`: one, on the QUICK budget)."""
     if quick:
-        budget = {
-            "total_steps": QUICK_STEPS["ours"],
-            "eval_every": QUICK_STEPS["every"],
-            "checkpoint_every": QUICK_STEPS["every"],
-        }
-        return [Arm(TASK, "bootstrap", "bayes", tuple({**QUICK, **budget}.items()), "pixels-quick", 1)]
+        settings = quick_settings(QUICK_STEPS["ours"], QUICK_STEPS["every"])
+        return [Arm(TASK, "bootstrap", "bayes", settings, "pixels-quick", 1)]
     return [arm(TASK, "bootstrap", loss, SEEDS, total_steps=OURS_STEPS, **PROTOCOL) for loss in LOSSES]
 
 
@@ -82,12 +90,15 @@ class Sb3Job:
     every: int
     episodes: int
     path: Path
+    max_steps: int | None = None
+    """Each episode's step limit (default: the preset's)."""
 
     @property
     def args(self) -> tuple:
         """`sb3_pixels.sb3_minatar_run`'s arguments."""
         task = get_task(self.task)
-        return (task.env_id, self.seed, self.budget, self.every, self.episodes, task.max_steps, self.path)
+        max_steps = self.max_steps or task.max_steps
+        return (task.env_id, self.seed, self.budget, self.every, self.episodes, max_steps, self.path)
 
     def current(self) -> bool:
         """Its file exists and records these settings (a changed setting runs it again)."""
@@ -138,9 +149,9 @@ def sb3(
     budget = QUICK_STEPS["sb3"] if quick else SB3_STEPS
     every = QUICK_STEPS["every"] if quick else PROTOCOL["eval_every"]
     episodes = 2 if quick else PROTOCOL["eval_episodes"]
-    suffix = "-quick" if quick else ""
+    suffix, max_steps = ("-quick", QUICK_MAX_STEPS) if quick else ("", None)
     jobs = [
-        Sb3Job(TASK, seed, budget, every, episodes, out / "sb3-dqn" / f"seed{seed}{suffix}.json")
+        Sb3Job(TASK, seed, budget, every, episodes, out / "sb3-dqn" / f"seed{seed}{suffix}.json", max_steps)
         for seed in range(seeds)
     ]
     if not no_run:

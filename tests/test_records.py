@@ -43,6 +43,13 @@ def test_a_row_round_trips_and_an_empty_cell_is_none_only_where_the_field_may_be
         EpisodeRow.from_row({**row, "interactions": ""})
 
 
+def test_a_column_is_read_by_the_name_the_file_spells_it_nested_records_included():
+    assert {column: ROW[column] for column in EpisodeRow.columns()} == ROW.to_row()
+    assert ROW["return"] == 20.0 and ROW["td"] == 0.5 and ROW["imitation_weight_agent"] is None
+    with pytest.raises(KeyError, match="^'return_'$"):  # the field's name is not a column
+        ROW["return_"]
+
+
 @pytest.mark.parametrize("column", EpisodeRow.columns())
 def test_every_column_is_required(column):
     with pytest.raises(KeyError, match=f"^'{column}'$"):

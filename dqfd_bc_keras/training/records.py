@@ -13,7 +13,7 @@ import dataclasses
 import functools
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -46,16 +46,17 @@ class Record:
         """Parse a CSV row (strings) or a JSON object (numbers): each value converted to its
         field's type, an empty cell to None where the field may be None, unknown columns ignored.
         A missing column raises KeyError naming it; a bad value ValueError."""
-        return cls(
-            **{
-                name: kind.from_row(row) if _is_record(kind) else _convert(row[_column(name)], kind, _column(name))
-                for name, kind in _fields(cls)  # type: ignore[arg-type]  # a class is hashable: python/mypy#20409
-            }
-        )
+        return cls(**{name: parse(row) for name, parse in _parsers(cls)})  # type: ignore[arg-type]  # python/mypy#20409
 
     def __getitem__(self, column: str) -> Any:
         """The value of `column` (as the file spells it), for code that picks a column by name."""
-        return self.to_row()[column]
+        path = _paths(type(self)).get(column)  # type: ignore[arg-type]  # a class is hashable: python/mypy#20409
+        if path is None:
+            raise KeyError(column)
+        value: Any = self
+        for name in path:
+            value = getattr(value, name)
+        return value
 
 
 @functools.cache
@@ -74,21 +75,55 @@ def _is_record(kind: Any) -> bool:
     return isinstance(kind, type) and issubclass(kind, Record)
 
 
-def _convert(value: Any, kind: Any, column: str) -> Any:
-    """`value` as `kind` (int, float, str, list[float], or any of them | None)."""
+@functools.cache
+def _paths(cls: type) -> dict[str, tuple[str, ...]]:
+    """column → the attribute names that lead to it from a record of class `cls` (nested records
+    flattened, as `columns` and `to_row` flatten them)."""
+    paths: dict[str, tuple[str, ...]] = {}
+    for name, kind in _fields(cls):
+        if _is_record(kind):
+            paths.update({column: (name, *path) for column, path in _paths(kind).items()})
+        else:
+            paths[_column(name)] = (name,)
+    return paths
+
+
+@functools.cache
+def _parsers(cls: type) -> list[tuple[str, Callable[[Mapping[str, Any]], Any]]]:
+    """(name, row → value) of each field of record class `cls`, built once per class: the lab parses
+    millions of cells, and reading a field's type for each of them cost more than the parsing."""
+    return [(name, kind.from_row if _is_record(kind) else _cell(_column(name), kind)) for name, kind in _fields(cls)]
+
+
+def _cell(column: str, kind: Any) -> Callable[[Mapping[str, Any]], Any]:
+    """row → its `column` as `kind` (int, float, str, list[float], or any of them | None)."""
     optional = isinstance(kind, types.UnionType)
-    if value is None or value == "":
-        if optional:
-            return None
-        raise ValueError(f"{column} has no value")
     base = next(k for k in typing.get_args(kind) if k is not type(None)) if optional else kind
+    convert: Callable[[Any], Any] = base
     if typing.get_origin(base) is list:
-        if not isinstance(value, list):
-            raise ValueError(f"{column} must be a list, got {value!r}")
-        return [float(v) for v in value]
-    if base is int:
-        return int(float(value)) if isinstance(value, str) else int(value)
-    return base(value)
+        convert = functools.partial(_floats, column)
+    elif base is int:
+        convert = _int
+
+    def parse(row: Mapping[str, Any]) -> Any:
+        value = row[column]
+        if value is None or value == "":
+            if optional:
+                return None
+            raise ValueError(f"{column} has no value")
+        return convert(value)
+
+    return parse
+
+
+def _floats(column: str, value: Any) -> list[float]:
+    if not isinstance(value, list):
+        raise ValueError(f"{column} must be a list, got {value!r}")
+    return [float(v) for v in value]
+
+
+def _int(value: Any) -> int:
+    return int(float(value)) if isinstance(value, str) else int(value)
 
 
 @dataclass(frozen=True)
