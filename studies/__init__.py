@@ -10,6 +10,7 @@ its own generated report in docs/. They are not part of the installed package (t
     tuned.py          a tuning study's params against the preset's defaults on fresh seeds (docs/TUNING.md)
     past_teacher.py   issue W on the five MinAtar games: the pilot's new arm beside §13's (docs/PAST_TEACHER.md)
     past_teacher_vector.py  issue W on Acrobot, LunarLander and MiniGrid, and the 10× question (§15)
+    tuned_presets.py  issue W's tuning of the presets: studies, the defaults on their seeds, fresh-seed checks (§16)
 
     python -m studies.pixels --out docs/data/pixels.tar.xz --no-run --report docs/PIXELS.md
     python -m studies.minatar_study --out docs/data/minatar.tar.xz --no-run \

@@ -120,22 +120,28 @@ def report(best: Path, source: Path) -> str:
 
 def verdict(values: dict[str, np.ndarray], metric: str, config: Config) -> list[str]:
     """The rule of the module's docstring, applied, with the test and the medians it read."""
-    p = mann_whitney(values["tuned"], values["defaults"])[1]
     margin = config.eval_every if metric == "threshold" else RETURN_MARGIN * config.limit
-    gain = float(np.median(values["tuned"]) - np.median(values["defaults"]))
-    gain = -gain if METRICS[metric].direction == "minimize" else gain
-    if p >= ALPHA:
-        said = "no measurable difference"
-    elif abs(gain) < margin:
-        said = f"a significant difference inside the margin ({margin:g}): not a better or worse setting"
-    else:
-        said = "**better**" if gain > 0 else "**worse**"
+    p, gain, said = compare(values["tuned"], values["defaults"], METRICS[metric].direction, margin)
     lines = [f"Tuned against defaults: Mann–Whitney p = {p:.3g}; the medians differ by {gain:+,.1f} in the tuned "
              f"params' favour (margin {margin:,.1f}): {said}."]  # fmt: skip
     if metric == "threshold":
         point, low, high = ratio_ci(values["defaults"], values["tuned"])
         lines.append(f"Defaults ÷ tuned, the medians' ratio: {point:.2f} [{low:.2f}, {high:.2f}] (95% bootstrap CI).")
     return lines
+
+
+def compare(tuned: np.ndarray, defaults: np.ndarray, direction: str, margin: float) -> tuple[float, float, str]:
+    """The rule: (two-sided Mann–Whitney p, the medians' difference in the tuned side's favour, the verdict)."""
+    p = mann_whitney(tuned, defaults)[1]
+    gain = float(np.median(tuned) - np.median(defaults))
+    gain = -gain if direction == "minimize" else gain
+    if p >= ALPHA:
+        said = "no measurable difference"
+    elif abs(gain) < margin:
+        said = f"a significant difference inside the margin ({margin:g}): not a better or worse setting"
+    else:
+        said = "**better**" if gain > 0 else "**worse**"
+    return p, gain, said
 
 
 def _median(values: np.ndarray) -> str:

@@ -1,0 +1,242 @@
+"""The presets W tunes (docs/PREREGISTRATION.md §16, committed before any of its trials or runs): for each
+preset and method, an `experiments tune` study on tuning seeds, the preset's own defaults scored the same
+way, and, where the study's best beats them, its params on seeds 0–9 at the studies' budget against the
+studies' runs of the defaults (§7, §13, §14, §15: reused, unpacked from their archives, so only what they
+lack is run). A method's params become its preset's defaults only by §16's rule (`judge`).
+
+    python -m studies.tuned_presets --out runs/presets [--workers 2]                # in §16's order; resumes
+    python -m studies.tuned_presets --out runs/presets --no-run --report FILE.md    # the verdicts so far
+    python -m studies.tuned_presets --out /tmp/presets --quick                      # a minute: the pipeline
+
+Writes only under --out (OUT/tuning/TASK-METHOD/ a study, OUT/tuning/TASK-METHOD-defaults/
+the preset's defaults on its tuning seeds, OUT/checks/ the check's runs in the lab's
+format) and, with --report, that one file.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
+from dqfd_bc_keras.core.config import QUICK
+from dqfd_bc_keras.core.params import read_params
+from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.experiments.arm_config import Arm, arm
+from dqfd_bc_keras.experiments.data import load_runs, open_suite
+from dqfd_bc_keras.experiments.jobs import Job
+from dqfd_bc_keras.experiments.run_files import FinishedRun
+from dqfd_bc_keras.experiments.suites import PROTOCOL as VECTOR_PROTOCOL
+from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs, run_suite
+from dqfd_bc_keras.files import write_text
+from dqfd_bc_keras.seeds import TUNE_SEED
+from dqfd_bc_keras.tuning import tune
+from dqfd_bc_keras.tuning.objective import METRICS
+from studies import minatar_study, past_teacher_vector
+from studies.tuned import compare, run_score
+
+DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
+METHODS = ("bayes", "ce_decay", "none")
+TRIALS, TUNING_SEEDS, CHECK_SEEDS = 30, 2, 10
+MARGIN = 0.15
+"""Of the teacher − random span (§13's equivalence margin): `auc`'s margin, and the final return's."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One preset as §16 tunes it: the study's metric and proxy budget, the check's budget and protocol,
+    and the archives holding the studies' runs of its defaults."""
+
+    task: str
+    metric: str
+    tuning_steps: int
+    budget: int
+    protocol: tuple[tuple[str, object], ...]
+    archives: tuple[Path, ...]
+    anchors: tuple[float, float]
+    """(uniform random policy, imperfect teacher): the margins' span."""
+
+    def defaults_arm(self, method: str, seeds: int = CHECK_SEEDS) -> Arm:
+        """The studies' arm of `method` on this preset (its name is theirs, so their runs are reused)."""
+        return arm(self.task, "bootstrap", method, seeds, total_steps=self.budget, **dict(self.protocol))
+
+    def tuned_arm(self, method: str, params: dict, seeds: int = CHECK_SEEDS) -> Arm:
+        defaults = self.defaults_arm(method, seeds)
+        return replace(defaults, overrides=(*defaults.overrides, *params.items()), label="tuned")
+
+
+_VECTOR = (("demo_episodes", 10), *VECTOR_PROTOCOL.items())
+_FROM_7_15 = (DATA / "results.tar.xz", DATA / "past-teacher-vector.tar.xz")
+PLANS = (
+    Plan("acrobot", "threshold", 20_000, 100_000, _VECTOR, _FROM_7_15, past_teacher_vector.ANCHORS["acrobot"]),
+    Plan("lunarlander", "threshold", 30_000, 100_000, _VECTOR, _FROM_7_15, past_teacher_vector.ANCHORS["lunarlander"]),
+    Plan(
+        "minigrid-empty", "auc", 25_000, past_teacher_vector.MINIGRID_BUDGET, _VECTOR,
+        (DATA / "past-teacher-vector.tar.xz",), past_teacher_vector.ANCHORS["minigrid-empty"],
+    ),
+    Plan(
+        "minatar-breakout", "auc", 25_000, minatar_study.BUDGET, tuple(minatar_study.PROTOCOL.items()),
+        (DATA / "minatar.tar.xz", DATA / "past-teacher.tar.xz"), minatar_study.ANCHORS["minatar-breakout"],
+    ),
+)  # fmt: skip
+"""§16's presets, in its order."""
+
+
+def quick_plan() -> Plan:
+    """Acrobot on the quick budget, no archive: every step of the pipeline in seconds (the numbers mean nothing)."""
+    protocol = tuple((k, v) for k, v in QUICK.items() if k != "total_steps")
+    steps = int(QUICK["total_steps"])  # type: ignore[call-overload]
+    return replace(PLANS[0], tuning_steps=steps, budget=steps, protocol=protocol, archives=())
+
+
+def study(plan: Plan, method: str, out: Path, workers: int, quick: bool) -> Path | None:
+    """The study of `method` on `plan`, run or continued: its best.json (None before a complete trial)."""
+    return tune(
+        plan.task, out=out / "tuning" / f"{plan.task}-{method}", expert_loss=method, metric=plan.metric,
+        steps=plan.tuning_steps, seeds=len(tuning_seeds(quick)), trials=1 if quick else TRIALS, workers=workers,
+        quick=quick,
+    ).best_file  # fmt: skip
+
+
+def tuning_seeds(quick: bool) -> list[int]:
+    return [TUNE_SEED + k for k in range(1 if quick else TUNING_SEEDS)]
+
+
+def own_arm(plan: Plan, method: str, quick: bool) -> Arm:
+    """The preset's defaults as a study's trial runs them: its settings on the tuning budget."""
+    fields = {**(QUICK if quick else {}), "total_steps": plan.tuning_steps}
+    return arm(plan.task, "bootstrap", method, len(tuning_seeds(quick)), **fields)
+
+
+def own_value(plan: Plan, method: str, out: Path, workers: int, quick: bool, run_missing: bool) -> float | None:
+    """The preset's defaults scored as the study scores a trial (the mean over the tuning seeds of
+    `tuning.objective.score`), run where missing unless not `run_missing`; None while a seed is missing."""
+    a, where = own_arm(plan, method, quick), out / "tuning" / f"{plan.task}-{method}-defaults"
+    jobs = [Job(a, seed, where) for seed in tuning_seeds(quick)]
+    if run_missing:
+        run_jobs(jobs, where, "defaults", len(jobs), SweepOptions(workers))
+    if not all(job.complete for job in jobs):
+        return None
+    threshold = get_task(plan.task).solved_return
+    return float(np.mean([run_score(r, plan.metric, threshold) for job in jobs for r in load_runs(job.directory)]))
+
+
+def better(metric: str, value: float | None, than: float | None) -> bool:
+    """`value` beats `than` in the metric's direction (a study without a complete trial beats nothing)."""
+    if value is None or than is None:
+        return False
+    return value < than if METRICS[metric].direction == "minimize" else value > than
+
+
+def unpack_arms(archives: Sequence[Path], out: Path, names: set[str]) -> None:
+    """The runs of the arms `names` that the archives hold and `out` lacks (an archived run is complete)."""
+    for archive in archives:
+        with open_suite(archive) as unpacked:
+            for directory in sorted(d for d in unpacked.iterdir() if d.name in names):
+                for path in sorted(p for p in directory.rglob("*") if p.is_file()):
+                    target = out / path.relative_to(unpacked)
+                    if not target.exists():
+                        target.parent.mkdir(parents=True, exist_ok=True)
+                        target.write_bytes(path.read_bytes())
+
+
+def check(plan: Plan, method: str, best: Path, out: Path, workers: int, quick: bool) -> None:
+    """The study's params on the check's seeds, beside the defaults' runs (reused where archived)."""
+    seeds = 2 if quick else CHECK_SEEDS
+    arms = [plan.defaults_arm(method, seeds), plan.tuned_arm(method, read_params(best, plan.task), seeds)]
+    unpack_arms(plan.archives, out / "checks", {arms[0].name})
+    run_suite(arms, seeds, out / "checks", SweepOptions(workers), name=f"tuned-{plan.task}-{method}")
+
+
+def judge(plan: Plan, tuned: list[FinishedRun], defaults: list[FinishedRun]) -> str:
+    """§16's rule: better on the study's metric (Mann–Whitney p < 0.05 and the medians differing by at least
+    one evaluation period for `threshold`, MARGIN of the teacher − random span for `auc`), and not worse at
+    the end (the final greedy return, by the same test, MARGIN of the span)."""
+    threshold = get_task(plan.task).solved_return
+    span = plan.anchors[1] - plan.anchors[0]
+    margin = dict(plan.protocol)["eval_every"] if plan.metric == "threshold" else MARGIN * span
+    values = [np.array([run_score(r, plan.metric, threshold) for r in runs]) for runs in (tuned, defaults)]
+    p, gain, said = compare(*values, METRICS[plan.metric].direction, float(margin))  # type: ignore[arg-type]
+    finals = [np.array([r.final.mean_return for r in runs]) for runs in (tuned, defaults)]
+    end_p, end_gain, end_said = compare(*finals, "maximize", MARGIN * span)
+    changes = said == "**better**" and end_said != "**worse**"
+    return (
+        f"{plan.metric}: {said} (p = {p:.3g}, {gain:+,.4g} in the tuned params' favour, margin {margin:,.4g}); "
+        f"final return: {end_said} (p = {end_p:.3g}, {end_gain:+,.4g}) → "
+        + ("**the preset takes the tuned params**" if changes else "the preset keeps its defaults")
+    )
+
+
+def status(plan: Plan, method: str, out: Path, quick: bool) -> str:
+    """One row of the report: the study, the defaults' value, and the check's verdict (or where it stands)."""
+    best = out / "tuning" / f"{plan.task}-{method}" / "best.json"
+    found = json.loads(best.read_text()) if best.is_file() else None
+    own = own_value(plan, method, out, 1, quick, run_missing=False)
+    cells = [plan.task, method, f"{plan.metric} at {plan.tuning_steps:,}"]
+    cells += [f"{found['value']:,.4g} (trial {found['trial']})" if found else "not run"]
+    cells += [f"{own:,.4g}" if own is not None else "not run"]
+    if found is None or own is None:
+        return "| " + " | ".join([*cells, "—"]) + " |"
+    if not (quick or better(plan.metric, found["value"], own)):
+        return "| " + " | ".join([*cells, "no check: the study's best is no better than the defaults"]) + " |"
+    seeds = 2 if quick else CHECK_SEEDS
+    tuned, defaults = (
+        checked(out / "checks" / a.name, seeds)
+        for a in (plan.tuned_arm(method, found["params"], seeds), plan.defaults_arm(method, seeds))
+    )
+    if min(len(tuned), len(defaults)) < seeds:
+        return "| " + " | ".join([*cells, f"check under way: {len(tuned)} and {len(defaults)} of {seeds} seeds"]) + " |"
+    return "| " + " | ".join([*cells, judge(plan, tuned, defaults)]) + " |"
+
+
+def checked(directory: Path, seeds: int) -> list[FinishedRun]:
+    """The complete runs of an arm's directory at the check's seeds (none while it has none)."""
+    return [r for r in load_runs(directory) if r.config.seed < seeds] if directory.is_dir() else []
+
+
+def report(plans: Sequence[Plan], methods: Sequence[str], out: Path, quick: bool) -> str:
+    lines = [
+        "# Tuning the presets (PREREGISTRATION §16)",
+        "",
+        f"Generated by `python -m studies.tuned_presets --out {out} --no-run`. Each study: TPE, the median "
+        f"pruner, {TRIALS} trials on seeds 1,000,000 and 1,000,001; the check: seeds 0–{CHECK_SEEDS - 1} at "
+        "the studies' budget against their runs of the preset's defaults.",
+        "",
+        "| preset | method | study | its best (trial) | the defaults, same seeds | check on fresh seeds |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    lines += [status(plan, method, out, quick) for plan in plans for method in methods]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m studies.tuned_presets", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, required=True, help="the studies' and the checks' directory")
+    parser.add_argument("--workers", type=positive_int, default=2, help="trials (and check runs) at once")
+    parser.add_argument("--no-run", action="store_true", help="report what is under --out, run nothing")
+    parser.add_argument("--report", type=Path, help="write the markdown here too (default: print it only)")
+    parser.add_argument("--quick", action="store_true", help="acrobot, bayes, on the quick budget (a test)")
+    args = parser.parse_args(argv)
+    plans, methods = ((quick_plan(),), METHODS[:1]) if args.quick else (PLANS, METHODS)
+    if not args.no_run:
+        for plan in plans:
+            for method in methods:
+                best = study(plan, method, args.out, args.workers, args.quick)
+                own = own_value(plan, method, args.out, args.workers, args.quick, run_missing=True)
+                value = json.loads(best.read_text())["value"] if best else None
+                if best is not None and (args.quick or better(plan.metric, value, own)):
+                    check(plan, method, best, args.out, args.workers, args.quick)
+    text = report(plans, methods, args.out, args.quick)
+    print(text)
+    if args.report is not None:
+        write_text(args.report, text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))
