@@ -33,11 +33,11 @@ from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.suites import PROTOCOL as VECTOR_PROTOCOL
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs, run_suite
-from dqfd_bc_keras.files import write_text
 from dqfd_bc_keras.seeds import TUNE_SEED
 from dqfd_bc_keras.tuning import tune
 from dqfd_bc_keras.tuning.objective import METRICS
 from studies import minatar_study, past_teacher_vector
+from studies.minatar_study import emit
 from studies.tuned import compare, run_score
 
 DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
@@ -211,7 +211,7 @@ def report(plans: Sequence[Plan], methods: Sequence[str], out: Path, quick: bool
         "| --- | --- | --- | --- | --- | --- |",
     ]
     lines += [status(plan, method, out, quick) for plan in plans for method in methods]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -231,11 +231,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 value = json.loads(best.read_text())["value"] if best else None
                 if best is not None and (args.quick or better(plan.metric, value, own)):
                     check(plan, method, best, args.out, args.workers, args.quick)
-    text = report(plans, methods, args.out, args.quick)
-    print(text)
-    if args.report is not None:
-        write_text(args.report, text)
-    return 0
+    return emit(report(plans, methods, args.out, args.quick), args.report)
 
 
 if __name__ == "__main__":
