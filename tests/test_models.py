@@ -12,6 +12,7 @@ from dqfd_bc_keras.core.bc import BCModel
 from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.evaluation import GreedyPolicy, evaluate
+from dqfd_bc_keras.seeds import demo_seed
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 
@@ -30,6 +31,16 @@ def test_models_readme_says_whether_each_minatar_model_reaches_its_teachers_mean
     assert f"{recorded['mean_return']:.2f} ± {recorded['std_return']:.2f}" in row and recorded["episodes"] == 100
     reaches = recorded["mean_return"] >= ANCHORS[game][1]
     assert ("at least its teacher's mean" in row, "below its teacher's mean" in row) == (reaches, not reaches)
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_the_front_pages_table_gives_each_models_eval_json(name):
+    recorded = json.loads((MODELS / name / "eval.json").read_text())
+    said = f"{recorded['mean_return']:.2f} ± {recorded['std_return']:.2f}".replace("-", "−")
+    readme = (MODELS.parent / "README.md").read_text()
+    table = readme[readme.index("| model | plain env | the teacher | the agent |") : readme.index("## Results")]
+    [row] = [line for line in table.splitlines() if line.startswith(f"| `{name}` |")]
+    assert said in row, (said, row)
 
 
 def test_every_shipped_model_is_in_the_table_of_models_readme():
@@ -79,7 +90,10 @@ def test_teacher_agreement_reconstructs_the_demonstrations_a_shipped_model_was_f
         "its Q-network's own play",
         "its BC model's own play",
     ]
-    assert agreements[0][1] == "demonstrated (seeds 0–9)" and agreements[1][1] == "held out (seeds 900000–900000)"
+    config = json.loads((MODELS / "minatar-breakout" / "config.json").read_text())
+    first = demo_seed(config["seed"])  # the run's own demonstrations, episode i at demo_seed + i
+    assert agreements[0][1] == f"demonstrated (seeds {first}–{first + config['demo_episodes'] - 1})"
+    assert agreements[1][1] == "held out (seeds 900000–900000)"
     shares = [[float(cell.strip(" |%")) for cell in row[3:5] if cell.strip(" |")] for row in agreements]
     assert shares[0][1] >= 99.0 and all(0.0 <= share <= 100.0 for row in shares for share in row)
     assert [len(row) for row in shares] == [2, 2, 1, 1]
