@@ -23,7 +23,7 @@ figures `minatar_*.png` in that directory.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -105,13 +105,15 @@ def sb3_jobs(seeds: int, out: Path, quick: bool = False) -> list[Sb3Job]:
     ]
 
 
-def unpack_missing(archive: Path, out: Path) -> None:
-    """The archive's files that `out` lacks, so a study resumed on another machine runs only what the
-    archive does not hold (an archived run has no checkpoints: the sweep counts it complete)."""
+def unpack_missing(archive: Path, out: Path, arms: Collection[str] | None = None) -> None:
+    """The archive's files that `out` lacks (of the arms named `arms` only, if given), so a study resumed
+    on another machine runs only what the archive does not hold (an archived run has no checkpoints: the
+    sweep counts it complete)."""
     if not archive.is_file():
         return
     with open_suite(archive) as unpacked:
-        for path in sorted(p for p in unpacked.rglob("*") if p.is_file()):
+        wanted = (p for p in unpacked.rglob("*") if arms is None or p.relative_to(unpacked).parts[0] in arms)
+        for path in sorted(p for p in wanted if p.is_file()):
             target = out / path.relative_to(unpacked)
             if not target.exists():
                 target.parent.mkdir(parents=True, exist_ok=True)

@@ -28,16 +28,15 @@ from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.core.params import read_params
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.experiments.arm_config import Arm, arm
-from dqfd_bc_keras.experiments.data import load_runs, open_suite
+from dqfd_bc_keras.experiments.data import load_runs
 from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.suites import PROTOCOL as VECTOR_PROTOCOL
 from dqfd_bc_keras.experiments.sweep import SweepOptions, run_jobs, run_suite
-from dqfd_bc_keras.seeds import TUNE_SEED
-from dqfd_bc_keras.tuning import tune
+from dqfd_bc_keras.tuning import TuneSettings, tune
 from dqfd_bc_keras.tuning.objective import METRICS
 from studies import minatar_study, past_teacher_vector
-from studies.minatar_study import emit
+from studies.minatar_study import emit, unpack_missing
 from studies.tuned import compare, run_score
 
 DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
@@ -94,36 +93,32 @@ def quick_plan() -> Plan:
     return replace(PLANS[0], tuning_steps=steps, budget=steps, protocol=protocol, archives=())
 
 
+def tuning(plan: Plan, method: str, quick: bool) -> dict:
+    """The settings of the study of `method` on `plan` (`TuneSettings`' fields), for `tune` and the defaults alike."""
+    seeds, trials = (1, 1) if quick else (TUNING_SEEDS, TRIALS)
+    return {"expert_loss": method, "metric": plan.metric, "steps": plan.tuning_steps, "seeds": seeds,
+            "trials": trials, "quick": quick}  # fmt: skip
+
+
 def study(plan: Plan, method: str, out: Path, workers: int, quick: bool) -> Path | None:
     """The study of `method` on `plan`, run or continued: its best.json (None before a complete trial)."""
-    return tune(
-        plan.task, out=out / "tuning" / f"{plan.task}-{method}", expert_loss=method, metric=plan.metric,
-        steps=plan.tuning_steps, seeds=len(tuning_seeds(quick)), trials=1 if quick else TRIALS, workers=workers,
-        quick=quick,
-    ).best_file  # fmt: skip
-
-
-def tuning_seeds(quick: bool) -> list[int]:
-    return [TUNE_SEED + k for k in range(1 if quick else TUNING_SEEDS)]
-
-
-def own_arm(plan: Plan, method: str, quick: bool) -> Arm:
-    """The preset's defaults as a study's trial runs them: its settings on the tuning budget."""
-    fields = {**(QUICK if quick else {}), "total_steps": plan.tuning_steps}
-    return arm(plan.task, "bootstrap", method, len(tuning_seeds(quick)), **fields)
+    where = out / "tuning" / f"{plan.task}-{method}"
+    return tune(plan.task, out=where, workers=workers, **tuning(plan, method, quick)).best_file
 
 
 def own_value(plan: Plan, method: str, out: Path, workers: int, quick: bool, run_missing: bool) -> float | None:
-    """The preset's defaults scored as the study scores a trial (the mean over the tuning seeds of
-    `tuning.objective.score`), run where missing unless not `run_missing`; None while a seed is missing."""
-    a, where = own_arm(plan, method, quick), out / "tuning" / f"{plan.task}-{method}-defaults"
-    jobs = [Job(a, seed, where) for seed in tuning_seeds(quick)]
+    """The preset's defaults scored as the study scores a trial: its runs' settings (`run_fields`) on its
+    seeds, the mean of `tuning.objective.score`; run where missing unless not `run_missing`; None while a
+    seed is missing."""
+    where = out / "tuning" / f"{plan.task}-{method}-defaults"
+    settings = TuneSettings(out=where, task=plan.task, **tuning(plan, method, quick))
+    a = arm(plan.task, "bootstrap", method, len(settings.seed_list), **settings.run_fields())
+    jobs = [Job(a, seed, where) for seed in settings.seed_list]
     if run_missing:
         run_jobs(jobs, where, "defaults", len(jobs), SweepOptions(workers))
     if not all(job.complete for job in jobs):
         return None
-    threshold = get_task(plan.task).solved_return
-    return float(np.mean([run_score(r, plan.metric, threshold) for job in jobs for r in load_runs(job.directory)]))
+    return float(np.mean([run_score(r, plan.metric, settings.threshold) for j in jobs for r in load_runs(j.directory)]))
 
 
 def better(metric: str, value: float | None, than: float | None) -> bool:
@@ -133,23 +128,12 @@ def better(metric: str, value: float | None, than: float | None) -> bool:
     return value < than if METRICS[metric].direction == "minimize" else value > than
 
 
-def unpack_arms(archives: Sequence[Path], out: Path, names: set[str]) -> None:
-    """The runs of the arms `names` that the archives hold and `out` lacks (an archived run is complete)."""
-    for archive in archives:
-        with open_suite(archive) as unpacked:
-            for directory in sorted(d for d in unpacked.iterdir() if d.name in names):
-                for path in sorted(p for p in directory.rglob("*") if p.is_file()):
-                    target = out / path.relative_to(unpacked)
-                    if not target.exists():
-                        target.parent.mkdir(parents=True, exist_ok=True)
-                        target.write_bytes(path.read_bytes())
-
-
 def check(plan: Plan, method: str, best: Path, out: Path, workers: int, quick: bool) -> None:
     """The study's params on the check's seeds, beside the defaults' runs (reused where archived)."""
     seeds = 2 if quick else CHECK_SEEDS
     arms = [plan.defaults_arm(method, seeds), plan.tuned_arm(method, read_params(best, plan.task), seeds)]
-    unpack_arms(plan.archives, out / "checks", {arms[0].name})
+    for archive in plan.archives:
+        unpack_missing(archive, out / "checks", {arms[0].name})
     run_suite(arms, seeds, out / "checks", SweepOptions(workers), name=f"tuned-{plan.task}-{method}")
 
 
