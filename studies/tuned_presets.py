@@ -5,19 +5,24 @@ studies' runs of the defaults (§7, §13, §14, §15: reused, unpacked from thei
 lack is run). A method's params become its preset's defaults only by §16's rule (`judge`).
 
     python -m studies.tuned_presets --out runs/presets [--workers 2]                # in §16's order; resumes
+    python -m studies.tuned_presets --out runs/presets --archive docs/data/tuned-presets.tar.xz   # and exports
     python -m studies.tuned_presets --out runs/presets --no-run --report FILE.md    # the verdicts so far
     python -m studies.tuned_presets --out /tmp/presets --quick                      # a minute: the pipeline
 
 Writes only under --out (OUT/tuning/TASK-METHOD/ a study, OUT/tuning/TASK-METHOD-defaults/
 the preset's defaults on its tuning seeds, OUT/checks/ the check's runs in the lab's
-format) and, with --report, that one file.
+format) and, with --report, that one file; with --archive, that archive too (rewritten as each study,
+its defaults' runs and each check run finish: what another machine, or the next session, resumes from).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import sqlite3
 import sys
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -27,8 +32,9 @@ from dqfd_bc_keras.commands.cli import ArgumentParser, positive_int, run
 from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.core.params import read_params
 from dqfd_bc_keras.envs.make import get_task
+from dqfd_bc_keras.errors import ConfigError
 from dqfd_bc_keras.experiments.arm_config import Arm, arm
-from dqfd_bc_keras.experiments.data import load_runs
+from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, lab_files, load_runs, write_archive
 from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.run_files import FinishedRun
 from dqfd_bc_keras.experiments.suites import PROTOCOL as VECTOR_PROTOCOL
@@ -106,7 +112,9 @@ def study(plan: Plan, method: str, out: Path, workers: int, quick: bool) -> Path
     return tune(plan.task, out=where, workers=workers, **tuning(plan, method, quick)).best_file
 
 
-def own_value(plan: Plan, method: str, out: Path, workers: int, quick: bool, run_missing: bool) -> float | None:
+def own_value(
+    plan: Plan, method: str, out: Path, workers: int, quick: bool, run_missing: bool, finished: Callable | None = None
+) -> float | None:
     """The preset's defaults scored as the study scores a trial: its runs' settings (`run_fields`) on its
     seeds, the mean of `tuning.objective.score`; run where missing unless not `run_missing`; None while a
     seed is missing."""
@@ -115,7 +123,7 @@ def own_value(plan: Plan, method: str, out: Path, workers: int, quick: bool, run
     a = arm(plan.task, "bootstrap", method, len(settings.seed_list), **settings.run_fields())
     jobs = [Job(a, seed, where) for seed in settings.seed_list]
     if run_missing:
-        run_jobs(jobs, where, "defaults", len(jobs), SweepOptions(workers))
+        run_jobs(jobs, where, "defaults", len(jobs), SweepOptions(workers, finished=finished))
     if not all(job.complete for job in jobs):
         return None
     return float(np.mean([run_score(r, plan.metric, settings.threshold) for j in jobs for r in load_runs(j.directory)]))
@@ -128,13 +136,43 @@ def better(metric: str, value: float | None, than: float | None) -> bool:
     return value < than if METRICS[metric].direction == "minimize" else value > than
 
 
-def check(plan: Plan, method: str, best: Path, out: Path, workers: int, quick: bool) -> None:
-    """The study's params on the check's seeds, beside the defaults' runs (reused where archived)."""
+def check(
+    plan: Plan, method: str, best: Path, out: Path, workers: int, quick: bool, finished: Callable | None = None
+) -> None:
+    """The study's params on the check's seeds, beside the defaults' runs (reused where archived); `finished`
+    is called after each run."""
     seeds = 2 if quick else CHECK_SEEDS
     arms = [plan.defaults_arm(method, seeds), plan.tuned_arm(method, read_params(best, plan.task), seeds)]
     for archive in plan.archives:
         unpack_missing(archive, out / "checks", {arms[0].name})
-    run_suite(arms, seeds, out / "checks", SweepOptions(workers), name=f"tuned-{plan.task}-{method}")
+    options = SweepOptions(workers, finished=finished)
+    run_suite(arms, seeds, out / "checks", options, name=f"tuned-{plan.task}-{method}")
+
+
+STUDY_FILES = ("study.db", "best.json", "study.json")
+"""What a study leaves beside its trials' runs that the archive keeps (its figures are redrawn from study.db)."""
+
+
+def export(out: Path, archive: Path, plans: Sequence[Plan], methods: Sequence[str]) -> None:
+    """§16 so far into `archive`: each study's STUDY_FILES (its database copied by SQLite's backup, whole
+    while trials write to it), every complete run under tuning/ (trials, the defaults on the tuning seeds)
+    and the check's tuned runs; not the defaults' runs the check reuses, which their studies' archives hold."""
+    reused = {plan.defaults_arm(method).name for plan in plans for method in methods}
+    runs = [name for name in lab_files(out) if not (name.startswith("checks/") and name.split("/")[1] in reused)]
+    files = {name: out / name for name in runs}
+    with tempfile.TemporaryDirectory(prefix="tuned-presets-") as tmp:
+        for path in sorted((out / "tuning").glob("*/*")):
+            name = path.relative_to(out).as_posix()
+            if path.name == "study.db":
+                files[name] = Path(tmp) / name.replace("/", "-")
+                with (
+                    contextlib.closing(sqlite3.connect(path)) as db,
+                    contextlib.closing(sqlite3.connect(files[name])) as copy,
+                ):
+                    db.backup(copy)
+            elif path.name in STUDY_FILES:
+                files[name] = path
+        write_archive(files, archive)
 
 
 def judge(plan: Plan, tuned: list[FinishedRun], defaults: list[FinishedRun]) -> str:
@@ -205,16 +243,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-run", action="store_true", help="report what is under --out, run nothing")
     parser.add_argument("--report", type=Path, help="write the markdown here too (default: print it only)")
     parser.add_argument("--quick", action="store_true", help="acrobot, bayes, on the quick budget (a test)")
+    parser.add_argument(
+        "--archive",
+        type=Path,
+        help=f"start from this {ARCHIVE_SUFFIX} archive (what --out lacks of it) and export to it",
+    )
     args = parser.parse_args(argv)
     plans, methods = ((quick_plan(),), METHODS[:1]) if args.quick else (PLANS, METHODS)
+    if args.archive is not None:
+        if not args.archive.name.endswith(ARCHIVE_SUFFIX):
+            raise ConfigError(f"--archive {args.archive}: expected a {ARCHIVE_SUFFIX} file")
+        unpack_missing(args.archive, args.out)
+
+    def finished(_: object = None) -> None:
+        if args.archive is not None and not args.no_run:
+            export(args.out, args.archive, plans, methods)
+
     if not args.no_run:
         for plan in plans:
             for method in methods:
                 best = study(plan, method, args.out, args.workers, args.quick)
-                own = own_value(plan, method, args.out, args.workers, args.quick, run_missing=True)
+                finished()
+                own = own_value(plan, method, args.out, args.workers, args.quick, True, finished)
                 value = json.loads(best.read_text())["value"] if best else None
                 if best is not None and (args.quick or better(plan.metric, value, own)):
-                    check(plan, method, best, args.out, args.workers, args.quick)
+                    check(plan, method, best, args.out, args.workers, args.quick, finished)
     return emit(report(plans, methods, args.out, args.quick), args.report)
 
 

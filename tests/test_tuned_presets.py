@@ -1,13 +1,17 @@
 """W's tuning of the presets (PREREGISTRATION §16): its rule by hand, its checks reusing the studies' runs
 of the defaults (the same arm names), and the command as a user runs it on the quick budget."""
 
+import shutil
+import tarfile
 from types import SimpleNamespace
 
 import pytest
 from helpers import python as run
 
+from dqfd_bc_keras.errors import ConfigError
 from studies import minatar_study, past_teacher_vector
-from studies.tuned_presets import METHODS, PLANS, judge
+from studies.minatar_study import unpack_missing
+from studies.tuned_presets import METHODS, PLANS, judge, main
 
 
 def fake(task: str, reached: int, final: float, seed: int, every: int = 1_000, budget: int = 100_000):
@@ -55,18 +59,44 @@ def test_the_check_reads_the_studies_runs_of_the_defaults_by_their_arm_names(pla
 
 
 @pytest.mark.slow
-def test_the_quick_pipeline_tunes_scores_the_defaults_checks_and_reports_again_from_its_files(tmp_path):
+def test_the_quick_pipeline_tunes_scores_the_defaults_checks_exports_and_reports_again_from_its_archive(tmp_path):
+    out, archive = tmp_path / "out", tmp_path / "presets.tar.xz"
     done = run(
-        "-m", "studies.tuned_presets", "--out", tmp_path, "--quick", "--workers", 1, "--report", tmp_path / "a.md"
-    )
+        "-m", "studies.tuned_presets", "--out", out, "--quick", "--workers", 1, "--report", tmp_path / "a.md",
+        "--archive", archive,
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    assert (tmp_path / "tuning" / "acrobot-bayes" / "best.json").is_file()
-    assert [p.name for p in (tmp_path / "tuning" / "acrobot-bayes-defaults").iterdir() if p.is_dir()]  # its runs
-    checked = sorted(p.name for p in (tmp_path / "checks").iterdir() if p.is_dir())
+    assert (out / "tuning" / "acrobot-bayes" / "best.json").is_file()
+    assert [p.name for p in (out / "tuning" / "acrobot-bayes-defaults").iterdir() if p.is_dir()]  # its runs
+    checked = sorted(p.name for p in (out / "checks").iterdir() if p.is_dir())
     assert len(checked) == 2 and checked[1] == "acrobot-bootstrap-bayes-tuned"
-    assert all((tmp_path / "checks" / arm / f"seed{s}" / "eval.json").is_file() for arm in checked for s in (0, 1))
+    assert all((out / "checks" / arm / f"seed{s}" / "eval.json").is_file() for arm in checked for s in (0, 1))
     text = (tmp_path / "a.md").read_text()
     [row] = [line for line in text.splitlines() if line.startswith("| acrobot | bayes |")]
     assert "| threshold at 600 |" in row and ("keeps its defaults" in row or "takes the tuned params" in row)
-    again = run("-m", "studies.tuned_presets", "--out", tmp_path, "--quick", "--no-run", "--report", tmp_path / "b.md")
+    again = run("-m", "studies.tuned_presets", "--out", out, "--quick", "--no-run", "--report", tmp_path / "b.md")
     assert again.returncode == 0 and (tmp_path / "b.md").read_text() == text, again.stderr
+    with tarfile.open(archive) as tar:
+        names = tar.getnames()
+    assert {"tuning/acrobot-bayes/study.db", "tuning/acrobot-bayes/best.json"} <= set(names)
+    assert any(n.startswith("tuning/acrobot-bayes/trials/") and n.endswith("/eval.json") for n in names)
+    assert any(n.startswith("tuning/acrobot-bayes-defaults/") and n.endswith("/eval.json") for n in names)
+    assert {n.split("/")[1] for n in names if n.startswith("checks/")} == {"acrobot-bootstrap-bayes-tuned"}
+    # the reused defaults' runs stay in their own archives; a study on another machine starts from this one
+    elsewhere = tmp_path / "elsewhere"
+    unpack_missing(archive, elsewhere)
+    shutil.copytree(out / "checks" / checked[0], elsewhere / "checks" / checked[0])
+    read = run(
+        "-m", "studies.tuned_presets", "--out", elsewhere, "--quick", "--no-run", "--report", tmp_path / "c.md"
+    )  # fmt: skip
+    assert read.returncode == 0 and (tmp_path / "c.md").read_text() == text.replace(str(out), str(elsewhere))
+    resumed = run("-m", "studies.tuned_presets", "--out", elsewhere, "--quick", "--workers", 1, "--archive", archive)
+    assert resumed.returncode == 0, resumed.stderr
+    trials = [sorted(p.name for p in (o / "tuning" / "acrobot-bayes" / "trials").iterdir()) for o in (out, elsewhere)]
+    assert trials[0] == trials[1] and "0 to run" in resumed.stdout  # nothing the archive held is run again
+
+
+def test_an_archive_that_is_not_one_is_refused_before_anything_runs(tmp_path):
+    with pytest.raises(ConfigError, match=r"--archive .*presets\.zip: expected a \.tar\.xz file"):
+        main(["--out", str(tmp_path / "out"), "--archive", str(tmp_path / "presets.zip")])
+    assert not (tmp_path / "out").exists()

@@ -144,22 +144,27 @@ def lab_files(directory: Path) -> list[str]:
 
 
 def export_archive(source: str | os.PathLike, path: str | os.PathLike) -> list[str]:
-    """Write the `lab_files` of the suite `source` into one xz-compressed tar at `path`; return
-    their names. Every run must be readable (a ConfigError names the first bad file).
-
-    The bytes depend on the files' contents only: members sorted, no directories, mtime 0,
-    owner 0 without names, mode 0644. Exporting the same data twice gives the same archive.
-    """
+    """Write the `lab_files` of the suite `source` into one xz-compressed tar at `path` (`write_archive`);
+    return their names. Every run must be readable (a ConfigError names the first bad file)."""
     with open_suite(source) as directory:
         if not _load(directory, Path(source), None):
             raise ConfigError(f"{source}: no complete run (a directory with eval.json) to export")
         names = lab_files(directory)
-        with atomic_path(path) as tmp, tarfile.open(tmp, "w:xz", format=tarfile.PAX_FORMAT) as tar:
-            for name in names:
-                data = (directory / name).read_bytes()
-                info = tarfile.TarInfo(name)
-                info.size, info.mtime, info.mode = len(data), 0, 0o644
-                info.uid = info.gid = 0
-                info.uname = info.gname = ""
-                tar.addfile(info, io.BytesIO(data))
+        write_archive({name: directory / name for name in names}, path)
     return names
+
+
+def write_archive(files: dict[str, Path], path: str | os.PathLike) -> None:
+    """The `files` (member name: the file holding its bytes) as one xz-compressed tar at `path`, atomically.
+
+    The bytes depend on the files' contents only: members sorted, no directories, mtime 0,
+    owner 0 without names, mode 0644. Writing the same data twice gives the same archive.
+    """
+    with atomic_path(path) as tmp, tarfile.open(tmp, "w:xz", format=tarfile.PAX_FORMAT) as tar:
+        for name in sorted(files):
+            data = files[name].read_bytes()
+            info = tarfile.TarInfo(name)
+            info.size, info.mtime, info.mode = len(data), 0, 0o644
+            info.uid = info.gid = 0
+            info.uname = info.gname = ""
+            tar.addfile(info, io.BytesIO(data))
