@@ -4,6 +4,7 @@ it finds broken, or in another config than its arm's, reported and restarted onl
 import csv
 import dataclasses
 import json
+import os
 import shutil
 
 import pytest
@@ -238,6 +239,17 @@ def test_quick_suite_runs_and_a_second_call_skips_finished_runs(backend, tmp_pat
         ]
         == logged["code_commit"]
     )
+
+
+@pytest.mark.slow
+def test_a_local_ray_runs_its_workers_at_the_callers_priority():
+    """As the local pool's do; at Ray's default (nice 15) a sweep beside any other work all but stops."""
+    pytest.importorskip("ray")
+    from dqfd_bc_keras.experiments.sweep import ray_session
+
+    with ray_session(1, None) as ray:
+        niceness = ray.get(ray.remote(lambda: os.nice(0)).remote())
+    assert niceness == os.nice(0)
 
 
 def test_cli_rejects_bad_arguments_in_one_line(capsys):
