@@ -11,7 +11,7 @@ from helpers import python as run
 from dqfd_bc_keras.errors import ConfigError
 from studies import minatar_study, past_teacher_vector
 from studies.minatar_study import unpack_missing
-from studies.tuned_presets import METHODS, PLANS, judge, main
+from studies.tuned_presets import DATA, METHODS, PLANS, judge, main
 
 
 def fake(task: str, reached: int, final: float, seed: int, every: int = 1_000, budget: int = 100_000):
@@ -100,3 +100,15 @@ def test_an_archive_that_is_not_one_is_refused_before_anything_runs(tmp_path):
     with pytest.raises(ConfigError, match=r"--archive .*presets\.zip: expected a \.tar\.xz file"):
         main(["--out", str(tmp_path / "out"), "--archive", str(tmp_path / "presets.zip")])
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_the_committed_report_is_what_the_committed_archive_gives(tmp_path):
+    """docs/TUNING_PRESETS.md from docs/data/tuned-presets.tar.xz alone (the checks' defaults from their studies')."""
+    committed = DATA / "tuned-presets.tar.xz"
+    done = run(
+        "-m", "studies.tuned_presets", "--out", tmp_path / "out", "--no-run", "--archive",
+        committed.relative_to(DATA.parents[1]), "--report", tmp_path / "r.md",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "r.md").read_text() == (DATA.parent / "TUNING_PRESETS.md").read_text()

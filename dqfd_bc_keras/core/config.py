@@ -211,10 +211,14 @@ class Config:
         unknown = [key for key in overrides if key not in cls.__dataclass_fields__]
         if unknown:
             raise ConfigError(unknown_field(unknown[0]))
-        wrong = [key for key in get_task(task).defaults if key not in cls.__dataclass_fields__]
-        if wrong:  # a user's preset (tasks.TaskSpec.defaults)
-            raise ConfigError(f"task {task!r}: its defaults hold an {unknown_field(wrong[0])}")
-        fields: dict[str, Any] = {**preset_defaults(task), **overrides}  # each checked by `validate`
+        spec = get_task(task)
+        for where, defaults in [("defaults", spec.defaults), *spec.method_defaults.items()]:
+            wrong = [key for key in defaults if key not in cls.__dataclass_fields__]
+            if wrong:  # a user's preset (tasks.TaskSpec.defaults, .method_defaults)
+                owner = "its defaults" if where == "defaults" else f"its defaults for {where!r}"
+                raise ConfigError(f"task {task!r}: {owner} hold an {unknown_field(wrong[0])}")
+        method = overrides.get("expert_loss")
+        fields: dict[str, Any] = {**preset_defaults(task, method), **overrides}  # each checked by `validate`
         return cls(**fields)
 
     @classmethod
@@ -296,10 +300,19 @@ class Config:
         return dataclasses.asdict(self)
 
 
-def preset_defaults(task: str) -> dict[str, object]:
-    """The defaults of `task` (its preset's; for any env `ENV_DEFAULTS`, for an Atari env
-    `atari.ATARI_DEFAULTS`), without validating them: an env without a time limit has no valid
-    defaults until `max_steps` is given."""
+def preset_defaults(task: str, expert_loss: object = None) -> dict[str, object]:
+    """The defaults of `task` for `expert_loss` (None: the preset's own method): `shared_defaults` with
+    that method's own defaults on the preset over them (`TaskSpec.method_defaults`)."""
+    preset = shared_defaults(task)
+    method = preset["expert_loss"] if expert_loss is None else expert_loss
+    own = get_task(task).method_defaults.get(method, {}) if isinstance(method, str) else {}
+    return {**preset, **own, "task": task}
+
+
+def shared_defaults(task: str) -> dict[str, object]:
+    """The defaults every method shares on `task` (its preset's; for any env `ENV_DEFAULTS`, for an
+    Atari env `atari.ATARI_DEFAULTS`), without validating them: an env without a time limit has no
+    valid defaults until `max_steps` is given."""
     shared = {
         f.name: f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
         for f in dataclasses.fields(Config)

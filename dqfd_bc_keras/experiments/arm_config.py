@@ -69,7 +69,7 @@ def _label(key: str, value: object) -> str:
 def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides: object) -> Arm:
     """An arm that keeps only the overrides differing from the task preset, labelled by them:
     arms equal in config get one name, so suites sharing an `--out` share their runs."""
-    preset = preset_defaults(task)
+    preset = preset_defaults(task, expert_loss)
     changed = {k: v for k, v in overrides.items() if preset[k] != v}
     label = "-".join(_label(k, v) for k, v in changed.items())
     return Arm(task, timeout, expert_loss, tuple(changed.items()), task_slug(label), seeds)

@@ -9,7 +9,6 @@ import json
 from collections import Counter
 from pathlib import Path
 
-from dqfd_bc_keras.core.config import Config
 from dqfd_bc_keras.experiments.ablations import ablation_pairs, dynamic_default, judge_ablation
 from dqfd_bc_keras.experiments.arms import ArmRuns, find_arm
 from dqfd_bc_keras.experiments.claims import (
@@ -26,7 +25,14 @@ from dqfd_bc_keras.experiments.estimators import CALIBRATION_FILE, meets_goal
 from dqfd_bc_keras.experiments.grid import BC_ALONE, DQN, collect, effect
 from dqfd_bc_keras.experiments.replicate import replicated
 from dqfd_bc_keras.experiments.stats import Summary
-from dqfd_bc_keras.experiments.suites import ALL, GRID_SEEDS, GRID_TASKS, PROTOCOL, SUITES, efficiency_tasks
+from dqfd_bc_keras.experiments.suites import (
+    ALL,
+    GRID_SEEDS,
+    GRID_TASKS,
+    SUITES,
+    efficiency_arm,
+    efficiency_tasks,
+)
 
 UNKNOWN = ("inconclusive", "not reproduced")
 
@@ -115,8 +121,7 @@ def _efficiency(arms: list[ArmRuns], directory: Path) -> list[str]:
             f"{a.task}: SB3 ÷ bayes {point:.1f}× [{low:.1f}×, {high:.1f}×] over {a.steps.size} seeds, the "
             f"{a.target:g}× goal {'met' if point >= a.target else 'not met'}"
         )
-        same = Config.for_task(a.task, expert_loss="bayes", demo_episodes=efficiency_tasks()[a.task], **PROTOCOL)
-        run = find_arm(arms, same)
+        run = find_arm(arms, efficiency_arm(a.task, "bayes", efficiency_tasks()[a.task]).config(0))
         if run is not None and len(run.runs) > a.steps.size:
             more = ratio_ci(sb3[a.task], run.values("interactions_to_threshold"))
             text += (

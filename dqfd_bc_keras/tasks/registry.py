@@ -59,6 +59,9 @@ class TaskSpec:
     """The plain env's "solved" threshold (its spec's `reward_threshold`); None when it has none."""
     defaults: Mapping[str, object] = field(default_factory=dict)
     """The preset's Config defaults where they differ from Config's shared ones."""
+    method_defaults: Mapping[str, Mapping[str, object]] = field(default_factory=dict)
+    """Expert loss → its own defaults on this preset, over `defaults`, read when that method runs: where a
+    tuned set beat the preset's defaults on fresh seeds (docs/PREREGISTRATION.md §16, docs/TASKS.md)."""
     experts: Mapping[str, Rule] = field(default_factory=dict, repr=False)
     """Scripted demonstrators by name (strong, imperfect)."""
     keys: Mapping[str, int] = field(default_factory=dict)
