@@ -78,6 +78,8 @@ TAUS = np.linspace(0.0, 2.0, 81)
 RESAMPLES, RNG_SEED = 10_000, 0
 ONE_SEED = "one seed: no interval"
 """What a rule reads instead of a verdict while an arm has one seed (a bootstrap of one is a point)."""
+QUICK_GAMES = ("minatar-breakout", "minatar-freeway")
+"""`--quick`'s games: two of the five (the pilot's), as every step of the pipeline runs on two as on five."""
 QUICK_STEPS = {"ours": 300, "sb3": 500, "every": 150}
 """`--quick`: interactions of each run of ours and of SB3's, and the evaluation grid: seconds, for the tests."""
 
@@ -89,7 +91,7 @@ def arms(quick: bool = False, losses: Sequence[str] = LOSSES) -> list[Arm]:
     """Our arms of `losses`, game by game (with `quick`: on tiny budgets)."""
     if quick:
         settings = quick_settings(QUICK_STEPS["ours"], QUICK_STEPS["every"])
-        return [Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in GAMES for loss in losses]
+        return [Arm(game, "bootstrap", loss, settings, "minatar-quick", 1) for game in QUICK_GAMES for loss in losses]
     return [arm(game, "bootstrap", loss, SEEDS, total_steps=BUDGET, **PROTOCOL) for game in GAMES for loss in losses]
 
 
@@ -101,7 +103,7 @@ def sb3_jobs(seeds: int, out: Path, quick: bool = False) -> list[Sb3Job]:
     return [
         Sb3Job(game, seed, budget, every, episodes, out / "sb3-dqn" / game / f"seed{seed}{suffix}.json", max_steps)
         for seed in range(seeds)
-        for game in GAMES
+        for game in (QUICK_GAMES if quick else GAMES)
     ]
 
 
@@ -237,7 +239,8 @@ def collect(out: Path, seeds: int, quick: bool = False, losses: Sequence[str] = 
             runs.setdefault((job.task, SB3_METHOD), {})[job.seed] = [
                 (e["interactions"], e["mean_return"]) for e in evaluations
             ]
-    return Study(runs, budget, seeds, tuple(sorted(commits)))
+    anchors = {game: ANCHORS[game] for game in (QUICK_GAMES if quick else GAMES)}
+    return Study(runs, budget, seeds, tuple(sorted(commits)), anchors=anchors)
 
 
 def check_out(out: Path, archive: Path | None, no_run: bool) -> None:

@@ -151,13 +151,14 @@ def report(study: Study, baseline: Study, weights: dict[tuple[str, str], list[fl
         study.commits,
         methods=(NEW_ARM, *METHODS),
         dqfd=(NEW_ARM, *DQFD),
+        anchors=study.anchors,  # the new arm's games: all five, or --quick's two
     )
     judged = both.complete
     lines = [
         "| game | teacher | arm | runs | weight on the agent's states (median over runs) |",
         "| --- | --- | --- | --- | --- |",
     ]
-    for game in GAMES:
+    for game in both.games:
         for method in (NEW_ARM, "bayes"):
             logged = [w for w in weights.get((game, method), []) if np.isfinite(w)]
             median = f"{np.median(logged):.3f}" if logged else "none logged"
