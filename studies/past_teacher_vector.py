@@ -31,7 +31,7 @@ from dqfd_bc_keras.commands.cli import ArgumentParser, run
 from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments.arm_config import Arm, arm
+from dqfd_bc_keras.experiments.arm_config import Arm, arm, on_shared_defaults
 from dqfd_bc_keras.experiments.baselines import SB3Job, run_sb3
 from dqfd_bc_keras.experiments.data import export_archive, load_runs, open_suite
 from dqfd_bc_keras.experiments.efficiency import SB3_METHOD, interaction_evals, ratio_ci, times
@@ -97,7 +97,7 @@ def ours(task: str, loss: str, quick: bool = False, steps: int | None = None) ->
     steps = steps or budget(task, quick)
     if quick:
         return arm(task, "bootstrap", loss, 1, **{**QUICK, "total_steps": steps, "eval_every": QUICK_STEPS["every"]})
-    return arm(task, "bootstrap", loss, SEEDS, demo_episodes=10, total_steps=steps, **PROTOCOL)
+    return on_shared_defaults(arm(task, "bootstrap", loss, SEEDS, demo_episodes=10, total_steps=steps, **PROTOCOL))
 
 
 def sb3_job(task: str, seed: int, out: Path, quick: bool = False, steps: int | None = None) -> SB3Job:

@@ -33,7 +33,7 @@ from dqfd_bc_keras.core.config import QUICK
 from dqfd_bc_keras.core.params import read_params
 from dqfd_bc_keras.envs.make import get_task
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments.arm_config import Arm, arm
+from dqfd_bc_keras.experiments.arm_config import Arm, arm, on_shared_defaults
 from dqfd_bc_keras.experiments.data import ARCHIVE_SUFFIX, lab_files, load_runs, write_archive
 from dqfd_bc_keras.experiments.jobs import Job
 from dqfd_bc_keras.experiments.run_files import FinishedRun
@@ -67,8 +67,11 @@ class Plan:
     """(uniform random policy, imperfect teacher): the margins' span."""
 
     def defaults_arm(self, method: str, seeds: int = CHECK_SEEDS) -> Arm:
-        """The studies' arm of `method` on this preset (its name is theirs, so their runs are reused)."""
-        return arm(self.task, "bootstrap", method, seeds, total_steps=self.budget, **dict(self.protocol))
+        """The studies' arm of `method` on this preset (its name is theirs, so their runs are reused), on the
+        preset's defaults before any tuned set of §16's."""
+        return on_shared_defaults(
+            arm(self.task, "bootstrap", method, seeds, total_steps=self.budget, **dict(self.protocol))
+        )
 
     def tuned_arm(self, method: str, params: dict, seeds: int = CHECK_SEEDS) -> Arm:
         defaults = self.defaults_arm(method, seeds)

@@ -58,6 +58,20 @@ def test_a_lab_arm_is_named_against_its_methods_defaults_and_the_efficiency_suit
     assert {k: getattr(suite.config(0), k) for k in GENERIC} == GENERIC  # and their settings
 
 
+def test_the_studies_runs_of_the_defaults_stay_on_the_defaults_they_ran_with():
+    """§15's `bayes` arm and §16's defaults are §7's runs (the same names): rerun, they would be those runs again."""
+    from studies import past_teacher_vector
+    from studies.tuned_presets import PLANS
+
+    defaults, vector = PLANS[0].defaults_arm("bayes"), past_teacher_vector.ours("acrobot", "bayes")
+    assert defaults.name == vector.name == "acrobot-bootstrap-bayes"
+    for a in (defaults, vector):
+        assert {k: getattr(a.config(0), k) for k in GENERIC} == GENERIC
+    tuned = PLANS[0].tuned_arm("bayes", TUNED_BAYES).config(0)
+    assert {k: getattr(tuned, k) for k in TUNED_BAYES} == TUNED_BAYES  # its params over the pinned values
+    assert tuned == Config.for_task("acrobot", seed=0, **dict(PLANS[0].protocol))  # what train.py now runs
+
+
 def test_a_users_preset_naming_no_config_field_for_a_method_is_one_line():
     register_task(TaskSpec("typo-method-pole", "CartPole-v1", method_defaults={"ce": {"n_stepz": 3}}))
     with pytest.raises(ConfigError, match=r"task 'typo-method-pole': its defaults for 'ce' hold an unknown Config "):

@@ -10,8 +10,8 @@ import json
 import re
 from dataclasses import dataclass
 
-from dqfd_bc_keras.core.config import QUICK, Config, preset_defaults
-from dqfd_bc_keras.envs.make import task_slug
+from dqfd_bc_keras.core.config import QUICK, Config, preset_defaults, shared_defaults
+from dqfd_bc_keras.envs.make import get_task, task_slug
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,16 @@ def arm(task: str, timeout: str, expert_loss: str, seeds: int = 10, **overrides:
     changed = {k: v for k, v in overrides.items() if preset[k] != v}
     label = "-".join(_label(k, v) for k, v in changed.items())
     return Arm(task, timeout, expert_loss, tuple(changed.items()), task_slug(label), seeds)
+
+
+def on_shared_defaults(a: Arm) -> Arm:
+    """Arm `a` on its preset's shared defaults where its method has its own there since
+    (`TaskSpec.method_defaults`), under the same name: a study run before keeps what its committed runs
+    are, and reruns them so (the efficiency suite, PREREGISTRATION §15's and §16's runs of the defaults)."""
+    shared = shared_defaults(a.task)
+    own = get_task(a.task).method_defaults.get(a.expert_loss, {})
+    fields = dict(a.overrides)
+    return dataclasses.replace(a, overrides=(*a.overrides, *((k, shared[k]) for k in own if k not in fields)))
 
 
 def quick(a: Arm) -> Arm:

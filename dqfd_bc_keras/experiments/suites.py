@@ -11,14 +11,13 @@ field, and how many seeds it gets); each (arm, seed) is one `train.py`-equivalen
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from typing import TypedDict, cast
 
-from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments, shared_defaults
-from dqfd_bc_keras.envs.make import checked_spaces, get_task
+from dqfd_bc_keras.core.config import QUICK, Config, parse_assignments
+from dqfd_bc_keras.envs.make import checked_spaces
 from dqfd_bc_keras.errors import ConfigError
-from dqfd_bc_keras.experiments.arm_config import Arm, arm, quick
+from dqfd_bc_keras.experiments.arm_config import Arm, arm, on_shared_defaults, quick
 from dqfd_bc_keras.experiments.claims import CLAIMS, PAPER_READING_STEPS
 from dqfd_bc_keras.experiments.claims import PAPER as PAPER_READING
 from dqfd_bc_keras.experiments.lab_settings import LAB_SETTINGS
@@ -100,13 +99,9 @@ def _dynamic() -> list[Arm]:
 
 
 def efficiency_arm(task: str, loss: str, episodes: int) -> Arm:
-    """`loss` on `task` as the efficiency suite runs it: the preset's shared defaults even where the method
-    has its own on the preset since (`TaskSpec.method_defaults`), under the same name, so the suite stays
-    what its committed runs (§7) are; a method's tuned set is measured by PREREGISTRATION §16's check."""
-    a = arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL)
-    shared = shared_defaults(task)
-    pinned = {key: shared[key] for key in get_task(task).method_defaults.get(loss, {})}
-    return dataclasses.replace(a, overrides=(*a.overrides, *pinned.items()))
+    """`loss` on `task` as the efficiency suite (§7) runs it: on the preset's shared defaults, as its
+    committed runs are; a method's tuned set on a preset is measured by PREREGISTRATION §16's check."""
+    return on_shared_defaults(arm(task, "bootstrap", loss, 10, demo_episodes=episodes, **PROTOCOL))
 
 
 def _efficiency() -> list[Arm]:
