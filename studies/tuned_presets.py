@@ -208,10 +208,16 @@ def judge(plan: Plan, tuned: list[FinishedRun], defaults: list[FinishedRun]) -> 
     end_p, end_gain, end_said = compare(*finals, "maximize", MARGIN * span)
     changes = said == "**better**" and end_said != "**worse**"
     return (
-        f"{plan.metric}: {said} (p = {p:.3g}, {gain:+,.4g} in the tuned params' favour, margin {margin:,.4g}); "
-        f"final return: {end_said} (p = {end_p:.3g}, {end_gain:+,.4g}) → "
+        f"{plan.metric}: {said} (p = {p:.3g}, {number(gain, '+')} in the tuned params' favour, "
+        f"margin {number(margin)}); "
+        f"final return: {end_said} (p = {end_p:.3g}, {number(end_gain, '+')}) → "
         + ("**the preset takes the tuned params**" if changes else "the preset keeps its defaults")
     )
+
+
+def number(x: float, sign: str = "") -> str:
+    """A value as the report prints it: interactions whole (17,750, not 1.775e+04), returns to 4 figures."""
+    return f"{x:{sign},.0f}" if abs(x) >= 1_000 else f"{x:{sign},.4g}"
 
 
 def status(plan: Plan, method: str, out: Path, quick: bool) -> str:
@@ -220,8 +226,8 @@ def status(plan: Plan, method: str, out: Path, quick: bool) -> str:
     found = json.loads(best.read_text()) if best.is_file() else None
     own = own_value(plan, method, out, 1, quick, run_missing=False)
     cells = [plan.task, method, f"{plan.metric} at {plan.tuning_steps:,}"]
-    cells += [f"{found['value']:,.4g} (trial {found['trial']})" if found else "not run"]
-    cells += [f"{own:,.4g}" if own is not None else "not run"]
+    cells += [f"{number(found['value'])} (trial {found['trial']})" if found else "not run"]
+    cells += [number(own) if own is not None else "not run"]
     if found is None or own is None:
         return "| " + " | ".join([*cells, "—"]) + " |"
     if not (quick or better(plan.metric, found["value"], own)):
