@@ -215,6 +215,15 @@ def judge(plan: Plan, tuned: list[FinishedRun], defaults: list[FinishedRun]) -> 
     )
 
 
+def finished_trials(settings: TuneSettings) -> int:
+    """The study's complete and pruned trials (what `tune` counts towards its --trials)."""
+    import optuna
+    from optuna.trial import TrialState
+
+    study = optuna.load_study(study_name=settings.name, storage=settings.storage_url)
+    return len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.PRUNED)))
+
+
 def number(x: float, sign: str = "") -> str:
     """A value as the report prints it: interactions whole (17,750, not 1.775e+04), returns to 4 figures."""
     return f"{x:{sign},.0f}" if abs(x) >= 1_000 else f"{x:{sign},.4g}"
@@ -228,6 +237,10 @@ def status(plan: Plan, method: str, out: Path, quick: bool) -> str:
     cells = [plan.task, method, f"{plan.metric} at {plan.tuning_steps:,}"]
     cells += [f"{number(found['value'])} (trial {found['trial']})" if found else "not run"]
     cells += [number(own) if own is not None else "not run"]
+    settings = TuneSettings(out=best.parent, task=plan.task, **tuning(plan, method, quick))
+    if (best.parent / "study.db").is_file() and (done := finished_trials(settings)) < settings.trials:
+        cells[3] = f"{cells[3] if found else 'none yet'} ({done} of {settings.trials} trials)"
+        return "| " + " | ".join([*cells, "— (the study is under way)"]) + " |"
     if found is None or own is None:
         return "| " + " | ".join([*cells, "—"]) + " |"
     if not (quick or better(plan.metric, found["value"], own)):
