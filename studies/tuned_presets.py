@@ -195,6 +195,11 @@ def export(out: Path, archive: Path, plans: Sequence[Plan], methods: Sequence[st
         write_archive(files, archive)
 
 
+def written(out: Path) -> frozenset[tuple[str, int]]:
+    """Every file under `out` with its modification time: what changes when a run, a trial or a study ends."""
+    return frozenset((p.as_posix(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file())
+
+
 def judge(plan: Plan, tuned: list[FinishedRun], defaults: list[FinishedRun]) -> str:
     """§16's rule: better on the study's metric (Mann–Whitney p < 0.05 and the medians differing by at least
     one evaluation period for `threshold`, MARGIN of the teacher − random span for `auc`), and not worse at
@@ -295,9 +300,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.archive is not None:
         start_from(args.archive, args.out, plans, methods)
 
+    exported: list[object] = [None]
+
     def finished(_: object = None) -> None:
-        if args.archive is not None and not args.no_run:
+        """Export what is new since the last export (a resumed study, its defaults and its check find all
+        done and write the archive once, not once each)."""
+        if args.archive is not None and not args.no_run and (now := written(args.out)) != exported[-1]:
             export(args.out, args.archive, plans, methods)
+            exported.append(now)
 
     if not args.no_run:
         for plan in plans:

@@ -9,7 +9,7 @@ import pytest
 from helpers import python as run
 
 from dqfd_bc_keras.errors import ConfigError
-from studies import minatar_study, past_teacher_vector
+from studies import minatar_study, past_teacher_vector, tuned_presets
 from studies.minatar_study import unpack_missing
 from studies.tuned_presets import DATA, METHODS, PLANS, judge, main
 
@@ -59,7 +59,9 @@ def test_the_check_reads_the_studies_runs_of_the_defaults_by_their_arm_names(pla
 
 
 @pytest.mark.slow
-def test_the_quick_pipeline_tunes_scores_the_defaults_checks_exports_and_reports_again_from_its_archive(tmp_path):
+def test_the_quick_pipeline_tunes_scores_the_defaults_checks_exports_and_reports_again_from_its_archive(
+    tmp_path, monkeypatch
+):
     out, archive = tmp_path / "out", tmp_path / "presets.tar.xz"
     done = run(
         "-m", "studies.tuned_presets", "--out", out, "--quick", "--workers", 1, "--report", tmp_path / "a.md",
@@ -90,8 +92,11 @@ def test_the_quick_pipeline_tunes_scores_the_defaults_checks_exports_and_reports
         "-m", "studies.tuned_presets", "--out", elsewhere, "--quick", "--no-run", "--report", tmp_path / "c.md"
     )  # fmt: skip
     assert read.returncode == 0 and (tmp_path / "c.md").read_text() == text.replace(str(out), str(elsewhere))
+    exports = []
+    monkeypatch.setattr(tuned_presets, "export", lambda *args: exports.append(args))
     resumed = run("-m", "studies.tuned_presets", "--out", elsewhere, "--quick", "--workers", 1, "--archive", archive)
     assert resumed.returncode == 0, resumed.stderr
+    assert len(exports) == 1  # the study, its defaults and its check all done: the archive is written once
     trials = [sorted(p.name for p in (o / "tuning" / "acrobot-bayes" / "trials").iterdir()) for o in (out, elsewhere)]
     assert trials[0] == trials[1] and "0 to run" in resumed.stdout  # nothing the archive held is run again
 
