@@ -34,6 +34,7 @@ from studies.minatar_study import main as minatar_study_main
 from studies.past_teacher import main as past_teacher_main
 from studies.past_teacher_vector import main as past_teacher_vector_main
 from studies.pixels import main as pixels_main
+from studies.tuned import main as tuned_main
 from studies.tuned_presets import main as tuned_presets_main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -48,6 +49,7 @@ PROGRAMS: dict[str, Callable[[Sequence[str] | None], int]] = {
     "studies.minatar_study": minatar_study_main,
     "studies.past_teacher": past_teacher_main,
     "studies.past_teacher_vector": past_teacher_vector_main,
+    "studies.tuned": tuned_main,
     "studies.tuned_presets": tuned_presets_main,
 }
 """Each command by the names a user types it (a script, a console script, a `python -m` module)."""
