@@ -115,22 +115,20 @@ def test_the_quick_study_exports_each_run_resumes_from_its_archive_and_reports_b
         names = tar.getnames()
     assert sum(name.endswith("/eval.json") for name in names) == 6  # every run of ours, no checkpoint
     assert sum(name.startswith("sb3-dqn/") for name in names) == 2 and not any("checkpoints" in n for n in names)
-    # A new machine: only the archive. Nothing runs twice.
-    again = run("-m", "studies.minatar_study", "--out", tmp_path / "new", "--archive", archive, "--quick")
+    # A new machine: only the archive. Nothing runs twice, and its report is the archive's, byte for byte.
+    for name in ("a", "b"):
+        (tmp_path / name / "figures").mkdir(parents=True)
+    report = [("--report", tmp_path / name / "MINATAR.md", "--figures", tmp_path / name / "figures") for name in "ab"]
+    again = run("-m", "studies.minatar_study", "--out", tmp_path / "new", "--archive", archive, "--quick", *report[0])
     assert again.returncode == 0, again.stderr
     assert "6 already complete, 0 to run" in again.stdout and "2 current, 0 to run" in again.stdout
-    reports = []
-    for name in ("a", "b"):
-        figures = tmp_path / name / "figures"
-        figures.mkdir(parents=True)
-        done = run(
-            "-m", "studies.minatar_study", "--out", archive, "--no-run", "--quick",
-            "--report", tmp_path / name / "MINATAR.md", "--figures", figures,
-        )  # fmt: skip
-        assert done.returncode == 0, done.stderr
-        reports.append(
-            [(tmp_path / name / "MINATAR.md").read_bytes()] + [p.read_bytes() for p in sorted(figures.iterdir())]
-        )
+    done = run("-m", "studies.minatar_study", "--out", archive, "--no-run", "--quick", *report[1])
+    assert done.returncode == 0, done.stderr
+    reports = [
+        [(tmp_path / name / "MINATAR.md").read_bytes()]
+        + [p.read_bytes() for p in sorted((tmp_path / name / "figures").iterdir())]
+        for name in "ab"
+    ]
     assert reports[0] == reports[1] and len(reports[0]) == 4
     text = reports[0][0].decode()
     for game in QUICK_GAMES:
