@@ -35,11 +35,11 @@ from studies.minatar_study import (
     ANCHORS,
     BUDGET,
     DQFD,
-    GAMES,
     METHODS,
     SEEDS,
     Study,
     aggregate_rows,
+    arms,
     collect,
     difference,
     emit,
@@ -132,12 +132,13 @@ def pilot_report(arms: Sequence[PilotArm]) -> str:
     return "\n".join([*lines, "", f"The new arm by §14's rule: **{choose(arms)}**."])
 
 
-def agent_weights(source: str | Path, methods: Sequence[str]) -> dict[tuple[str, str], list[float]]:
-    """(game, method) → each finished run's `agent_weight`, for the runs of `methods` in `source`."""
+def agent_weights(directory: Path, methods: Sequence[str], quick: bool = False) -> dict[tuple[str, str], list[float]]:
+    """(game, method) → each finished run's `agent_weight`, for the runs of the arms of `methods` in `directory`
+    (only theirs are read: a run's metrics are most of the time a report takes)."""
     weights: dict[tuple[str, str], list[float]] = {}
-    for finished in load_runs(source):
-        if finished.config.expert_loss in methods and finished.config.task in GAMES:
-            weights.setdefault((finished.config.task, finished.config.expert_loss), []).append(agent_weight(finished))
+    for a in arms(quick, methods):
+        for finished in load_runs(directory / a.name) if (directory / a.name).is_dir() else []:
+            weights.setdefault((a.task, a.expert_loss), []).append(agent_weight(finished))
     return weights
 
 
@@ -238,7 +239,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     study = run_or_read(args.out, seeds, args.quick, args.no_run, args.archive, args.workers, (NEW_ARM,), False)
     with open_suite(BASELINE) as directory:
         baseline, weights = collect(directory, SEEDS), agent_weights(directory, ("bayes",))
-    ours = agent_weights(args.out, (NEW_ARM,)) if args.out.exists() else {}
+    ours: dict[tuple[str, str], list[float]] = {}
+    if args.out.exists():
+        with open_suite(args.out) as directory:
+            ours = agent_weights(directory, (NEW_ARM,), args.quick)
     return emit(report(study, baseline, {**weights, **ours}, args.figures), args.report)
 
 
