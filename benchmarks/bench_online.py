@@ -91,7 +91,7 @@ def main(argv=None) -> int:
     interleave.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.quick:
-        args.steps, args.rounds = 300, 2
+        args.steps, args.rounds = 300, 1  # bench_updates' --quick runs two: the interleaving end to end
 
     def sb3() -> dict | None:
         rate = sb3_rate(args.steps)

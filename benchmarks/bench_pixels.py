@@ -143,7 +143,7 @@ def main(argv=None) -> int:
     interleave.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.quick:
-        args.warmup, args.steps, args.updates, args.rounds = QUICK_WARMUP, QUICK_WARMUP, 20, 2
+        args.warmup, args.steps, args.updates, args.rounds = QUICK_WARMUP, QUICK_WARMUP, 20, 1
     if args.design == "numpy-probe" and args.expert_loss == "none":
         parser.error("--design numpy-probe times DQfD's loop: it needs demonstrations (an --expert-loss but none)")
     if args.steps < args.warmup or args.updates < 1:

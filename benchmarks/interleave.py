@@ -184,7 +184,7 @@ def add_arguments(parser: argparse.ArgumentParser, rounds: int = 3) -> None:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="a tiny budget and 2 rounds: checks that the benchmark runs (CI), its figures mean nothing",
+        help="a tiny budget and one or two rounds: checks that the benchmark runs (CI), its figures mean nothing",
     )
     parser.add_argument("--side", choices=SIDES, help=argparse.SUPPRESS)  # a child: run one side, print JSON
 
