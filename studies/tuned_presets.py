@@ -234,14 +234,21 @@ def number(x: float, sign: str = "") -> str:
     return f"{x:{sign},.0f}" if abs(x) >= 1_000 else f"{x:{sign},.4g}"
 
 
+def scored(plan: Plan, value: float) -> str:
+    """A study's value as the report prints it: for `threshold`, a mean past the proxy budget says so (a run
+    that never reaches the threshold scores the grid point after the budget)."""
+    past = plan.metric == "threshold" and value > plan.tuning_steps
+    return f"{number(value)}, past the {plan.tuning_steps:,} budget" if past else number(value)
+
+
 def status(plan: Plan, method: str, out: Path, quick: bool) -> str:
     """One row of the report: the study, the defaults' value, and the check's verdict (or where it stands)."""
     best = out / "tuning" / f"{plan.task}-{method}" / "best.json"
     found = json.loads(best.read_text()) if best.is_file() else None
     own = own_value(plan, method, out, 1, quick, run_missing=False)
     cells = [plan.task, method, f"{plan.metric} at {plan.tuning_steps:,}"]
-    cells += [f"{number(found['value'])} (trial {found['trial']})" if found else "not run"]
-    cells += [number(own) if own is not None else "not run"]
+    cells += [f"{scored(plan, found['value'])} (trial {found['trial']})" if found else "not run"]
+    cells += [scored(plan, own) if own is not None else "not run"]
     settings = TuneSettings(out=best.parent, task=plan.task, **tuning(plan, method, quick))
     if (best.parent / "study.db").is_file() and (done := finished_trials(settings)) < settings.trials:
         cells[3] = f"{cells[3] if found else 'none yet'} ({done} of {settings.trials} trials)"

@@ -11,7 +11,7 @@ from helpers import python as run
 from dqfd_bc_keras.errors import ConfigError
 from studies import minatar_study, past_teacher_vector, tuned_presets
 from studies.minatar_study import unpack_missing
-from studies.tuned_presets import DATA, METHODS, PLANS, judge, main
+from studies.tuned_presets import DATA, METHODS, PLANS, judge, main, scored
 
 
 def fake(task: str, reached: int, final: float, seed: int, every: int = 1_000, budget: int = 100_000):
@@ -44,6 +44,14 @@ def test_a_preset_takes_tuned_params_only_if_better_beyond_the_margin_and_not_wo
     assert said.startswith("threshold: a significant difference inside the margin (1000): not a better or worse")
     assert "(p = 0.0137, +500 in the tuned params' favour, margin 1,000)" in said
     assert said.endswith("the preset keeps its defaults")
+
+
+def test_a_threshold_study_past_its_budget_says_so():
+    acrobot, minigrid = PLANS[0], PLANS[2]
+    assert (acrobot.tuning_steps, minigrid.metric) == (20_000, "auc")
+    assert scored(acrobot, 21_000.0) == "21,000, past the 20,000 budget"  # every seed "never": the point after
+    assert scored(acrobot, 1_500.0) == "1,500" and scored(acrobot, 20_000.0) == "20,000"  # reached at the end
+    assert scored(minigrid, 0.8125) == "0.8125"  # an area is never past a budget
 
 
 @pytest.mark.parametrize("plan", PLANS, ids=[p.task for p in PLANS])
