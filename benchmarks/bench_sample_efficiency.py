@@ -12,7 +12,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dqfd_bc_keras.commands.cli import run
 from dqfd_bc_keras.experiments.__main__ import main as lab
-from dqfd_bc_keras.experiments.baselines import PROTOCOL, SB3_METHOD, ZOO, sb3_run, sb3_settings  # noqa: F401  (tests)
+from dqfd_bc_keras.experiments.baselines import PROTOCOL, SB3_METHOD, sb3_run, sb3_settings  # noqa: F401  (tests)
+from dqfd_bc_keras.experiments.zoo import ZOO  # noqa: F401  (tests)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
